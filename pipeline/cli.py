@@ -1,0 +1,152 @@
+"""The ``mcl`` command. Only this module turns errors into one-line messages and exit codes."""
+from __future__ import annotations
+
+import argparse
+import logging
+import shutil
+import sys
+import traceback
+from pathlib import Path
+
+from .errors import ConfigError, MclError
+
+EXIT_ERROR, EXIT_FAILED, EXIT_INTERRUPTED = 2, 1, 130
+
+
+def _parse_params(pairs) -> dict[str, float]:
+    out = {}
+    for pair in pairs or []:
+        name, sep, value = pair.partition("=")
+        try:
+            if not sep or not name.strip():
+                raise ValueError
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise ConfigError(f"--param '{pair}': expected NAME=NUMBER") from None
+    return out
+
+
+def _model_from_args(args):
+    from .api import load_model
+
+    return load_model(args.sources, args.model, args.compiler)
+
+
+def cmd_compile(args) -> int:
+    from .api import compile_model
+    from .model import CompiledModel
+
+    model = compile_model(args.sources, args.model, args.compiler)
+    out = Path(args.output)
+    if isinstance(model, CompiledModel):
+        o = model.ode
+        print(f"compiled {model.name} with {model.info.get('compiler')}: {len(o.x_names)} states "
+              f"(index {o.index}), {o.nonlinear_blocks} algebraic loop(s), {len(o.u_names)} input(s), "
+              f"{len(o.y_names)} output(s), {len(o.p_names)} free parameter(s)")
+        if out.suffix.lower() == ".fmu":
+            from .fmu.export import build_fmu
+
+            build_fmu(model, out, validate=not args.no_validate)
+            print(f"wrote {out} (FMI 2.0 Model Exchange{'' if args.no_validate else ', validated by FMPy'})")
+        else:
+            model.save(out)
+            print(f"wrote {out}/ (CasADi functions; run it with 'mcl simulate {out}')")
+    else:
+        if out.suffix.lower() != ".fmu":
+            raise ConfigError(f"compiler '{args.compiler}' writes FMUs: give -o NAME.fmu")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(model.path, out)
+        print(f"wrote {out}")
+    return 0
+
+
+def cmd_simulate(args) -> int:
+    from .api import simulate
+    from .data import read_csv, write_csv
+
+    model = _model_from_args(args)
+    inputs = read_csv(args.input)
+    options = {"rtol": args.rtol, "time_limit": args.time_limit}
+    result = simulate(model, inputs, _parse_params(args.param), options=options, engine=args.engine)
+    if not result.ok:
+        print(f"mcl: simulation failed: {result.reason}", file=sys.stderr)
+        return EXIT_FAILED
+    write_csv(args.output, result.as_series())
+    print(f"simulated {len(result.time)} samples of {', '.join(result.output_names)} with the "
+          f"{result.engine} engine in {result.seconds:.3g} s -> {args.output}")
+    return 0
+
+
+def cmd_plugins(args) -> int:
+    from .plugins import Registry
+
+    reg = Registry()
+    print("plugins:")
+    for p in reg.plugins:
+        print(f"  {p.name:28s} {p.origin:24s} {p.module}")
+    print("compilers:")
+    for name, cls in reg.compilers.items():
+        ok, why = cls().available()
+        state = "available" if ok else f"unavailable: {why}"
+        print(f"  {name:14s} {cls.__module__:28s} {state}")
+    print("engines:")
+    for name, cls in reg.engines.items():
+        print(f"  {name:14s} {cls.__module__}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="mcl", description="Modelica component learning")
+    parser.add_argument("--verbose", action="store_true", help="show tracebacks and debug logs")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("compile", help="compile Modelica sources to an FMU (or a saved model)",
+                       description="Compile Modelica sources (.mo files or package directories).")
+    p.add_argument("sources", nargs="+", help=".mo files or package directories")
+    p.add_argument("--model", "-m", required=True, help="class to compile, e.g. Pkg.Model")
+    p.add_argument("-o", "--output", required=True,
+                   help="OUT.fmu for an FMI 2.0 FMU, or a directory for the in-process model")
+    p.add_argument("--compiler", help="compiler plugin by name (see 'mcl plugins')")
+    p.add_argument("--no-validate", action="store_true", help="skip FMPy validation of the FMU")
+    p.set_defaults(func=cmd_compile)
+
+    p = sub.add_parser("simulate", help="simulate a model with measured inputs",
+                       description="Simulate an FMU, a saved model, or Modelica sources (--model).")
+    p.add_argument("sources", nargs="+", metavar="MODEL",
+                   help="an FMU, a saved model directory, or Modelica sources with --model")
+    p.add_argument("--model", "-m", help="class name when MODEL is Modelica sources")
+    p.add_argument("--input", "-i", required=True, help="CSV: header row, time first, one column per input")
+    p.add_argument("--param", "-p", action="append", metavar="NAME=VALUE", help="set a parameter")
+    p.add_argument("-o", "--output", required=True, help="result CSV")
+    p.add_argument("--engine", help="engine by name: casadi (in-process) or fmu")
+    p.add_argument("--compiler", help="compiler plugin by name, for Modelica sources")
+    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (default 1e-6)")
+    p.add_argument("--time-limit", type=float, default=60.0, help="seconds before giving up (default 60)")
+    p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("plugins", help="list installed plugins, compilers and engines")
+    p.set_defaults(func=cmd_plugins)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="mcl: %(levelname)s: %(message)s")
+    for noisy in ("pymoca", "matplotlib"):
+        logging.getLogger(noisy).setLevel(logging.DEBUG if args.verbose else logging.ERROR)
+    try:
+        return args.func(args)
+    except MclError as exc:
+        if args.verbose:
+            traceback.print_exc()
+        print(f"mcl: error: {exc}", file=sys.stderr)
+        return EXIT_ERROR
+    except KeyboardInterrupt:
+        print("mcl: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

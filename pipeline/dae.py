@@ -1,0 +1,178 @@
+"""The implicit DAE 0 = F(x', x, z, u, p, t) of a flattened model, in scalar CasADi SX.
+
+Built from a pymoca model: every vector variable is split into named scalars, parameters whose
+binding is an expression of other parameters are resolved to the *free* parameters (the ones a
+user or a fitting loop sets), constants are substituted, and every name the user may ask for
+(aliases included) maps to an expression in the DAE's unknowns.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+
+from .errors import ModelicaError
+
+
+@dataclass
+class Dae:
+    """Implicit DAE in scalar SX symbols.
+
+    ``residual`` has as many rows as ``x`` plus ``z``; ``init_residual`` holds the model's initial
+    equations. ``x_start`` / ``z_start`` are expressions in ``p`` (a start value may be bound to
+    a parameter); ``x_fixed`` marks states whose start value is an initial condition.
+    ``exprs`` maps every variable name (aliases, dependent parameters, outputs) to its expression.
+    """
+
+    x: ca.SX
+    dx: ca.SX
+    z: ca.SX
+    u: ca.SX
+    p: ca.SX
+    t: ca.SX
+    residual: ca.SX
+    init_residual: ca.SX
+    x_names: list[str]
+    z_names: list[str]
+    u_names: list[str]
+    p_names: list[str]
+    p_values: np.ndarray
+    x_start: ca.SX
+    x_fixed: np.ndarray
+    z_start: ca.SX
+    u_start: np.ndarray
+    outputs: list[str]
+    exprs: dict[str, ca.SX] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
+    descriptions: dict[str, str] = field(default_factory=dict)
+
+
+def _scalar_names(var) -> list[str]:
+    name, n = var.symbol.name(), var.symbol.numel()
+    return [name] if n == 1 else [f"{name}[{i + 1}]" for i in range(n)]
+
+
+def _attr(value, default=0.0):
+    """A numeric attribute, or the MX expression it is bound to."""
+    if isinstance(value, ca.MX):
+        return value
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        return default
+    return default if np.isnan(out) else out
+
+
+def from_pymoca(model, name: str = "model") -> Dae:
+    """Translate a pymoca CasADi ``Model`` into a scalar SX :class:`Dae` (with balance check)."""
+    groups = dict(
+        x=model.states, dx=model.der_states, z=model.alg_states, u=model.inputs,
+    )
+    params = list(model.parameters)
+    consts = list(model.constants)
+    t_mx = model.time
+
+    def syms(vs):
+        return [v.symbol for v in vs]
+
+    mx_all = [*syms(groups["x"]), *syms(groups["dx"]), *syms(groups["z"]), *syms(groups["u"]),
+              *syms(params), *syms(consts), t_mx]
+    names = {k: [n for v in vs for n in _scalar_names(v)] for k, vs in groups.items()}
+    sx = {k: ca.SX.sym(k, len(names[k])) for k in groups}
+    p_all_names = [n for v in params for n in _scalar_names(v)]
+    p_all = ca.SX.sym("p_all", len(p_all_names))
+    c_vals = ca.vertcat(*[ca.DM(_attr(c.value)).reshape((-1, 1)) if not isinstance(c.value, ca.MX)
+                          else ca.DM.nan(c.symbol.numel(), 1) for c in consts]) if consts else ca.DM(0, 1)
+    t = ca.SX.sym("t")
+
+    def to_sx(mx_exprs):
+        """MX expressions over the model's symbols -> SX over ours (constants substituted)."""
+        if not mx_exprs:
+            return ca.SX(0, 1)
+        f = ca.Function("f", [ca.vertcat(*[ca.vec(s) for s in mx_all[:-1]]), t_mx],
+                        [ca.vertcat(*[ca.vec(ca.MX(e)) for e in mx_exprs])]).expand()
+        args = ca.vertcat(sx["x"], sx["dx"], sx["z"], sx["u"], p_all, ca.SX(c_vals))
+        return f(args, t)
+
+    residual = to_sx(list(model.equations))
+    n_unknown = len(names["x"]) + len(names["z"])
+    if residual.numel() != n_unknown:
+        raise ModelicaError(
+            f"model {name} is unbalanced: {residual.numel()} equations for {n_unknown} unknowns "
+            f"({len(names['x'])} states, {len(names['z'])} algebraic variables)"
+        )
+    init_residual = to_sx(list(model.initial_equations))
+
+    # Parameters: free ones keep a symbol, dependent ones are resolved to expressions of free ones.
+    values = [_attr(v.value, default=np.nan) for v in params]
+    value_exprs = to_sx([v if isinstance(v, ca.MX) else ca.MX(ca.DM.nan(params[i].symbol.numel(), 1)
+                                                              if np.isnan(v) else v)
+                         for i, v in enumerate(values)])
+    free = [i for i, v in enumerate(values) if not isinstance(v, ca.MX)]
+    p = ca.SX.sym("p", len(free))
+    p_names = [p_all_names[i] for i in free]
+    p_values = np.array([0.0 if np.isnan(values[i]) else values[i] for i in free])
+    resolved = ca.SX(p_all)
+    resolved[free] = p
+    dependent = [i for i in range(len(values)) if i not in free]
+    for _ in range(len(dependent) + 1):
+        if not dependent:
+            break
+        nxt = ca.SX(resolved)
+        nxt[dependent] = ca.substitute(value_exprs[dependent], p_all, resolved)
+        resolved = nxt
+        if not ca.depends_on(resolved, p_all):
+            break
+    else:
+        if dependent and ca.depends_on(resolved, p_all):
+            raise ModelicaError(f"model {name}: parameter bindings are circular")
+
+    def bind(e):
+        return ca.substitute(e, p_all, resolved)
+
+    def starts(vs):
+        return bind(to_sx([v.start if isinstance(v.start, ca.MX) else
+                           ca.MX(ca.DM.ones(v.symbol.numel(), 1) * _attr(v.start)) for v in vs]))
+
+    x_fixed = np.array([bool(_attr(v.fixed)) if not isinstance(v.fixed, ca.MX) else False
+                        for v in groups["x"] for _ in range(v.symbol.numel())], dtype=bool)
+    u_start = np.array([_attr(v.start) if not isinstance(v.start, ca.MX) else 0.0
+                        for v in groups["u"] for _ in range(v.symbol.numel())])
+
+    exprs: dict[str, ca.SX] = {}
+    for k in ("x", "z", "u"):
+        for i, n in enumerate(names[k]):
+            exprs[n] = sx[k][i]
+    for i, n in enumerate(p_all_names):
+        exprs[n] = resolved[i]
+    for c in consts:
+        if not isinstance(c.value, ca.MX):
+            exprs[c.symbol.name()] = ca.SX(_attr(c.value))
+    for alias, (canonical, sign) in _aliases(model):
+        if canonical in exprs and alias not in exprs:
+            exprs[alias] = sign * exprs[canonical]
+    outputs = list(model.outputs)
+    missing = [o for o in outputs if o not in exprs]
+    if missing:
+        raise ModelicaError(f"model {name}: cannot resolve output(s) {', '.join(missing)}")
+    units, descriptions = {}, {}
+    return Dae(
+        x=sx["x"], dx=sx["dx"], z=sx["z"], u=sx["u"], p=p, t=t,
+        residual=bind(residual), init_residual=bind(init_residual),
+        x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
+        p_values=p_values, x_start=starts(groups["x"]), x_fixed=x_fixed,
+        z_start=starts(groups["z"]), u_start=u_start, outputs=outputs, exprs=exprs,
+        units=units, descriptions=descriptions,
+    )
+
+
+def _aliases(model):
+    """(alias, (canonical, sign)) pairs from pymoca's alias relation (names without '-')."""
+    rel = model.alias_relation
+    for canonical in rel.canonical_variables:
+        for alias in rel.aliases(canonical):
+            if alias.startswith("-") or alias == canonical:
+                continue
+            name, sign = rel.canonical_signed(alias)
+            yield alias, (name, float(sign))

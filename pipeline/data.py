@@ -1,0 +1,107 @@
+"""Measured time series: CSV files with a header row and ``time`` in the first column."""
+from __future__ import annotations
+
+import csv
+import os
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import DataError
+
+
+@dataclass
+class TimeSeries:
+    """Samples of named signals on a strictly increasing time grid; ``values`` is (N, n)."""
+
+    time: np.ndarray
+    values: np.ndarray
+    names: list[str]
+    source: str = "<memory>"
+
+    def __post_init__(self):
+        self.time = np.asarray(self.time, dtype=float).ravel()
+        self.values = np.asarray(self.values, dtype=float).reshape(len(self.time), -1)
+        if self.values.shape[1] != len(self.names):
+            raise DataError(f"{self.values.shape[1]} columns for {len(self.names)} names",
+                            where=self.source)
+
+    def column(self, name: str) -> np.ndarray:
+        if name not in self.names:
+            raise DataError(f"no column '{name}' (columns: {', '.join(self.names)})", where=self.source)
+        return self.values[:, self.names.index(name)]
+
+    def select(self, names) -> "TimeSeries":
+        """The columns ``names`` in that order (DataError naming the missing ones)."""
+        missing = [n for n in names if n not in self.names]
+        if missing:
+            raise DataError(f"missing column(s) {', '.join(missing)}; the file has: "
+                            f"{', '.join(self.names) or 'only time'}", where=self.source)
+        idx = [self.names.index(n) for n in names]
+        return TimeSeries(self.time, self.values[:, idx], list(names), self.source)
+
+    def validate(self) -> "TimeSeries":
+        """Raise a DataError for NaN/inf values or a time column that is not increasing."""
+        if len(self.time) < 2:
+            raise DataError("needs at least two samples", where=self.source)
+        bad_t = np.nonzero(~np.isfinite(self.time))[0]
+        if bad_t.size:
+            raise DataError(f"time is not a finite number (data row {bad_t[0] + 1})", where=self.source)
+        step = np.nonzero(np.diff(self.time) <= 0)[0]
+        if step.size:
+            raise DataError(f"time is not strictly increasing at data row {step[0] + 2} "
+                            f"(t = {self.time[step[0] + 1]:g})", where=self.source)
+        bad = np.argwhere(~np.isfinite(self.values))
+        if bad.size:
+            r, c = bad[0]
+            raise DataError(f"column '{self.names[c]}' has a missing or non-finite value at data row "
+                            f"{r + 1} (t = {self.time[r]:g})", where=self.source)
+        return self
+
+
+def read_csv(path) -> TimeSeries:
+    """Read a CSV time series; errors name the file and line."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError("no such data file", where=str(path))
+    with path.open(newline="", encoding="utf-8-sig") as fh:
+        rows = list(csv.reader(fh))
+    rows = [r for r in rows if r and any(c.strip() for c in r)]
+    if not rows:
+        raise DataError("empty file", where=str(path))
+    header = [h.strip() for h in rows[0]]
+    if header[0].lower() != "time":
+        raise DataError(f"the first column must be 'time', not '{header[0]}'", where=f"{path}:1")
+    dup = {h for h in header if header.count(h) > 1}
+    if dup:
+        raise DataError(f"duplicate column name(s) {', '.join(sorted(dup))}", where=f"{path}:1")
+    data = np.empty((len(rows) - 1, len(header)))
+    for i, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            raise DataError(f"{len(row)} fields, the header has {len(header)}", where=f"{path}:{i}")
+        for j, cell in enumerate(row):
+            try:
+                data[i - 2, j] = float(cell) if cell.strip() else np.nan
+            except ValueError:
+                raise DataError(f"column '{header[j]}': '{cell}' is not a number",
+                                where=f"{path}:{i}") from None
+    return TimeSeries(data[:, 0], data[:, 1:], header[1:], str(path)).validate()
+
+
+def write_csv(path, series: TimeSeries) -> None:
+    """Write atomically (temporary file + rename): a reader never sees half a file."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["time", *series.names])
+            for t, row in zip(series.time, series.values):
+                w.writerow([repr(float(t)), *(repr(float(v)) for v in row)])
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

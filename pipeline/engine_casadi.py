@@ -1,0 +1,188 @@
+"""In-process engine: CVODES on the compiled ODE, inputs baked in as a linear interpolant.
+
+The fitting loops' workhorse (../shared/DESIGN.md, section 4: 10-50x faster than the FMU route).
+Forward sensitivities integrate S' = (df/dx) S + df/dp alongside the state, so dy/dp is exact up
+to the solver tolerance. The horizon is integrated in chunks so a wall-clock limit can stop a run
+that crawls (some infeasible parameters make CVODES take tiny steps for ever).
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import casadi as ca
+import numpy as np
+
+from .data import TimeSeries
+from .errors import DataError
+from .model import CompiledModel
+from .simulate import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
+                       quiet_native_output)
+
+N_CHUNKS = 10
+_CACHE_SIZE = 16
+
+
+class CasadiEngine(Engine):
+    """Simulate a :class:`CompiledModel` in this process."""
+
+    name = "casadi"
+
+    def __init__(self):
+        self._plans: OrderedDict = OrderedDict()
+
+    def accepts(self, model) -> bool:
+        return isinstance(model, CompiledModel)
+
+    def simulate(self, model: CompiledModel, inputs: TimeSeries, params=None, t_out=None,
+                 options: SimulationOptions | None = None, sensitivities=None) -> SimulationResult:
+        opts = options or SimulationOptions()
+        u = prepare_inputs(model, inputs)
+        t_out = u.time if t_out is None else np.asarray(t_out, dtype=float)
+        _check_grid(t_out, u)
+        p = model.parameter_vector(params)
+        sel = [model.ode.p_names.index(n) for n in (sensitivities or [])
+               if _known(n, model)]
+        plan = self._plan(model, u, t_out, tuple(sel), opts)
+        with quiet_native_output():
+            return plan.run(p, opts)
+
+    def _plan(self, model, u, t_out, sel, opts):
+        key = (id(model), id(model.ode.ode), u.time.tobytes(), u.values.tobytes(),
+               t_out.tobytes(), sel, opts.rtol, opts.atol, opts.max_steps)
+        if key not in self._plans:
+            self._plans[key] = _Plan(model, u, t_out, list(sel), opts)
+            if len(self._plans) > _CACHE_SIZE:
+                self._plans.popitem(last=False)
+        self._plans.move_to_end(key)
+        return self._plans[key]
+
+
+def _known(name, model):
+    if name not in model.ode.p_names:
+        raise DataError(f"no free parameter '{name}' to differentiate by")
+    return True
+
+
+def _check_grid(t_out, u: TimeSeries):
+    if len(t_out) < 2 or np.any(np.diff(t_out) <= 0):
+        raise DataError("output times must be strictly increasing (at least two)")
+    if len(u.names) and (t_out[0] < u.time[0] - 1e-12 or t_out[-1] > u.time[-1] + 1e-12):
+        raise DataError(f"output times [{t_out[0]:g}, {t_out[-1]:g}] leave the input's range "
+                        f"[{u.time[0]:g}, {u.time[-1]:g}]", where=u.source)
+
+
+class _Plan:
+    """Integrators and output maps for one (model, input, grid, sensitivity) combination."""
+
+    def __init__(self, model: CompiledModel, u: TimeSeries, t_out, sel, opts):
+        ode = model.ode
+        self.model, self.t_out, self.sel, self.u = model, t_out, sel, u
+        nx, npar, ns = len(ode.x_names), len(ode.p_names), len(sel)
+        X, P, T = ca.MX.sym("x", nx), ca.MX.sym("p", npar), ca.MX.sym("t")
+        if u.names:
+            interp = ca.interpolant("U", "linear", [u.time], u.values.ravel(order="C"))
+            Ut = interp(T)
+            self.u_out = np.array([np.interp(t_out, u.time, u.values[:, j])
+                                   for j in range(len(u.names))])
+        else:
+            Ut = ca.MX(0, 1)
+            self.u_out = np.zeros((0, len(t_out)))
+        f = ode.ode(X, Ut, P, T)
+        xa, fa = X, f
+        if ns:
+            S = ca.MX.sym("S", nx, ns)
+            dS = ca.mtimes(ca.jacobian(f, X), S) + ca.jacobian(f, P)[:, sel]
+            xa, fa = ca.vertcat(X, ca.vec(S)), ca.vertcat(f, ca.vec(dS))
+        dae = {"x": xa, "p": P, "t": T, "ode": fa}
+        iopts = {"reltol": opts.rtol, "abstol": opts.atol, "max_num_steps": opts.max_steps,
+                 "disable_internal_warnings": True}
+        chunks = np.array_split(np.arange(1, len(t_out)), min(N_CHUNKS, len(t_out) - 1))
+        self.chunks = []
+        for k, idx in enumerate(chunks):
+            t0 = t_out[idx[0] - 1]
+            integ = ca.integrator(f"I{k}", "cvodes", dae, t0, t_out[idx].tolist(), iopts)
+            self.chunks.append((idx, integ))
+        N = len(t_out)
+        Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
+                          (("x", nx), ("u", len(ode.u_names)), ("p", npar), ("t", 1)))
+        checks = ca.Function("checks", [Xs, Us, Ps, Ts],
+                             [ode.out(Xs, Us, Ps, Ts), ode.alg_res(Xs, Us, Ps, Ts),
+                              ode.drift(Xs, Us, Ps, Ts)])
+        self.checks = checks.map(N)
+        if ns:
+            Ss = ca.MX.sym("S", nx, ns)
+            y = ode.out(Xs, Us, Ps, Ts)
+            dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel]
+            self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts], [dy]).map(N)
+            x0 = ode.init(Us, Ps, Ts)
+            self.dx0 = ca.Function("dx0", [Us, Ps, Ts], [x0, ca.jacobian(x0, Ps)[:, sel]])
+        self.nx, self.ns = nx, ns
+
+    def run(self, p: np.ndarray, opts: SimulationOptions) -> SimulationResult:
+        ode, t_out, N = self.model.ode, self.t_out, len(self.t_out)
+        clock = Stopwatch(opts.time_limit)
+        names = ode.y_names
+
+        def fail(reason):
+            return SimulationResult.failed(reason, t_out, names, "casadi", clock.elapsed)
+
+        u0 = self.u_out[:, 0]
+        try:
+            if self.ns:
+                x0, s0 = (np.array(v) for v in self.dx0(u0, p, t_out[0]))
+                xa = np.concatenate([x0.ravel(), s0.ravel(order="F")])
+            else:
+                xa = np.array(ode.init(u0, p, t_out[0])).ravel()
+        except RuntimeError as exc:
+            return fail(f"initialisation failed: {_last_line(exc)}")
+        if not np.all(np.isfinite(xa)):
+            return fail("initialisation gave non-finite values")
+        traj = np.full((len(xa), N), np.nan)
+        traj[:, 0] = xa
+        for idx, integ in self.chunks:
+            if clock.expired:
+                return fail(f"time limit of {opts.time_limit:g} s exceeded at t = {t_out[idx[0] - 1]:g}")
+            try:
+                xf = np.array(integ(x0=traj[:, idx[0] - 1], p=p)["xf"])
+            except RuntimeError as exc:
+                return fail(f"solver error before t = {t_out[idx[-1]]:g}: {_last_line(exc)}")
+            traj[:, idx] = xf
+            if not np.all(np.isfinite(xf)):
+                bad = idx[np.argmax(~np.all(np.isfinite(xf), axis=0))]
+                return fail(f"non-finite state at t = {t_out[bad]:g}")
+        X = traj[: self.nx]
+        P = np.repeat(p[:, None], N, axis=1)
+        y, res, drift = (np.array(v) for v in self.checks(X, self.u_out, P, t_out[None, :]))
+        result = SimulationResult(t_out.copy(), y.T, list(names), seconds=clock.elapsed,
+                                  engine="casadi", states=X.T)
+        scale = 1.0 + np.max(np.abs(X))
+        reason = _check(y, res.ravel(), drift.ravel(), t_out, scale, opts)
+        if reason:
+            result.ok, result.reason = False, reason
+        if self.ns:
+            # column k of traj holds vec(S(t_k)); the mapped function wants [S(t_1), ..., S(t_N)]
+            S = np.hstack([traj[self.nx:, k].reshape(self.nx, self.ns, order="F") for k in range(N)])
+            dy = np.array(self.sens(X, S, self.u_out, P, t_out[None, :]))
+            result.sensitivities = dy.reshape(len(names), N, self.ns).transpose(1, 0, 2)
+            result.sensitivity_names = [ode.p_names[i] for i in self.sel]
+        return result
+
+
+def _check(y, res, drift, t, scale, opts) -> str | None:
+    if not np.all(np.isfinite(y)):
+        return f"non-finite output at t = {t[np.argmax(~np.all(np.isfinite(y), axis=0))]:g}"
+    bad = np.nonzero(~(res <= opts.residual_tol * scale))[0]
+    if bad.size:
+        k = bad[0]
+        return f"algebraic loop not converged at t = {t[k]:g} (residual {res[k]:.3g})"
+    bad = np.nonzero(~(drift <= opts.drift_tol * scale))[0]
+    if bad.size:
+        k = bad[0]
+        return f"constraint drift {drift[k]:.3g} at t = {t[k]:g} (index-reduced invariants violated)"
+    return None
+
+
+def _last_line(exc: Exception) -> str:
+    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    msg = lines[-1] if lines else type(exc).__name__
+    return msg.split(": ", 1)[-1] if msg.startswith(".../") else msg

@@ -1,0 +1,41 @@
+"""One exception family for the whole tool; only the CLI turns it into a one-line message."""
+from __future__ import annotations
+
+
+class MclError(Exception):
+    """Base of every error `mcl` raises for a user mistake or an unsupported input.
+
+    ``where`` is the file (and line) the problem is in, shown before the message.
+    """
+
+    def __init__(self, message: str, where: str | None = None):
+        super().__init__(message)
+        self.message = message
+        self.where = where
+
+    def __str__(self) -> str:
+        return f"{self.where}: {self.message}" if self.where else self.message
+
+
+class ModelicaError(MclError):
+    """A Modelica source that does not parse, names a missing class, or is unbalanced."""
+
+
+class UnsupportedConstruct(ModelicaError):
+    """A construct the compiler cannot translate faithfully (never compiled wrongly)."""
+
+
+class CompileError(MclError):
+    """The compiler failed on a model it accepted (C compiler, FMU packaging, ...)."""
+
+
+class PluginError(MclError):
+    """A plugin failed to load, registered a duplicate name, or nothing handles a request."""
+
+
+class DataError(MclError):
+    """A data file is missing, malformed, or does not match the model."""
+
+
+class ConfigError(MclError):
+    """A run file or command-line value is invalid."""

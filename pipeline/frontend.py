@@ -1,0 +1,195 @@
+"""Modelica front end: source files -> pymoca CasADi model, with errors that name file and line.
+
+pymoca parses and flattens; this module adds what a user needs around it: collecting sources from
+files and package directories, one-line errors with locations, and refusing constructs pymoca
+would translate wrongly (see ../shared/DESIGN.md, section 1) instead of compiling them.
+"""
+from __future__ import annotations
+
+import logging
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .compat import patch_casadi_for_pymoca
+from .errors import ModelicaError, UnsupportedConstruct
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class Sources:
+    """The Modelica files a model is compiled from, with their text kept for error locations."""
+
+    files: list[Path]
+    text: dict[Path, str] = field(default_factory=dict)
+
+    def locate(self, pattern: str) -> str | None:
+        """``file:line`` of the first line matching the regular expression, or None."""
+        rx = re.compile(pattern)
+        for f in self.files:
+            for n, line in enumerate(self.text[f].splitlines(), 1):
+                if rx.search(_strip_comment(line)):
+                    return f"{f}:{n}"
+        return None
+
+
+def _strip_comment(line: str) -> str:
+    return line.split("//", 1)[0]
+
+
+def collect_sources(paths) -> Sources:
+    """Expand ``.mo`` files and package directories into a sorted, de-duplicated file list."""
+    files: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(p.rglob("*.mo"))
+            if not found:
+                raise ModelicaError("directory holds no .mo files", where=str(p))
+            files.extend(found)
+        elif p.is_file():
+            if p.suffix != ".mo":
+                raise ModelicaError("not a Modelica source (.mo) file", where=str(p))
+            files.append(p)
+        else:
+            raise ModelicaError("no such file or directory", where=str(p))
+    unique = list(dict.fromkeys(f.resolve() for f in files))
+    if not unique:
+        raise ModelicaError("no Modelica sources given")
+    return Sources(unique, {f: f.read_text(encoding="utf-8", errors="replace") for f in unique})
+
+
+def parse(sources: Sources):
+    """Parse every file into one pymoca class tree; a syntax error names file, line and column."""
+    from pymoca import parser  # slow import (ANTLR): only when compiling
+
+    tree = None
+    for f in sources.files:
+        try:
+            part = parser.parse(sources.text[f])
+        except SyntaxError as exc:  # pymoca's ModelicaSyntaxError
+            raise ModelicaError(
+                f"syntax error: {exc.msg}", where=f"{f}:{exc.lineno}:{exc.offset}"
+            ) from None
+        except NotImplementedError as exc:
+            raise UnsupportedConstruct(f"not supported by the pymoca parser: {exc}", where=str(f))
+        if part is None:
+            continue
+        if tree is None:
+            tree = part
+        else:
+            tree.extend(part)
+    if tree is None:
+        raise ModelicaError("the sources define no classes", where=str(sources.files[0]))
+    return tree
+
+
+def find_class(tree, name: str):
+    """The class ``name`` (dotted) in the parsed tree, or a ModelicaError listing what exists."""
+    node = tree
+    for part in name.split("."):
+        if part not in node.classes:
+            known = ", ".join(sorted(node.classes)) or "nothing"
+            raise ModelicaError(f"class '{name}' not found ('{part}' not in {node.name or 'top level'}: {known})")
+        node = node.classes[part]
+    return node
+
+
+def flatten(tree, name: str, sources: Sources):
+    """Flatten ``name``; a missing class or type names the file and line that uses it."""
+    from pymoca import ast
+    from pymoca.tree import flatten as pymoca_flatten
+
+    find_class(tree, name)
+    try:
+        return pymoca_flatten(tree, ast.ComponentRef.from_string(name))
+    except Exception as exc:  # pymoca raises bare Exceptions and ModelicaSemanticError
+        msg = str(exc).splitlines()[0]
+        token = re.search(r"(?:Type|Class|class|type)\s+([\w.]+)", msg)
+        where = sources.locate(re.escape(token.group(1).split(".")[-1])) if token else None
+        raise ModelicaError(f"cannot flatten {name}: {msg}", where=where) from None
+
+
+def check_supported(flat_class, sources: Sources) -> None:
+    """Refuse constructs that pymoca 0.12 + casadi 3.8 would reject late or compile wrongly."""
+    from pymoca import ast
+
+    def refuse(construct: str, pattern: str):
+        raise UnsupportedConstruct(
+            f"unsupported Modelica construct: {construct}", where=sources.locate(pattern)
+        )
+
+    def walk_expr(e):
+        if isinstance(e, ast.Expression):
+            if e.operator == "der" and not isinstance(e.operands[0], ast.ComponentRef):
+                refuse("der() of an expression (write der(x) of a variable)", r"\bder\s*\(\s*[^)]*[*/+-]")
+            if e.operator in ("pre", "edge", "change", "sample", "initial", "terminal"):
+                refuse(f"event operator {e.operator}()", rf"\b{e.operator}\s*\(")
+            for o in e.operands:
+                walk_expr(o)
+        elif isinstance(e, ast.IfExpression):
+            for part in (*e.conditions, *e.expressions):
+                walk_expr(part)
+
+    def walk_eqs(eqs):
+        for eq in eqs:
+            if isinstance(eq, ast.WhenEquation):
+                refuse("when-equation (discrete events, reinit)", r"\bwhen\b")
+            if isinstance(eq, ast.ForEquation):
+                if any(isinstance(e, ast.ConnectClause) for e in eq.equations):
+                    refuse("connect() inside a for-loop", r"\bfor\b")
+                walk_eqs(eq.equations)
+            elif isinstance(eq, ast.IfEquation):
+                for block in eq.blocks:
+                    walk_eqs(block)
+            elif isinstance(eq, ast.Equation):
+                for side in (eq.left, eq.right):
+                    for e in side if isinstance(side, list) else [side]:
+                        walk_expr(e)
+
+    walk_eqs(flat_class.equations)
+    walk_eqs(flat_class.initial_equations)
+    if flat_class.statements or flat_class.initial_statements:
+        refuse("algorithm section", r"\balgorithm\b")
+
+
+def generate(tree, name: str, sources: Sources):
+    """Modelica class -> pymoca CasADi ``Model`` (aliases detected), checked for support."""
+    patch_casadi_for_pymoca()
+    from pymoca.backends.casadi._options import _merge_default_options
+    from pymoca.backends.casadi.generator import Generator, GeneratorWalker
+
+    flat_tree = flatten(tree, name, sources)
+    flat_class = flat_tree.classes[name]
+    check_supported(flat_class, sources)
+    options = _merge_default_options({"detect_aliases": True, "check_balanced": False})
+    try:
+        gen = Generator(flat_tree, name, options)
+        GeneratorWalker().walk(gen, flat_tree)
+        model = gen.model
+        model.simplify(options)
+    except Exception as exc:
+        msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
+        key = re.search(r"'([\w.]+)'", msg)
+        where = sources.locate(re.escape(key.group(1).split(".")[-1])) if key else None
+        raise UnsupportedConstruct(
+            f"the pymoca front end cannot translate {name}: {msg}", where=where
+        ) from None
+    _restore_top_level_inputs(model, find_class(tree, name))
+    return model
+
+
+def _restore_top_level_inputs(model, cls) -> None:
+    """pymoca drops the causality of ``input T u`` when T is a derived type: put it back."""
+    declared = {n for n, s in cls.symbols.items() if "input" in s.prefixes}
+    for v in list(model.alg_states):
+        if v.symbol.name() in declared:
+            model.alg_states.remove(v)
+            model.inputs.append(v)
+
+
+def load(paths, name: str):
+    """Sources (files or package directories) + class name -> (pymoca model, Sources)."""
+    sources = collect_sources(paths)
+    tree = parse(sources)
+    return generate(tree, name, sources), sources

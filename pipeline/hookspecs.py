@@ -1,0 +1,63 @@
+"""Every hook of mcl, in one place: read this module to learn the architecture.
+
+Built-in plugins (``plugins/``) and third-party plugins (entry-point group ``mcl``) implement
+these with :data:`pipeline.hookimpl`. Capability hooks return classes carrying a unique ``name``
+(a duplicate name is an error); the YAML file and the command line pick a class by that name.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import pluggy
+
+#: Marker name shared by hook specs and implementations.
+PROJECT = "mcl"
+
+hookspec = pluggy.HookspecMarker(PROJECT)
+hookimpl = pluggy.HookimplMarker(PROJECT)
+
+
+@hookspec
+def mcl_compilers() -> list[type]:
+    """Register compiler classes (subclasses of :class:`pipeline.compile.Compiler`).
+
+    Called once per plugin manager; all results are collected. When a user names no compiler,
+    the first registered compiler that is available and accepts the sources wins (plugins
+    registered later are asked first, so a third-party compiler can take over a file type).
+    """
+
+
+@hookspec
+def mcl_engines() -> list[type]:
+    """Register simulation engine classes (subclasses of :class:`pipeline.simulate.Engine`).
+
+    All results are collected; a model is simulated by the first engine that accepts it,
+    unless the user names one.
+    """
+
+
+@hookspec(firstresult=True)
+def mcl_load_model(path: str) -> Any:
+    """Read a ready-made model file (an FMU, a saved compiled model, ...), or return None.
+
+    First non-None result wins. Called wherever a model is expected and a file is given instead
+    of Modelica sources.
+    """
+
+
+@hookspec
+def mcl_before_stage(stage: str, context: dict) -> None:
+    """Called before a stage (``compile``, ``simulate``, ...) runs; ``context`` holds its inputs.
+
+    Observers may log or record; they must not replace the stage. Return value ignored.
+    """
+
+
+@hookspec
+def mcl_after_stage(stage: str, context: dict, result: Any) -> None:
+    """Called after a stage finished, with its result. Return value ignored."""
+
+
+@hookspec
+def mcl_on_stage_error(stage: str, context: dict, error: BaseException) -> None:
+    """Called when a stage raised; the error propagates afterwards. Return value ignored."""

@@ -1,0 +1,115 @@
+"""What a compiler produces: a model both engines can run.
+
+:class:`CompiledModel` is the in-process form (CasADi functions of the explicit ODE, exact
+sensitivities); :class:`FmuModel` wraps an FMU file, from ``mcl compile`` or from another tool.
+Both carry the names of inputs, outputs and free parameters, so the rest of the pipeline does not
+care which it has.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from .errors import DataError, MclError
+from .structure import Ode
+
+_FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe")
+
+
+@dataclass
+class CompiledModel:
+    """A model compiled to CasADi functions (see :class:`pipeline.structure.Ode`)."""
+
+    name: str
+    ode: Ode
+    info: dict = field(default_factory=dict)
+
+    @property
+    def input_names(self) -> list[str]:
+        return self.ode.u_names
+
+    @property
+    def output_names(self) -> list[str]:
+        return self.ode.y_names
+
+    @property
+    def parameters(self) -> dict[str, float]:
+        return dict(zip(self.ode.p_names, map(float, self.ode.p_values)))
+
+    def parameter_vector(self, overrides: dict | None = None) -> np.ndarray:
+        """Nominal parameter values with ``overrides`` (by name) applied."""
+        p = self.ode.p_values.astype(float).copy()
+        for k, v in (overrides or {}).items():
+            if k not in self.ode.p_names:
+                raise MclError(f"model {self.name} has no free parameter '{k}' "
+                               f"(free parameters: {', '.join(self.ode.p_names)})")
+            p[self.ode.p_names.index(k)] = float(v)
+        return p
+
+    def save(self, directory) -> Path:
+        """Write the functions (CasADi serialisation) and names to ``directory``."""
+        d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        for f in _FUNCTIONS:
+            getattr(self.ode, f).save(str(d / f"{f}.casadi"))
+        o = self.ode
+        meta = dict(name=self.name, info=self.info, x_names=o.x_names, u_names=o.u_names,
+                    p_names=o.p_names, y_names=o.y_names, p_values=o.p_values.tolist(),
+                    u_start=o.u_start.tolist(), probe_names=o.probe_names, index=o.index,
+                    nonlinear_blocks=o.nonlinear_blocks)
+        (d / "model.json").write_text(json.dumps(meta, indent=1))
+        return d
+
+    @classmethod
+    def load(cls, directory) -> "CompiledModel":
+        d = Path(directory)
+        meta = json.loads((d / "model.json").read_text())
+        funcs = {f: ca.Function.load(str(d / f"{f}.casadi")) for f in _FUNCTIONS}
+        ode = Ode(x_names=meta["x_names"], u_names=meta["u_names"], p_names=meta["p_names"],
+                  y_names=meta["y_names"], p_values=np.array(meta["p_values"]),
+                  u_start=np.array(meta["u_start"]), probe_names=meta["probe_names"],
+                  index=meta["index"], nonlinear_blocks=meta["nonlinear_blocks"], **funcs)
+        return cls(meta["name"], ode, meta.get("info", {}))
+
+
+@dataclass
+class FmuModel:
+    """An FMI 2.0/3.0 Model Exchange or Co-Simulation FMU, read with FMPy."""
+
+    path: Path
+    name: str
+    input_names: list[str]
+    output_names: list[str]
+    parameters: dict[str, float]
+    fmi_version: str
+
+    @classmethod
+    def read(cls, path) -> "FmuModel":
+        from fmpy import read_model_description
+
+        path = Path(path)
+        if not path.is_file():
+            raise DataError("no such FMU", where=str(path))
+        try:
+            md = read_model_description(str(path), validate=False)
+        except Exception as exc:
+            raise DataError(f"not a readable FMU: {exc}", where=str(path)) from None
+        real = [v for v in md.modelVariables if v.type == "Real" or v.type.startswith("Float")]
+        params = {v.name: float(v.start) for v in real
+                  if v.causality == "parameter" and v.start is not None}
+        return cls(path=path, name=md.modelName,
+                   input_names=[v.name for v in real if v.causality == "input"],
+                   output_names=[v.name for v in real if v.causality == "output"],
+                   parameters=params, fmi_version=md.fmiVersion)
+
+    def parameter_vector(self, overrides: dict | None = None) -> dict[str, float]:
+        p = dict(self.parameters)
+        for k, v in (overrides or {}).items():
+            if k not in p:
+                raise MclError(f"FMU {self.path.name} has no parameter '{k}'")
+            p[k] = float(v)
+        return p

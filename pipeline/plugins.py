@@ -1,0 +1,144 @@
+"""Plugin manager factory and a typed facade over the hooks.
+
+Built-in plugins are registered exactly like third-party ones; external plugins come from the
+entry-point group ``mcl``. Environment variables make runs reproducible:
+
+- ``MCL_DISABLE_EXTERNAL_PLUGINS=1`` loads no external plugin;
+- ``MCL_PLUGINS=a,b`` loads only the external plugins named ``a`` and ``b``.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+from dataclasses import dataclass
+from importlib import metadata
+
+import pluggy
+
+from . import hookspecs
+from .errors import PluginError
+
+ENTRY_POINT_GROUP = "mcl"
+DEFAULT_PLUGINS = (
+    "plugins.casadi_compiler",
+    "plugins.openmodelica",
+    "plugins.engines",
+    "plugins.model_files",
+)
+ENV_DISABLE = "MCL_DISABLE_EXTERNAL_PLUGINS"
+ENV_ALLOW = "MCL_PLUGINS"
+
+
+@dataclass
+class PluginInfo:
+    name: str
+    origin: str      # "built-in" or "distribution==version"
+    module: str
+
+
+def _external_allowed(name: str) -> bool:
+    if os.environ.get(ENV_DISABLE, "").strip().lower() in ("1", "true", "yes"):
+        return False
+    allow = os.environ.get(ENV_ALLOW)
+    if allow is None:
+        return True
+    return name in {n.strip() for n in allow.split(",") if n.strip()}
+
+
+def plugin_manager(external: bool = True) -> tuple[pluggy.PluginManager, list[PluginInfo]]:
+    """A fresh manager with the built-in plugins and (unless blocked) the external ones."""
+    pm = pluggy.PluginManager(hookspecs.PROJECT)
+    pm.add_hookspecs(hookspecs)
+    infos = []
+    for modname in DEFAULT_PLUGINS:
+        mod = importlib.import_module(modname)
+        pm.register(mod, name=modname)
+        infos.append(PluginInfo(modname, "built-in", modname))
+    if external:
+        for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+            if not _external_allowed(ep.name) or pm.has_plugin(ep.name):
+                continue
+            dist = f"{ep.dist.name}=={ep.dist.version}" if ep.dist else "unknown distribution"
+            try:
+                obj = ep.load()
+                pm.register(obj, name=ep.name)
+            except Exception as exc:
+                raise PluginError(f"plugin '{ep.name}' from {dist} failed to load: {exc}") from None
+            infos.append(PluginInfo(ep.name, dist, ep.value))
+    try:
+        pm.check_pending()
+    except pluggy.PluginValidationError as exc:
+        raise PluginError(f"plugin '{exc.plugin_name if hasattr(exc, 'plugin_name') else exc.plugin}'"
+                          f" implements an unknown hook: {exc}") from None
+    return pm, infos
+
+
+def _named(results, kind: str) -> dict[str, type]:
+    out: dict[str, type] = {}
+    for group in results:
+        for cls in group or []:
+            name = getattr(cls, "name", "")
+            if not name:
+                raise PluginError(f"{kind} class {cls.__qualname__} has no name")
+            if name in out and out[name] is not cls:
+                raise PluginError(f"two {kind}s are named '{name}' ({out[name].__module__}, {cls.__module__})")
+            out[name] = cls
+    return out
+
+
+class Registry:
+    """What the installed plugins provide, by name; the one object the core asks."""
+
+    def __init__(self, external: bool = True):
+        self.pm, self.plugins = plugin_manager(external)
+        self.compilers = _named(self.pm.hook.mcl_compilers(), "compiler")
+        self.engines = _named(self.pm.hook.mcl_engines(), "engine")
+
+    @property
+    def hook(self):
+        return self.pm.hook
+
+    def compiler(self, sources, name: str | None = None):
+        from .compile import choose
+
+        return choose(self.compilers, sources, name)
+
+    def engine_for(self, model, name: str | None = None):
+        if name:
+            if name not in self.engines:
+                raise PluginError(f"no engine named '{name}' (installed: {', '.join(self.engines)})")
+            engine = self.engines[name]()
+            if not engine.accepts(model):
+                raise PluginError(f"engine '{name}' cannot run a {type(model).__name__}")
+            return engine
+        for engine_cls in self.engines.values():
+            engine = engine_cls()
+            if engine.accepts(model):
+                return engine
+        raise PluginError(f"no engine runs a {type(model).__name__}")
+
+    def load_model_file(self, path):
+        model = self.hook.mcl_load_model(path=str(path))
+        if model is None:
+            raise PluginError(f"no plugin reads model files like '{path}'")
+        return model
+
+    def stage(self, stage: str, context: dict):
+        """Context manager running the lifecycle hooks around a stage."""
+        return _Stage(self, stage, context)
+
+
+class _Stage:
+    def __init__(self, registry, stage, context):
+        self.r, self.stage, self.context, self.result = registry, stage, context, None
+
+    def __enter__(self):
+        self.r.hook.mcl_before_stage(stage=self.stage, context=self.context)
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc is not None:
+            self.r.hook.mcl_on_stage_error(stage=self.stage, context=self.context, error=exc)
+        else:
+            self.r.hook.mcl_after_stage(stage=self.stage, context=self.context, result=self.result)
+        return False

@@ -1,0 +1,124 @@
+"""One simulation interface, two engines (in-process CasADi, FMU via FMPy).
+
+A failed simulation is a result, not an exception: :class:`SimulationResult` says ``ok`` and,
+when not, ``reason`` — solver error, non-finite values, end time not reached, algebraic loop not
+converged, invariant drift, or time limit exceeded (../shared/DESIGN.md, section 6: reliable
+detection needs every one of these checks).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .data import TimeSeries
+from .errors import DataError
+
+
+@dataclass
+class SimulationOptions:
+    """Solver settings shared by the engines."""
+
+    rtol: float = 1e-6
+    atol: float = 1e-8
+    time_limit: float = 60.0        # wall-clock seconds for one simulation
+    max_steps: int = 20000          # solver steps between two output chunks
+    residual_tol: float = 1e-6      # algebraic loops: max |g| accepted (relative to scale)
+    drift_tol: float = 1e-3         # invariants of index reduction: max |I| accepted
+    fmu_substeps: int = 4           # FMU engine: communication steps per output interval
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "SimulationOptions":
+        d = dict(d or {})
+        unknown = set(d) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise DataError(f"unknown simulation option(s): {', '.join(sorted(unknown))}")
+        return cls(**d)
+
+
+@dataclass
+class SimulationResult:
+    """Outputs on the output grid; ``sensitivities[k, i, j]`` = d y_i(t_k) / d p_j."""
+
+    time: np.ndarray
+    outputs: np.ndarray
+    output_names: list[str]
+    ok: bool = True
+    reason: str | None = None
+    seconds: float = 0.0
+    engine: str = ""
+    sensitivities: np.ndarray | None = None
+    sensitivity_names: list[str] = field(default_factory=list)
+    states: np.ndarray | None = None
+
+    def output(self, name: str) -> np.ndarray:
+        return self.outputs[:, self.output_names.index(name)]
+
+    def as_series(self) -> TimeSeries:
+        return TimeSeries(self.time, self.outputs, list(self.output_names), f"<{self.engine}>")
+
+    @classmethod
+    def failed(cls, reason, time, output_names, engine, seconds=0.0):
+        t = np.asarray(time, dtype=float)
+        return cls(t, np.full((len(t), len(output_names)), np.nan), list(output_names),
+                   ok=False, reason=reason, seconds=seconds, engine=engine)
+
+
+class Engine:
+    """Base of simulation engines. Subclasses set ``name`` and implement :meth:`simulate`."""
+
+    name = ""
+
+    def accepts(self, model) -> bool:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def simulate(self, model, inputs: TimeSeries, params: dict | None = None,
+                 t_out: np.ndarray | None = None, options: SimulationOptions | None = None,
+                 sensitivities: list[str] | None = None) -> SimulationResult:
+        raise NotImplementedError  # pragma: no cover - interface
+
+
+def prepare_inputs(model, inputs: TimeSeries) -> TimeSeries:
+    """The model's inputs, in its order, from a series that may hold more columns."""
+    if not model.input_names:
+        return TimeSeries(inputs.time, np.zeros((len(inputs.time), 0)), [], inputs.source)
+    return inputs.select(model.input_names).validate()
+
+
+class Stopwatch:
+    def __init__(self, limit: float):
+        self.start, self.limit = _time.perf_counter(), limit
+
+    @property
+    def elapsed(self) -> float:
+        return _time.perf_counter() - self.start
+
+    @property
+    def expired(self) -> bool:
+        return self.elapsed > self.limit
+
+
+@contextlib.contextmanager
+def quiet_native_output():
+    """Silence what native solvers print on stdout/stderr (CVODES, rootfinder failures).
+
+    Their messages are folded into ``SimulationResult.reason`` instead; C++ writes to the file
+    descriptors directly, so redirecting ``sys.stdout`` is not enough.
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in (*saved, null):
+            os.close(fd)

@@ -1,0 +1,278 @@
+"""Structural processing: index reduction, causalisation, consistent initialisation.
+
+DAE -> ODE in three steps (../shared/DESIGN.md, sections 2-3):
+
+1. ``casadi.dae_reduce_index`` differentiates the constraints that make the DAE high-index
+   (capacitor loops, rigidly coupled masses) and ``dae_map_semi_expl`` gives the semi-explicit
+   form x' = f(x, z), 0 = g(x, z) with the dropped constraints as invariants I(x, z) = 0.
+2. The algebraic system g is put in block-triangular form (Dulmage-Mendelsohn via
+   ``Sparsity.btf``); each block is solved in order: linear blocks explicitly, nonlinear
+   blocks (algebraic loops) by Newton's method (``rootfinder``, ``fast_newton``: the plugin
+   whose C code generation works). The result is an explicit ODE x' = f(x, z(x)).
+3. The initial state solves the invariants and initial equations, completed by start values of
+   states chosen greedily (fixed states first) so that the system is square and nonsingular.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+import scipy.linalg
+
+from .dae import Dae
+from .errors import ModelicaError, UnsupportedConstruct
+
+log = logging.getLogger(__name__)
+
+#: Largest linear block solved symbolically; larger ones go through a sparse QR at run time.
+SYMBOLIC_SOLVE_MAX = 8
+NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
+
+
+@dataclass
+class Ode:
+    """Explicit ODE of a compiled model; every function takes (x, u, p, t) unless said."""
+
+    x_names: list[str]
+    u_names: list[str]
+    p_names: list[str]
+    y_names: list[str]
+    p_values: np.ndarray
+    u_start: np.ndarray
+    ode: ca.Function        # -> x'
+    out: ca.Function        # -> y
+    alg_res: ca.Function    # -> max |g(x, z(x))| (0 unless there are algebraic loops)
+    drift: ca.Function      # -> max |I(x, z(x))|: invariants dropped by index reduction
+    init: ca.Function       # (u, p, t) -> x0
+    probe: ca.Function      # -> every named variable, in order ``probe_names``
+    probe_names: list[str]
+    index: int
+    nonlinear_blocks: int
+
+
+def reduce_index(dae: Dae):
+    """Index reduction (step 1); returns the semi-explicit DAE and the map back to ``dae``."""
+    up = ca.vertcat(dae.u, dae.p)
+    impl = dict(x_impl=dae.x, dx_impl=dae.dx, z=dae.z, alg=dae.residual, t=dae.t, p=up)
+    try:
+        red, stats = ca.dae_reduce_index(impl, {})
+        semi, state_to_orig, _phi = ca.dae_map_semi_expl(impl, red)
+    except RuntimeError as exc:
+        raise ModelicaError(f"index reduction failed (structurally singular model?): "
+                            f"{str(exc).strip().splitlines()[-1]}") from None
+    if ca.depends_on(red["I"], dae.u):
+        used = [n for i, n in enumerate(dae.u_names) if ca.depends_on(red["I"], dae.u[i])]
+        raise UnsupportedConstruct(
+            f"the model needs the time derivative of input(s) {', '.join(used)} (an input drives "
+            "a constraint that index reduction differentiates, e.g. a voltage source directly "
+            "across a capacitor); add a series element or give the input as a state")
+    return semi, state_to_orig, red["I"], int(stats["index"])
+
+
+def _blocks(g: ca.SX, z: ca.SX):
+    """BTF blocks of dg/dz in solving order: list of (rows, cols)."""
+    sp = ca.jacobian(g, z).sparsity()
+    if ca.sprank(sp) < z.numel():
+        raise ModelicaError(
+            f"the algebraic equations are structurally singular ({ca.sprank(sp)} of {z.numel()} "
+            "variables determined): an equation is missing or a variable is over-constrained")
+    _, rowperm, colperm, rowblock, colblock, _, _ = sp.btf()
+    blocks = [(list(rowperm[rowblock[k]:rowblock[k + 1]]), list(colperm[colblock[k]:colblock[k + 1]]))
+              for k in range(len(rowblock) - 1)]
+    dense = np.array(ca.DM(sp, 1))
+    col_block = {c: k for k, (_, cols) in enumerate(blocks) for c in cols}
+
+    def upper(bl):  # does some block depend on a later one?
+        return any(col_block[c] > k for k, (rows, _) in enumerate(bl)
+                   for r in rows for c in np.nonzero(dense[r])[0])
+
+    if upper(blocks):
+        blocks = blocks[::-1]
+        col_block = {c: k for k, (_, cols) in enumerate(blocks) for c in cols}
+        assert not upper(blocks), "BTF order"
+    return blocks
+
+
+def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
+    """Solve 0 = g(z, args) for z block by block; returns (Function args -> z, #nonlinear blocks).
+
+    Linear blocks A z_k + b = 0 are solved symbolically (small) or by sparse QR (large);
+    nonlinear blocks by Newton's method started from ``z_guess``.
+    """
+    blocks = _blocks(g, z)
+    mx_args = [ca.MX.sym(f"a{i}", a.sparsity()) for i, a in enumerate(args)]
+    solved: dict[int, ca.MX] = {}
+    n_nonlinear = 0
+    for k, (rows, cols) in enumerate(blocks):
+        gk, zk = g[rows], ca.vertcat(*[z[c] for c in cols])
+        prev = [c for c in sorted(solved) if ca.depends_on(gk, z[c])]
+        zprev = ca.vertcat(*[z[c] for c in prev]) if prev else ca.SX(0, 1)
+        prev_mx = ca.vertcat(*[solved[c] for c in prev]) if prev else ca.MX(0, 1)
+        A = ca.jacobian(gk, zk)
+        if not ca.depends_on(A, zk):
+            b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
+            if len(cols) <= SYMBOLIC_SOLVE_MAX:
+                sol_sx = -ca.solve(A, b) if len(cols) > 1 else -b / A
+                f = ca.Function(f"blk{k}", [zprev, *args], [sol_sx])
+                sol = f(prev_mx, *mx_args)
+            else:
+                fa = ca.Function(f"blk{k}", [zprev, *args], [A, b])
+                A_mx, b_mx = fa(prev_mx, *mx_args)
+                sol = -ca.solve(A_mx, b_mx, "qr")
+        else:
+            n_nonlinear += 1
+            par = ca.vertcat(zprev, *args)
+            resid = ca.Function(f"loop{k}", [zk, par], [gk])
+            rf = ca.rootfinder(f"newton{k}", "fast_newton", resid, NEWTON_OPTS)
+            guess = ca.DM(z_guess[cols])
+            sol = rf(guess, ca.vertcat(prev_mx, *mx_args))
+        for i, c in enumerate(cols):
+            solved[c] = sol[i]
+    zsol = ca.vertcat(*[solved[c] for c in range(z.numel())]) if z.numel() else ca.MX(0, 1)
+    return ca.Function("zsol", mx_args, [zsol]), n_nonlinear
+
+
+def build_ode(dae: Dae, name: str = "model") -> Ode:
+    """Index reduction + causalisation + initialisation: the model's explicit ODE."""
+    semi, state_to_orig, invariants, index = reduce_index(dae)
+    xs, zs = semi["x"], semi["z"]
+    up = semi["p"]
+    nu = dae.u.numel()
+    orig = state_to_orig(xf=xs, zf=zs)
+    x_impl, z_orig = orig["x_impl"], orig["z"]
+
+    # start values of the semi-explicit unknowns (used as Newton guesses and pins)
+    start_fun = ca.Function("start", [dae.p], [dae.x_start, dae.z_start])
+    x0_nom, z0_nom = (np.array(v).ravel() for v in start_fun(dae.p_values))
+    to_orig = dict(zip(map(str, ca.vertsplit(dae.x)), x0_nom))
+    to_orig.update(zip(map(str, ca.vertsplit(dae.z)), z0_nom))
+    z_guess = np.array([to_orig.get(str(s), 0.0) for s in ca.vertsplit(zs)])
+
+    t = semi["t"]
+    zfun, n_nl = causalise(semi["alg"], zs, [xs, up, t], z_guess)
+    X, U, P, T = (ca.MX.sym(n, k) for n, k in
+                  (("x", xs.numel()), ("u", nu), ("p", dae.p.numel()), ("t", 1)))
+    UP = ca.vertcat(U, P)
+    Z = zfun(X, UP, T)
+    sx_fun = ca.Function("sx", [xs, zs, up, t],
+                         [semi["ode"], semi["alg"], invariants_in(invariants, dae, x_impl, z_orig)])
+    xdot, g, inv = sx_fun(X, Z, UP, T)
+    zero = ca.DM.zeros(1, 1)
+    absmax = (lambda v: ca.mmax(ca.fabs(v)) if v.numel() else zero)
+
+    # every named variable of the original model, as a function of the ODE's arguments
+    probe_names = list(dae.exprs)
+    exprs = ca.vertcat(*[dae.exprs[n] for n in probe_names])
+    probe_sx = ca.Function("probe_sx", [dae.x, dae.z, dae.u, dae.p, dae.t], [exprs])
+    orig_fun = ca.Function("orig", [xs, zs], [x_impl, z_orig])
+    XI, ZI = orig_fun(X, Z)
+    probe_all = probe_sx(XI, ZI, U, P, T)
+    y_idx = [probe_names.index(o) for o in dae.outputs]
+
+    args, names = [X, U, P, T], ["x", "u", "p", "t"]
+    mk = (lambda fname, outs: ca.Function(fname, args, outs, names, ["out"]))
+    ode = mk("ode", [xdot])
+    out = mk("out", [probe_all[y_idx] if y_idx else ca.MX(0, 1)])
+    alg_res = mk("alg_res", [absmax(g)])
+    drift = mk("drift", [absmax(inv)])
+    probe = mk("probe", [probe_all])
+
+    x_names = semi_state_names(xs, dae)
+    init = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names)
+    # SX evaluates faster than the MX call graph, where there is no Newton or QR solve in it
+    ode, out, alg_res, drift, probe, init = map(_expanded, (ode, out, alg_res, drift, probe, init))
+    return Ode(
+        x_names=x_names, u_names=list(dae.u_names), p_names=list(dae.p_names),
+        y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
+        ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe,
+        probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
+    )
+
+
+def _expanded(f: ca.Function) -> ca.Function:
+    try:
+        return f.expand()
+    except RuntimeError:  # holds a rootfinder or a run-time linear solver
+        return f
+
+
+def invariants_in(invariants: ca.SX, dae: Dae, x_impl, z_orig):
+    """The invariants, written in the semi-explicit unknowns."""
+    return ca.substitute(invariants, ca.vertcat(dae.x, dae.z), ca.vertcat(x_impl, z_orig))
+
+
+def semi_state_names(xs: ca.SX, dae: Dae) -> list[str]:
+    """Names of the semi-explicit states (original states, then differentiated variables)."""
+    lookup = {str(s): n for s, n in zip(ca.vertsplit(dae.x), dae.x_names)}
+    lookup.update({str(s): n for s, n in zip(ca.vertsplit(dae.z), dae.z_names)})
+    return [lookup.get(str(s), str(s)) for s in ca.vertsplit(xs)]
+
+
+def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names):
+    """(u, p, t) -> consistent x0: invariants + initial equations + chosen start values."""
+    nx = xs.numel()
+    dx_orig = ca.MX(0, 1)  # initial equations with der() are rare; map them when present
+    init_res = ca.Function("ires", [dae.x, dae.dx, dae.z, dae.u, dae.p, dae.t], [dae.init_residual])
+    if dae.init_residual.numel():
+        if ca.depends_on(dae.init_residual, dae.dx):
+            raise UnsupportedConstruct("initial equations with der() are not supported yet")
+        dx_orig = ca.MX.zeros(dae.dx.numel())
+    hard = ca.vertcat(inv, init_res(XI, dx_orig, ZI, U, P, T))
+    semi_start = ca.Function("sst", [dae.p], [ca.vertcat(*[
+        _start_of(s, dae) for s in ca.vertsplit(xs)])])(P)
+
+    # numeric Jacobian at the nominal start point, to choose a square nonsingular system
+    xs0 = np.array(ca.Function("s0", [P], [semi_start])(dae.p_values)).ravel()
+    jac = ca.Function("J", [X, U, P, T], [ca.jacobian(hard, X)])
+    J = np.array(jac(xs0, dae.u_start, dae.p_values, 0.0))
+    rows = _independent_rows(J)
+    J = J[rows]
+    fixed = set(n for n, f in zip(dae.x_names, dae.x_fixed) if f)
+    order = ([i for i, n in enumerate(x_names) if n in fixed]
+             + [i for i, n in enumerate(x_names) if n in dae.x_names and n not in fixed]
+             + [i for i, n in enumerate(x_names) if n not in dae.x_names])
+    pins = []
+    rank = np.linalg.matrix_rank(J) if J.size else 0
+    for i in order:
+        if rank + len(pins) >= nx:
+            break
+        trial = np.vstack([J, np.eye(nx)[pins + [i]]])
+        if np.linalg.matrix_rank(trial) == rank + len(pins) + 1:
+            pins.append(i)
+        elif x_names[i] in fixed:
+            log.warning("start value of %s is not used: the state is determined by constraints",
+                        x_names[i])
+    if rank + len(pins) < nx:
+        raise ModelicaError("cannot find a consistent initial state (singular initial system)")
+    residual = ca.vertcat(hard[rows] if rows else ca.MX(0, 1),
+                          X[pins] - semi_start[pins] if pins else ca.MX(0, 1))
+    if not ca.depends_on(ca.jacobian(residual, X), X):
+        # linear: one exact solve, no Newton iteration
+        Ab = ca.Function("Ab", [X, U, P, T], [ca.jacobian(residual, X), residual])
+        A, b = Ab(ca.DM.zeros(nx), U, P, T)
+        x0 = -ca.solve(A, b) if nx else ca.MX(0, 1)
+        return ca.Function("init", [U, P, T], [x0], ["u", "p", "t"], ["x0"])
+    G = ca.Function("G", [X, ca.vertcat(U, P, T)], [residual])
+    rf = ca.rootfinder("init_newton", "fast_newton", G, NEWTON_OPTS)
+    x0 = rf(semi_start, ca.vertcat(U, P, T))
+    return ca.Function("init", [U, P, T], [x0], ["u", "p", "t"], ["x0"])
+
+
+def _start_of(s, dae: Dae):
+    for vec, start in ((dae.x, dae.x_start), (dae.z, dae.z_start)):
+        for i, v in enumerate(ca.vertsplit(vec)):
+            if ca.is_equal(v, s):
+                return start[i]
+    return ca.SX(0)
+
+
+def _independent_rows(J: np.ndarray) -> list[int]:
+    """Rows of J that are linearly independent (QR with column pivoting on J^T)."""
+    if J.size == 0:
+        return []
+    _, R, piv = scipy.linalg.qr(J.T, pivoting=True, mode="economic")
+    d = np.abs(np.diag(R))
+    tol = max(J.shape) * np.finfo(float).eps * (d[0] if d.size else 0) * 100
+    return sorted(piv[: int(np.sum(d > tol))].tolist())

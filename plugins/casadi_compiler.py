@@ -1,0 +1,26 @@
+"""The embedded default compiler: pymoca front end -> CasADi DAE -> index reduction -> ODE."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from pipeline import hookimpl
+from pipeline.compile import Compiler
+
+
+class CasadiCompiler(Compiler):
+    name = "casadi"
+    description = "pymoca + CasADi: index reduction, causalisation; in-process model and FMI 2.0 FMU"
+
+    def compile(self, sources: list[Path], model: str, options: dict | None = None):
+        from pipeline import dae, frontend, structure
+        from pipeline.model import CompiledModel
+
+        pymoca_model, srcs = frontend.load(sources, model)
+        ode = structure.build_ode(dae.from_pymoca(pymoca_model, model), model)
+        info = {"compiler": self.name, "sources": [str(f) for f in srcs.files]}
+        return CompiledModel(model, ode, info)
+
+
+@hookimpl
+def mcl_compilers():
+    return [CasadiCompiler]
