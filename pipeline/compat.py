@@ -5,6 +5,8 @@ of them. Patching them in one place keeps the rest of the code free of workaroun
 """
 from __future__ import annotations
 
+import re
+
 import casadi as ca
 
 _PATCHED = False
@@ -24,4 +26,25 @@ def patch_casadi_for_pymoca() -> None:
     # Modelica built-ins that casadi names differently.
     ca.MX.log10 = lambda self: ca.log10(self)
     ca.MX.sign = lambda self: ca.sign(self)
+    _patch_function_names()
     _PATCHED = True
+
+
+def _patch_function_names() -> None:
+    """casadi rejects dotted function names (``Pkg.f``): build them under ``Pkg_f``."""
+    from pymoca.backends.casadi.generator import Generator
+
+    original = Generator.get_function
+
+    def get_function(self, function_name):
+        if function_name in self.functions or function_name not in self.root.classes:
+            return original(self, function_name)
+        tree = self.root.classes[function_name]
+        saved = tree.name
+        tree.name = re.sub(r"\W", "_", saved)
+        try:
+            return original(self, function_name)
+        finally:
+            tree.name = saved
+
+    Generator.get_function = get_function

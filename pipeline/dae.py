@@ -168,11 +168,11 @@ def from_pymoca(model, name: str = "model") -> Dae:
 
 
 def _aliases(model):
-    """(alias, (canonical, sign)) pairs from pymoca's alias relation (names without '-')."""
+    """(alias, (canonical, sign)) for every alias pymoca eliminated, negated ones included."""
     rel = model.alias_relation
     for canonical in rel.canonical_variables:
-        for alias in rel.aliases(canonical):
-            if alias.startswith("-") or alias == canonical:
-                continue
-            name, sign = rel.canonical_signed(alias)
-            yield alias, (name, float(sign))
+        for member in rel.aliases(canonical) | rel.aliases("-" + canonical):
+            name = member.lstrip("-")
+            if name != canonical:
+                target, sign = rel.canonical_signed(name)
+                yield name, (target, float(sign))

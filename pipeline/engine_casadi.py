@@ -183,6 +183,13 @@ def _check(y, res, drift, t, scale, opts) -> str | None:
 
 
 def _last_line(exc: Exception) -> str:
-    lines = [line.strip() for line in str(exc).strip().splitlines() if line.strip()]
+    """A one-line reason from a CasADi exception (its text is a stack of C++ locations)."""
+    text = str(exc)
+    if "rootfinder process failed" in text:
+        return "algebraic loop did not converge (Newton's method failed)"
+    lines = [line.strip() for line in text.strip().splitlines() if line.strip()]
     msg = lines[-1] if lines else type(exc).__name__
-    return msg.split(": ", 1)[-1] if msg.startswith(".../") else msg
+    msg = msg.split(": ", 1)[-1] if msg.startswith(".../") else msg
+    if msg == "Evaluation failed":
+        return "model evaluation failed (singular algebraic loop or non-finite value)"
+    return msg

@@ -24,6 +24,11 @@ class Sources:
     files: list[Path]
     text: dict[Path, str] = field(default_factory=dict)
 
+    def locate_class(self, name: str) -> str | None:
+        """``file:line`` where class ``name`` (dotted) is defined."""
+        short = re.escape(name.split(".")[-1])
+        return self.locate(rf"\b(model|block|class|package|connector|record)\s+{short}\b")
+
     def locate(self, pattern: str) -> str | None:
         """``file:line`` of the first line matching the regular expression, or None."""
         rx = re.compile(pattern)
@@ -169,9 +174,14 @@ def generate(tree, name: str, sources: Sources):
         model = gen.model
         model.simplify(options)
     except Exception as exc:
+        connector = sources.locate(r"\bconnector\s+\w+\s*=\s*(input|output)\b")
+        if isinstance(exc, KeyError) and connector:
+            raise UnsupportedConstruct(
+                "unsupported Modelica construct: a connector declared as `connector X = input Real`"
+                " (RealInput); declare `input Real u` in the model instead", where=connector) from None
         msg = str(exc).strip().splitlines()[-1] if str(exc).strip() else type(exc).__name__
         key = re.search(r"'([\w.]+)'", msg)
-        where = sources.locate(re.escape(key.group(1).split(".")[-1])) if key else None
+        where = sources.locate(rf"\b{re.escape(key.group(1).split('.')[-1])}\b") if key else None
         raise UnsupportedConstruct(
             f"the pymoca front end cannot translate {name}: {msg}", where=where
         ) from None
@@ -193,3 +203,10 @@ def load(paths, name: str):
     sources = collect_sources(paths)
     tree = parse(sources)
     return generate(tree, name, sources), sources
+
+
+def located(error: ModelicaError, sources: Sources, name: str) -> ModelicaError:
+    """``error`` pointed at the definition of class ``name`` when it names no place yet."""
+    if error.where is None:
+        error.where = sources.locate_class(name)
+    return error

@@ -31,8 +31,8 @@ def mcl_compilers() -> list[type]:
 def mcl_engines() -> list[type]:
     """Register simulation engine classes (subclasses of :class:`pipeline.simulate.Engine`).
 
-    All results are collected; a model is simulated by the first engine that accepts it,
-    unless the user names one.
+    All results are collected; a model is simulated by the first engine that accepts it
+    (plugins registered later are asked first), unless the user names one.
     """
 
 

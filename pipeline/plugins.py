@@ -45,8 +45,9 @@ def _external_allowed(name: str) -> bool:
     return name in {n.strip() for n in allow.split(",") if n.strip()}
 
 
-def plugin_manager(external: bool = True) -> tuple[pluggy.PluginManager, list[PluginInfo]]:
-    """A fresh manager with the built-in plugins and (unless blocked) the external ones."""
+def plugin_manager(external: bool = True, extra=()) -> tuple[pluggy.PluginManager, list[PluginInfo]]:
+    """A fresh manager with the built-in plugins, (unless blocked) the external ones, and
+    ``extra`` plugin objects (for programs that embed mcl, and for tests)."""
     pm = pluggy.PluginManager(hookspecs.PROJECT)
     pm.add_hookspecs(hookspecs)
     infos = []
@@ -65,11 +66,14 @@ def plugin_manager(external: bool = True) -> tuple[pluggy.PluginManager, list[Pl
             except Exception as exc:
                 raise PluginError(f"plugin '{ep.name}' from {dist} failed to load: {exc}") from None
             infos.append(PluginInfo(ep.name, dist, ep.value))
+    for obj in extra:
+        name = getattr(obj, "__name__", type(obj).__name__)
+        pm.register(obj, name=name)
+        infos.append(PluginInfo(name, "registered in process", getattr(obj, "__module__", "")))
     try:
         pm.check_pending()
     except pluggy.PluginValidationError as exc:
-        raise PluginError(f"plugin '{exc.plugin_name if hasattr(exc, 'plugin_name') else exc.plugin}'"
-                          f" implements an unknown hook: {exc}") from None
+        raise PluginError(f"a plugin implements an unknown hook: {exc}") from None
     return pm, infos
 
 
@@ -89,8 +93,8 @@ def _named(results, kind: str) -> dict[str, type]:
 class Registry:
     """What the installed plugins provide, by name; the one object the core asks."""
 
-    def __init__(self, external: bool = True):
-        self.pm, self.plugins = plugin_manager(external)
+    def __init__(self, external: bool = True, extra=()):
+        self.pm, self.plugins = plugin_manager(external, extra)
         self.compilers = _named(self.pm.hook.mcl_compilers(), "compiler")
         self.engines = _named(self.pm.hook.mcl_engines(), "engine")
 

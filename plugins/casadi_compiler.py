@@ -15,8 +15,13 @@ class CasadiCompiler(Compiler):
         from pipeline import dae, frontend, structure
         from pipeline.model import CompiledModel
 
+        from pipeline.errors import ModelicaError
+
         pymoca_model, srcs = frontend.load(sources, model)
-        ode = structure.build_ode(dae.from_pymoca(pymoca_model, model), model)
+        try:
+            ode = structure.build_ode(dae.from_pymoca(pymoca_model, model), model)
+        except ModelicaError as exc:
+            raise frontend.located(exc, srcs, model) from None
         info = {"compiler": self.name, "sources": [str(f) for f in srcs.files]}
         return CompiledModel(model, ode, info)
 

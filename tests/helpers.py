@@ -1,0 +1,40 @@
+"""Helpers shared by the tests: the project library, a compile cache, signals, error measures."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.api import compile_model
+from pipeline.data import TimeSeries
+
+ROOT = Path(__file__).resolve().parents[1]
+LIB = ROOT / "modelica" / "MCL"
+DATA = Path(__file__).resolve().parent / "data"
+
+_compiled: dict = {}
+
+
+def compiled(name: str, sources=None):
+    """Compile once per test session (compiling is deterministic and the models are immutable)."""
+    key = (name, tuple(map(str, sources or [LIB])))
+    if key not in _compiled:
+        _compiled[key] = compile_model(sources or [LIB], name)
+    return _compiled[key]
+
+
+
+
+def multisine(t, parts=((2.0, 0.5, 0.0), (0.5, 2.1, 0.3))):
+    """Sum of sines a*sin(w t + phi): a smooth input known in closed form."""
+    return sum(a * np.sin(w * t + phi) for a, w, phi in parts)
+
+
+def series(t, **columns) -> TimeSeries:
+    values = np.column_stack(list(columns.values())) if columns else np.zeros((len(t), 0))
+    return TimeSeries(t, values, list(columns))
+
+
+def rel_err(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))

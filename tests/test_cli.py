@@ -1,0 +1,84 @@
+"""The `mcl` command: compile, simulate, plugins; user mistakes are one line, never a traceback."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from helpers import LIB, multisine
+from pipeline.cli import main
+from pipeline.data import read_csv
+from pipeline.fmu.export import validate_fmu
+
+
+@pytest.fixture
+def input_csv(tmp_path):
+    t = np.linspace(0, 20, 201)
+    f = tmp_path / "input.csv"
+    np.savetxt(f, np.column_stack([t, multisine(t)]), delimiter=",", header="time,u", comments="")
+    return f
+
+
+def test_compile_then_simulate_both_engines(tmp_path, input_csv, capsys):
+    fmu = tmp_path / "cauer.fmu"
+    assert main(["compile", str(LIB), "--model", "MCL.Examples.CauerFilter", "-o", str(fmu)]) == 0
+    assert "index 2" in capsys.readouterr().out
+    assert validate_fmu(fmu) == []
+    out_fmu, out_src = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert main(["simulate", str(fmu), "-i", str(input_csv), "-o", str(out_fmu), "-p", "Rnl.w3=0.02"]) == 0
+    assert main(["simulate", str(LIB), "--model", "MCL.Examples.CauerFilter", "-i", str(input_csv),
+                 "-o", str(out_src), "--param", "Rnl.w3=0.02"]) == 0
+    a, b = read_csv(out_fmu), read_csv(out_src)
+    assert a.names == b.names == ["y"]
+    assert np.max(np.abs(a.values - b.values)) < 1e-4 * np.max(np.abs(b.values))
+
+
+def test_saved_model_directory_runs_in_process(tmp_path, input_csv):
+    saved = tmp_path / "cauer"
+    assert main(["compile", str(LIB), "-m", "MCL.Examples.CauerFilter", "-o", str(saved)]) == 0
+    assert main(["simulate", str(saved), "-i", str(input_csv), "-o", str(tmp_path / "r.csv")]) == 0
+    assert len(read_csv(tmp_path / "r.csv").time) == 201
+
+
+def test_failed_simulation_exits_1_with_the_reason(tmp_path, input_csv, capsys):
+    code = main(["simulate", str(LIB), "-m", "MCL.Examples.CauerFilter", "-i", str(input_csv),
+                 "-o", str(tmp_path / "r.csv"), "-p", "Rnl.w1=-0.1"])
+    assert code == 1
+    assert "simulation failed" in capsys.readouterr().err
+    assert not (tmp_path / "r.csv").exists()
+
+
+def test_plugins_lists_compilers_and_engines(capsys):
+    assert main(["plugins"]) == 0
+    out = capsys.readouterr().out
+    assert "casadi" in out and "openmodelica" in out and "fmu" in out and "built-in" in out
+
+
+@pytest.mark.parametrize("args,message", [
+    (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-i", "{missing}", "-o", "x.csv"],
+     "no such data file"),
+    (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-i", "{input}", "-o", "x.csv",
+      "-p", "w1"], "expected NAME=NUMBER"),
+    (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-i", "{input}", "-o", "x.csv",
+      "-p", "nope=1"], "no free parameter 'nope'"),
+    (["compile", "{bad}", "-m", "B.M", "-o", "x.fmu"], "syntax error"),
+    (["compile", "{lib}", "-m", "MCL.Examples.CauerFilter", "-o", "x.fmu", "--compiler", "openmodelica"],
+     "not available"),
+])
+def test_user_mistakes_are_one_line(tmp_path, input_csv, args, message):
+    bad = tmp_path / "B.mo"
+    bad.write_text("package B\n  model M\n    Real x\n  end M;\nend B;\n")
+    fmt = dict(lib=LIB, missing=tmp_path / "none.csv", input=input_csv, bad=bad)
+    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", *[a.format(**fmt) for a in args]],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("mcl: error:") and message in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_help_on_every_subcommand():
+    for cmd in ("compile", "simulate", "plugins"):
+        proc = subprocess.run([sys.executable, "-m", "pipeline.cli", cmd, "--help"],
+                              capture_output=True, text=True, timeout=60)
+        assert proc.returncode == 0 and "usage: mcl" in proc.stdout
