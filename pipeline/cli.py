@@ -72,6 +72,11 @@ def cmd_simulate(args) -> int:
         print(f"mcl: simulation failed: {result.reason}", file=sys.stderr)
         return EXIT_FAILED
     write_csv(args.output, result.as_series())
+    if args.plot:
+        from .plots import plot_simulation
+
+        plot_simulation(result, inputs.select(model.input_names), args.plot, title=model.name)
+        print(f"plotted inputs and outputs -> {args.plot}")
     print(f"simulated {len(result.time)} samples of {', '.join(result.output_names)} with the "
           f"{result.engine} engine in {result.seconds:.3g} s -> {args.output}")
     return 0
@@ -118,6 +123,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--input", "-i", required=True, help="CSV: header row, time first, one column per input")
     p.add_argument("--param", "-p", action="append", metavar="NAME=VALUE", help="set a parameter")
     p.add_argument("-o", "--output", required=True, help="result CSV")
+    p.add_argument("--plot", metavar="PNG", help="also draw inputs and outputs to this PNG file")
     p.add_argument("--engine", help="engine by name: casadi (in-process) or fmu")
     p.add_argument("--compiler", help="compiler plugin by name, for Modelica sources")
     p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (default 1e-6)")
