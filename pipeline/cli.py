@@ -82,6 +82,67 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def cmd_graph(args) -> int:
+    from .graph import build_graph
+
+    graph = build_graph(args.sources, args.model)
+    print(graph.describe())
+    if args.draw:
+        print(f"drew {graph.draw(args.draw)}")
+    return 0
+
+
+def cmd_pretrain(args) -> int:
+    import json
+
+    from .api import registry
+    from .graph import build_graph
+    from .pretrain import plot_feasibility, pretrain
+
+    reg = registry()
+    graph = build_graph(args.sources, args.model)
+    comps = graph.components
+    if args.component not in comps:
+        raise ConfigError(f"--component: {args.model} has no component '{args.component}' "
+                          f"(two-connector ones: {', '.join(c.name for c in graph.two_connector_components())})")
+    comp = comps[args.component]
+    if not comp.two_connector:
+        raise ConfigError(f"--component: '{args.component}' is not a two-connector component")
+    spec = {"name": args.template}
+    if args.lhs:
+        spec["lhs"] = args.lhs.split(",")
+    if args.rhs:
+        spec["rhs"] = args.rhs.split(",")
+    template = reg.template(spec)
+    out = Path(args.output)
+    out.mkdir(parents=True, exist_ok=True)
+    with reg.executor(args.executor) as executor:
+        result = pretrain(template, comp.connectors[0], graph.sources, reg, n_samples=args.samples,
+                          box=args.box, seed=args.seed, executor=executor, feasibility=args.feasibility,
+                          amplitude=args.amplitude, directory=out / "configurations")
+    result.save(out / "samples.npz")
+    plot_feasibility(result, out / "feasibility.png", title=f"{args.component}: {template.law()}")
+    coef = getattr(result.model, "coef_", None)
+    summary = {"configurations": result.configurations, "skipped": result.notes,
+               "samples": int(len(result.labels)), "feasible": int(result.labels.sum()),
+               "held_out_accuracy": result.accuracy, "parameters": result.parameter_names,
+               "hyperplane_normal": None if coef is None else [float(c) for c in coef]}
+    (out / "pretrain.json").write_text(json.dumps(summary, indent=1))
+    print(f"configurations used: {', '.join(result.configurations)}")
+    for name, why in result.notes.items():
+        print(f"  left out {name}: {why}")
+    print(f"{summary['feasible']} of {summary['samples']} samples feasible; q(w) ({args.feasibility}) "
+          f"held-out accuracy {result.accuracy:.1%}")
+    if coef is not None:
+        terms = " + ".join(f"{c:.3g}*{n}" for c, n in zip(coef, result.parameter_names))
+        axis = template.symmetric_axis
+        sym = "" if axis is None else (f", taking {result.parameter_names[axis]} >= 0: the law is "
+                                       "unchanged by w -> -w")
+        print(f"separating hyperplane: {terms} = 0 (feasible side > 0{sym})")
+    print(f"wrote {out}/feasibility.png, samples.npz, pretrain.json")
+    return 0
+
+
 def cmd_plugins(args) -> int:
     from .plugins import Registry
 
@@ -94,9 +155,11 @@ def cmd_plugins(args) -> int:
         ok, why = cls().available()
         state = "available" if ok else f"unavailable: {why}"
         print(f"  {name:14s} {cls.__module__:28s} {state}")
-    print("engines:")
-    for name, cls in reg.engines.items():
-        print(f"  {name:14s} {cls.__module__}")
+    for title, group in (("engines", reg.engines), ("templates", reg.templates),
+                         ("feasibility models", reg.feasibility_models), ("executors", reg.executors)):
+        print(f"{title}:")
+        for name, cls in group.items():
+            print(f"  {name:14s} {cls.__module__}")
     return 0
 
 
@@ -129,6 +192,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (default 1e-6)")
     p.add_argument("--time-limit", type=float, default=60.0, help="seconds before giving up (default 60)")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("graph", help="print (and draw) the connection graph of a model")
+    p.add_argument("sources", nargs="+", help=".mo files or package directories")
+    p.add_argument("--model", "-m", required=True, help="class name, e.g. Pkg.Model")
+    p.add_argument("--draw", metavar="FILE", help="draw the graph to a PNG or SVG file")
+    p.set_defaults(func=cmd_graph)
+
+    p = sub.add_parser("pretrain", help="pre-train the feasibility model of a template (Remark 3.1)",
+                       description="Sample a template's parameters in small configurations and "
+                                   "train q(w) on which ones simulate.")
+    p.add_argument("sources", nargs="+", help=".mo files or package directories")
+    p.add_argument("--model", "-m", required=True, help="system model the component is in")
+    p.add_argument("--component", "-c", required=True, help="the component's instance name")
+    p.add_argument("--template", default="polynomial", help="template name (default polynomial)")
+    p.add_argument("--lhs", help="comma-separated left-hand terms, e.g. i")
+    p.add_argument("--rhs", help="comma-separated right-hand terms, e.g. v^2,v^3")
+    p.add_argument("--samples", type=int, default=200)
+    p.add_argument("--box", type=float, default=1.0, help="sample w in [-box, box]^n")
+    p.add_argument("--amplitude", type=float, default=1.0, help="excitation amplitude")
+    p.add_argument("--feasibility", default="logistic", help="logistic or neural")
+    p.add_argument("--executor", default="local", help="local, serial or dask")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("-o", "--output", required=True, help="output directory")
+    p.set_defaults(func=cmd_pretrain)
 
     p = sub.add_parser("plugins", help="list installed plugins, compilers and engines")
     p.set_defaults(func=cmd_plugins)

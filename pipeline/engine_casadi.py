@@ -97,6 +97,8 @@ class _Plan:
         iopts = {"reltol": opts.rtol, "abstol": opts.atol, "max_num_steps": opts.max_steps,
                  "disable_internal_warnings": True}
         chunks = np.array_split(np.arange(1, len(t_out)), min(N_CHUNKS, len(t_out) - 1))
+        if nx == 0:  # purely algebraic model: nothing to integrate, outputs evaluated below
+            chunks = []
         self.chunks = []
         for k, idx in enumerate(chunks):
             t0 = t_out[idx[0] - 1]
@@ -152,10 +154,13 @@ class _Plan:
                 return fail(f"non-finite state at t = {t_out[bad]:g}")
         X = traj[: self.nx]
         P = np.repeat(p[:, None], N, axis=1)
-        y, res, drift = (np.array(v) for v in self.checks(X, self.u_out, P, t_out[None, :]))
+        try:
+            y, res, drift = (np.array(v) for v in self.checks(X, self.u_out, P, t_out[None, :]))
+        except RuntimeError as exc:
+            return fail(f"evaluating the outputs failed: {_last_line(exc)}")
         result = SimulationResult(t_out.copy(), y.T, list(names), seconds=clock.elapsed,
                                   engine="casadi", states=X.T)
-        scale = 1.0 + np.max(np.abs(X))
+        scale = 1.0 + (np.max(np.abs(X)) if X.size else 0.0)
         reason = _check(y, res.ravel(), drift.ravel(), t_out, scale, opts)
         if reason:
             result.ok, result.reason = False, reason

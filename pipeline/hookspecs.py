@@ -36,6 +36,30 @@ def mcl_engines() -> list[type]:
     """
 
 
+@hookspec
+def mcl_templates() -> list[type]:
+    """Register component template classes (subclasses of :class:`pipeline.templates.Template`).
+
+    All results are collected; a run file or command picks one by ``name`` and passes its
+    options to the constructor.
+    """
+
+
+@hookspec
+def mcl_feasibility_models() -> list[type]:
+    """Register feasibility model classes q(w; beta) (subclasses of
+    :class:`pipeline.feasibility.FeasibilityModel`). All results are collected; picked by name.
+    """
+
+
+@hookspec
+def mcl_executors() -> list[type]:
+    """Register batch executor classes (subclasses of :class:`pipeline.executor.Executor`).
+
+    All results are collected; picked by name (``local`` by default).
+    """
+
+
 @hookspec(firstresult=True)
 def mcl_load_model(path: str) -> Any:
     """Read a ready-made model file (an FMU, a saved compiled model, ...), or return None.

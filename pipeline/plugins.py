@@ -24,6 +24,9 @@ DEFAULT_PLUGINS = (
     "plugins.openmodelica",
     "plugins.engines",
     "plugins.model_files",
+    "plugins.templates",
+    "plugins.feasibility",
+    "plugins.executors",
 )
 ENV_DISABLE = "MCL_DISABLE_EXTERNAL_PLUGINS"
 ENV_ALLOW = "MCL_PLUGINS"
@@ -97,6 +100,9 @@ class Registry:
         self.pm, self.plugins = plugin_manager(external, extra)
         self.compilers = _named(self.pm.hook.mcl_compilers(), "compiler")
         self.engines = _named(self.pm.hook.mcl_engines(), "engine")
+        self.templates = _named(self.pm.hook.mcl_templates(), "template")
+        self.feasibility_models = _named(self.pm.hook.mcl_feasibility_models(), "feasibility model")
+        self.executors = _named(self.pm.hook.mcl_executors(), "executor")
 
     @property
     def hook(self):
@@ -120,6 +126,27 @@ class Registry:
             if engine.accepts(model):
                 return engine
         raise PluginError(f"no engine runs a {type(model).__name__}")
+
+    def template(self, spec):
+        """A template instance from a name or ``{name: ..., options...}``."""
+        from .templates import make_template
+
+        return make_template(self.templates, spec)
+
+    def feasibility_model(self, spec="logistic"):
+        spec = {"name": spec} if isinstance(spec, str) else dict(spec)
+        name = spec.pop("name", "logistic")
+        if name not in self.feasibility_models:
+            raise PluginError(f"no feasibility model named '{name}' "
+                              f"(installed: {', '.join(self.feasibility_models)})")
+        return self.feasibility_models[name](**spec)
+
+    def executor(self, spec=None):
+        spec = {"kind": spec} if isinstance(spec, str) or spec is None else dict(spec)
+        kind = spec.pop("kind", None) or "local"
+        if kind not in self.executors:
+            raise PluginError(f"no executor named '{kind}' (installed: {', '.join(self.executors)})")
+        return self.executors[kind](**spec)
 
     def load_model_file(self, path):
         model = self.hook.mcl_load_model(path=str(path))

@@ -1,0 +1,212 @@
+"""One executor interface for every batch of simulations (sampling, configurations, candidates).
+
+``local`` runs a process pool on this machine (default), ``serial`` runs in this process (for
+debugging), ``dask`` sends the batch to a Dask distributed cluster (a ``LocalCluster`` when no
+address is given). In every case a task that crashes its worker or hangs past its timeout
+becomes a :class:`TaskFailed` result and the batch goes on. ``fn(context, item)`` gets a
+``context`` shipped once per worker (a compiled model, say), not once per task.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from .errors import ConfigError
+
+
+@dataclass
+class TaskFailed:
+    """The result of a task that raised, crashed its worker or timed out."""
+
+    reason: str
+
+    def __bool__(self) -> bool:
+        return False
+
+
+class Progress:
+    """A progress line on stderr: rewritten in place on a terminal, every 10% otherwise."""
+
+    def __init__(self, label: str, total: int, stream=None, enabled: bool = True):
+        self.label, self.total, self.done, self.failed = label, total, 0, 0
+        self.stream = stream or sys.stderr
+        self.enabled = enabled and total > 0
+        self.tty = getattr(self.stream, "isatty", lambda: False)()
+        self.start = time.perf_counter()
+        self._next_report = 0.1
+
+    def update(self, ok: bool = True) -> None:
+        self.done += 1
+        self.failed += not ok
+        if not self.enabled:
+            return
+        frac = self.done / self.total
+        if self.tty or frac >= self._next_report or self.done == self.total:
+            self._next_report = frac + 0.1
+            el = time.perf_counter() - self.start
+            eta = el / self.done * (self.total - self.done)
+            end = "\n" if (not self.tty or self.done == self.total) else ""
+            print(f"\r{self.label}: {self.done}/{self.total} ({self.failed} failed) "
+                  f"{el:.0f}s elapsed, ~{eta:.0f}s left", end=end, file=self.stream, flush=True)
+
+
+class Executor:
+    """Base class: ``map`` runs ``fn(context, item)`` for every item, results in item order."""
+
+    name = ""
+
+    def map(self, fn: Callable[[Any, Any], Any], items: list, context: Any = None,
+            timeout: float = 300.0, label: str = "batch", progress: bool = True) -> list:
+        raise NotImplementedError  # pragma: no cover - interface
+
+    def close(self) -> None:
+        pass
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+class SerialExecutor(Executor):
+    """In this process, one task after another: no isolation (for debugging)."""
+
+    name = "serial"
+
+    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True):
+        bar = Progress(label, len(items), enabled=progress)
+        out = []
+        for item in items:
+            try:
+                r = fn(context, item)
+            except Exception as exc:  # noqa: BLE001 - a failed task is a result
+                r = TaskFailed(f"{type(exc).__name__}: {exc}")
+            out.append(r)
+            bar.update(not isinstance(r, TaskFailed))
+        return out
+
+
+class LocalExecutor(Executor):
+    """Up to ``workers`` child processes at a time, one task each.
+
+    A task per process is what isolates failures exactly: a crash (segfault in native code) or
+    a hang (killed at ``timeout``) marks that task failed and nothing else. On Linux the children
+    are forked, so ``context`` (and whatever the parent has already built, such as integrators
+    cached by the in-process engine) is shared copy-on-write instead of pickled.
+    """
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None):
+        self.workers = workers or max(1, os.cpu_count() or 2)
+        self.mp = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
+
+    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True):
+        from multiprocessing.connection import wait
+
+        bar = Progress(label, len(items), enabled=progress)
+        results: dict[int, Any] = {}
+        queue = list(range(len(items)))[::-1]
+        running: dict[Any, tuple[int, Any, float]] = {}  # connection -> (index, process, start)
+        while queue or running:
+            while queue and len(running) < self.workers:
+                k = queue.pop()
+                recv, send = self.mp.Pipe(duplex=False)
+                proc = self.mp.Process(target=_child, args=(fn, context, items[k], send), daemon=True)
+                proc.start()
+                send.close()
+                running[recv] = (k, proc, time.perf_counter())
+            ready = wait(list(running), timeout=0.05)
+            now = time.perf_counter()
+            for conn in list(running):
+                k, proc, started = running[conn]
+                if conn in ready:
+                    try:
+                        results[k] = conn.recv()
+                    except EOFError:
+                        proc.join(1)
+                        results[k] = TaskFailed(f"worker process crashed (exit code {proc.exitcode})")
+                elif now - started > timeout:
+                    results[k] = TaskFailed(f"timed out after {timeout:g} s")
+                else:
+                    continue
+                if proc.is_alive():
+                    proc.kill()
+                proc.join(1)
+                conn.close()
+                del running[conn]
+                bar.update(not isinstance(results[k], TaskFailed))
+        return [results[k] for k in range(len(items))]
+
+
+def _child(fn, context, item, conn) -> None:
+    try:
+        result = fn(context, item)
+    except Exception as exc:  # noqa: BLE001 - a failed task is a result
+        result = TaskFailed(f"{type(exc).__name__}: {exc}")
+    try:
+        conn.send(result)
+    finally:
+        conn.close()
+
+
+def _dask_task(fn, context, item):
+    try:
+        return fn(context, item)
+    except Exception as exc:  # noqa: BLE001
+        return TaskFailed(f"{type(exc).__name__}: {exc}")
+
+
+class DaskExecutor(Executor):
+    """A Dask distributed cluster: ``address`` of a scheduler, or a LocalCluster started here."""
+
+    name = "dask"
+
+    def __init__(self, address: str | None = None, workers: int | None = None):
+        try:
+            from distributed import Client, LocalCluster
+        except ImportError:
+            raise ConfigError("the dask executor needs 'dask[distributed]' "
+                              "(pip install 'mcl[dask]')") from None
+        if address:
+            self.cluster, self.client = None, Client(address)
+        else:
+            self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1,
+                                        processes=True, dashboard_address=None)
+            self.client = Client(self.cluster)
+
+    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True):
+        from distributed import as_completed
+
+        bar = Progress(label, len(items), enabled=progress)
+        ctx = self.client.scatter(context, broadcast=True) if context is not None else None
+        futures = [self.client.submit(_dask_task, fn, ctx, item, pure=False) for item in items]
+        index = {f.key: k for k, f in enumerate(futures)}
+        results: dict[int, Any] = {}
+        try:
+            for f in as_completed(futures, timeout=timeout * max(1, len(items))):
+                k = index[f.key]
+                try:
+                    results[k] = f.result()
+                except Exception as exc:  # noqa: BLE001 - KilledWorker, CancelledError, ...
+                    results[k] = TaskFailed(f"{type(exc).__name__}: {exc}")
+                bar.update(not isinstance(results[k], TaskFailed))
+        except TimeoutError:
+            pass
+        for k, f in enumerate(futures):
+            if k not in results:
+                f.cancel()
+                results[k] = TaskFailed(f"timed out after {timeout:g} s")
+                bar.update(False)
+        return [results[k] for k in range(len(items))]
+
+    def close(self) -> None:
+        self.client.close()
+        if self.cluster is not None:
+            self.cluster.close()

@@ -1,0 +1,251 @@
+"""The connection graph of a system model: component instances and the connections between them.
+
+It is the map the later stages search: which two-connector components could be the wrong one,
+what is connected to what, where a learned component can be placed. It can be written back as
+Modelica, with one component replaced or a new one connected, and compiled again.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import networkx as nx
+
+from . import modelica_text as mt
+from .errors import ModelicaError
+from .frontend import collect_sources, find_class, parse
+
+BUILTIN = {"Real", "Integer", "Boolean", "String"}
+
+
+@dataclass
+class Connector:
+    """A connector of a component: its class and its potential and flow variables."""
+
+    name: str
+    cls: str
+    potential: list[str]
+    flow: list[str]
+
+    @property
+    def simple(self) -> bool:
+        """One potential and one flow variable (paper 000's component template, Fig. 1)."""
+        return len(self.potential) == 1 and len(self.flow) == 1
+
+
+@dataclass
+class Component:
+    name: str
+    cls: str
+    connectors: list[Connector]
+    declaration: str                  # Modelica text, e.g. 'MCL.Electrical.Resistor R1(R = 1);'
+    parameters: dict[str, str] = field(default_factory=dict)   # class parameters -> modifier text
+
+    @property
+    def two_connector(self) -> bool:
+        a = self.connectors
+        return len(a) == 2 and a[0].simple and a[1].simple and a[0].cls == a[1].cls
+
+    @property
+    def domain(self) -> str:
+        return self.connectors[0].cls if self.connectors else ""
+
+
+@dataclass
+class SystemGraph:
+    """Components as nodes; one edge per ``connect`` with the two connector names.
+
+    ``declarations`` and ``equations`` keep the model's own variables and non-connect equations
+    (as Modelica text) so that :meth:`to_modelica` reproduces a model that compiles.
+    """
+
+    name: str
+    graph: nx.MultiGraph
+    declarations: list[str]
+    equations: list[str]
+    sources: list[Path]
+
+    @property
+    def components(self) -> dict[str, Component]:
+        return {n: d["component"] for n, d in self.graph.nodes(data=True)}
+
+    def two_connector_components(self) -> list[Component]:
+        return [c for c in self.components.values() if c.two_connector]
+
+    def connections(self) -> list[tuple[str, str]]:
+        """Every connect as ('A.p', 'B.n') pairs."""
+        return [(f"{a}.{d['ports'][a]}", f"{b}.{d['ports'][b]}") if a != b else
+                (f"{a}.{d['ports']['self'][0]}", f"{a}.{d['ports']['self'][1]}")
+                for a, b, d in self.graph.edges(data=True)]
+
+    def nets(self) -> list[set[str]]:
+        """Connection sets: connectors at the same potential (electrical nodes, rigid joints)."""
+        g = nx.Graph()
+        g.add_edges_from(self.connections())
+        return [set(c) for c in nx.connected_components(g)]
+
+    def neighbours(self, name: str) -> set[str]:
+        return set(self.graph.neighbors(name)) - {name}
+
+    # -- rewriting ---------------------------------------------------------------------------
+    def replaced(self, name: str, cls: str, modification: str = "") -> "SystemGraph":
+        """A copy with component ``name`` of class ``cls`` (same connector names)."""
+        if name not in self.graph:
+            raise ModelicaError(f"{self.name} has no component '{name}' "
+                                f"(components: {', '.join(sorted(self.graph))})")
+        new = self.copy()
+        old = new.graph.nodes[name]["component"]
+        comp = copy.copy(old)
+        comp.cls, comp.declaration = cls, f"{cls} {name}{modification};"
+        new.graph.nodes[name]["component"] = comp
+        return new
+
+    def with_component(self, comp: Component, connect: list[tuple[str, str]]) -> "SystemGraph":
+        """A copy with ``comp`` added and connected (``connect``: ('new.p', 'R1.n') pairs)."""
+        new = self.copy()
+        if comp.name in new.graph:
+            raise ModelicaError(f"{self.name} already has a component '{comp.name}'")
+        new.graph.add_node(comp.name, component=comp)
+        for a, b in connect:
+            new._add_connection(a, b)
+        return new
+
+    def without_component(self, name: str) -> "SystemGraph":
+        new = self.copy()
+        new.graph.remove_node(name)
+        return new
+
+    def copy(self) -> "SystemGraph":
+        return SystemGraph(self.name, self.graph.copy(), list(self.declarations),
+                           list(self.equations), list(self.sources))
+
+    def _add_connection(self, a: str, b: str) -> None:
+        ca, pa = a.split(".", 1)
+        cb, pb = b.split(".", 1)
+        for c in (ca, cb):
+            if c not in self.graph:
+                raise ModelicaError(f"connect({a}, {b}): no component '{c}' in {self.name}")
+        ports = {"self": (pa, pb)} if ca == cb else {ca: pa, cb: pb}
+        self.graph.add_edge(ca, cb, ports=ports)
+
+    def to_modelica(self, name: str | None = None, extra_classes: str = "") -> str:
+        """The model as Modelica source (a single class, or ``extra_classes`` + the model)."""
+        short = (name or self.name).split(".")[-1]
+        decl = [*self.declarations, *(c.declaration for c in self.components.values())]
+        eqs = [*self.equations, *(f"connect({a}, {b});" for a, b in self.connections())]
+        body = "\n".join(f"  {d}" for d in decl) + "\nequation\n" + "\n".join(f"  {e}" for e in eqs)
+        return f"{extra_classes}model {short}\n{body}\nend {short};\n"
+
+    def draw(self, path) -> Path:
+        """Draw the graph (PNG or SVG by extension): two-connector components highlighted."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        g = nx.Graph(self.graph)
+        pos = nx.kamada_kawai_layout(g) if len(g) > 2 else nx.spring_layout(g, seed=0)
+        comps = self.components
+        colors = ["tab:orange" if comps[n].two_connector else "tab:gray" for n in g]
+        fig, ax = plt.subplots(figsize=(8, 6))
+        nx.draw_networkx(g, pos, ax=ax, node_color=colors, node_size=900, font_size=9)
+        labels = {(a, b): "/".join(sorted({d["ports"].get(a, ""), d["ports"].get(b, "")} - {""}))
+                  for a, b, d in self.graph.edges(data=True) if a != b}
+        nx.draw_networkx_edge_labels(g, pos, edge_labels=labels, font_size=7, ax=ax)
+        ax.set_title(f"{self.name}: orange = two-connector components")
+        ax.axis("off")
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, bbox_inches="tight", dpi=110)
+        plt.close(fig)
+        return path
+
+    def describe(self) -> str:
+        """A text listing: components with class and connectors, then the nets."""
+        lines = [f"{self.name}: {len(self.graph)} components, {self.graph.number_of_edges()} connections"]
+        for c in self.components.values():
+            ports = ", ".join(f"{p.name}:{p.cls.split('.')[-1]}" for p in c.connectors)
+            mark = " [two-connector]" if c.two_connector else ""
+            lines.append(f"  {c.name:16s} {c.cls:36s} {ports}{mark}")
+        lines.append("nets:")
+        lines += [f"  {{{', '.join(sorted(n))}}}" for n in self.nets()]
+        return "\n".join(lines)
+
+
+# -- building the graph from sources -----------------------------------------------------------
+def _resolve(scope, type_ref):
+    from pymoca.tree import find_name
+
+    try:
+        return find_name(scope, type_ref)
+    except Exception:  # pymoca raises various errors for names it cannot find
+        return None
+
+
+def _members(cls, seen=None):
+    """(symbols, equations) of ``cls`` with what it inherits through ``extends``.
+
+    ``symbols`` maps a name to (symbol, declaring class): a type name is looked up in the scope
+    of the class that declares it, not the one that inherits it.
+    """
+    seen = seen or set()
+    if id(cls) in seen:
+        return {}, []
+    seen.add(id(cls))
+    symbols, equations = {}, []
+    for ext in cls.extends:
+        base = _resolve(cls.parent or cls, ext.component) or _resolve(cls, ext.component)
+        if base is None:
+            raise ModelicaError(f"cannot resolve base class {mt.ref(ext.component)} of {cls.full_name}")
+        s, e = _members(base, seen)
+        symbols.update(s)
+        equations += e
+    symbols.update({n: (sym, cls) for n, sym in cls.symbols.items()})
+    return symbols, equations + list(cls.equations)
+
+
+def _connector(name, sym, owner) -> Connector | None:
+    cls = _resolve(owner, sym.type)
+    if cls is None or getattr(cls, "type", "") != "connector":
+        return None
+    syms, _ = _members(cls)
+    flow = [n for n, (s, _) in syms.items() if "flow" in s.prefixes]
+    potential = [n for n, (s, _) in syms.items() if "flow" not in s.prefixes and "stream" not in s.prefixes]
+    return Connector(name, cls.full_name, potential, flow)
+
+
+def build_graph(sources, model: str) -> SystemGraph:
+    """Parse ``sources`` and build the connection graph of class ``model``."""
+    srcs = collect_sources(sources)
+    tree = parse(srcs)
+    cls = find_class(tree, model)
+    symbols, equations = _members(cls)
+    g = nx.MultiGraph()
+    declarations, other_equations = [], []
+    for name, (sym, owner) in symbols.items():
+        type_name = mt.ref(sym.type)
+        target = None if type_name in BUILTIN else _resolve(owner, sym.type)
+        if target is None or getattr(target, "type", "") in ("type", "connector"):
+            if type_name not in BUILTIN and target is None:
+                raise ModelicaError(f"{model}: type {type_name} of '{name}' not found",
+                                    where=srcs.locate(rf"\b{name}\b"))
+            declarations.append(mt.declaration(sym, target.full_name if target else None))
+            continue
+        members, _ = _members(target)
+        connectors = [c for n, (s, o) in members.items() if (c := _connector(n, s, o))]
+        params = {n: "" for n, (s, _) in members.items() if "parameter" in s.prefixes}
+        g.add_node(name, component=Component(name, target.full_name, connectors,
+                                             mt.declaration(sym, target.full_name), params))
+    sg = SystemGraph(model, g, declarations, [], list(srcs.files))
+    from pymoca import ast
+
+    for eq in equations:
+        if isinstance(eq, ast.ConnectClause):
+            a, b = mt.ref(eq.left), mt.ref(eq.right)
+            if "." in a and "." in b and a.split(".")[0] in g and b.split(".")[0] in g:
+                sg._add_connection(a, b)
+                continue
+        other_equations.append(mt.equation(eq))
+    sg.equations = other_equations
+    return sg
