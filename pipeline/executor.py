@@ -185,7 +185,7 @@ class DaskExecutor(Executor):
         from distributed import as_completed
 
         bar = Progress(label, len(items), enabled=progress)
-        ctx = self.client.scatter(context, broadcast=True) if context is not None else None
+        ctx = self.client.scatter(context, broadcast=True, hash=False) if context is not None else None
         futures = [self.client.submit(_dask_task, fn, ctx, item, pure=False) for item in items]
         index = {f.key: k for k, f in enumerate(futures)}
         results: dict[int, Any] = {}

@@ -86,7 +86,9 @@ class SystemGraph:
         return [set(c) for c in nx.connected_components(g)]
 
     def neighbours(self, name: str) -> set[str]:
-        return set(self.graph.neighbors(name)) - {name}
+        """Components sharing a net with ``name`` (connected directly or through others' connects)."""
+        mine = {f"{name}.{c.name}" for c in self.components[name].connectors}
+        return {p.split(".", 1)[0] for net in self.nets() if net & mine for p in net} - {name}
 
     # -- rewriting ---------------------------------------------------------------------------
     def replaced(self, name: str, cls: str, modification: str = "") -> "SystemGraph":

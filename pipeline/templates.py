@@ -124,7 +124,7 @@ class Template:
         out = np.full(v.shape, np.nan)
         for k, vk in enumerate(v):
             env = {"v": vk, "dv": 0.0 if dv is None else dv[k], "di": 0.0}
-            g = lambda i: float(self.residual(w, {**env, "i": i}))
+            g = lambda i: float(np.ravel(self.residual(w, {**env, "i": i}))[0])
             scale = 1.0 + abs(vk)
             for span in (1e-3, 1e-1, 1e1, 1e3, 1e5):
                 lo, hi = -span * scale, span * scale

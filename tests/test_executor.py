@@ -1,0 +1,72 @@
+"""Batches: crashes and hangs are isolated and labelled; the Dask executor gives the same results."""
+import io
+import os
+import time
+
+import pytest
+
+from pipeline import hookimpl
+from pipeline.executor import DaskExecutor, LocalExecutor, Progress, SerialExecutor, TaskFailed
+from pipeline.plugins import Registry
+
+
+def task(scale, x):
+    if x == 3:
+        os.kill(os.getpid(), 11)   # segfault in native code
+    if x == 5:
+        time.sleep(60)             # a simulation that hangs
+    if x == 6:
+        raise ValueError("bad input")
+    return scale * x
+
+
+def test_local_executor_isolates_crash_hang_and_error():
+    t0 = time.perf_counter()
+    out = LocalExecutor(workers=2).map(task, list(range(8)), context=10, timeout=2, progress=False)
+    assert time.perf_counter() - t0 < 20
+    assert [r for k, r in enumerate(out) if k not in (3, 5, 6)] == [0, 10, 20, 40, 70]
+    assert isinstance(out[3], TaskFailed) and "crashed" in out[3].reason
+    assert isinstance(out[5], TaskFailed) and "timed out" in out[5].reason
+    assert isinstance(out[6], TaskFailed) and "bad input" in out[6].reason
+
+
+def test_serial_executor_labels_errors():
+    out = SerialExecutor().map(lambda c, x: 1 / x, [1, 0], progress=False)
+    assert out[0] == 1 and isinstance(out[1], TaskFailed)
+
+
+def square(offset, x):
+    return x * x + offset
+
+
+def test_dask_local_cluster_gives_the_same_results():
+    pytest.importorskip("distributed")
+    with DaskExecutor(workers=2) as ex:
+        out = ex.map(square, list(range(20)), context=1, timeout=60, progress=False)
+        failing = ex.map(task, [6, 2], context=1, timeout=60, progress=False)
+    assert out == [x * x + 1 for x in range(20)]
+    assert isinstance(failing[0], TaskFailed) and failing[1] == 2
+
+
+def test_progress_reports_to_a_stream():
+    buf = io.StringIO()
+    bar = Progress("batch", 4, stream=buf)
+    for ok in (True, False, True, True):
+        bar.update(ok)
+    assert "batch: 4/4 (1 failed)" in buf.getvalue()
+
+
+class InlineExecutor(SerialExecutor):
+    name = "inline"
+
+
+class ExecutorPlugin:
+    @hookimpl
+    def mcl_executors(self):
+        return [InlineExecutor]
+
+
+def test_executors_are_plugins():
+    reg = Registry(external=False, extra=[ExecutorPlugin()])
+    assert {"local", "serial", "dask", "inline"} <= set(reg.executors)
+    assert reg.executor("inline").map(square, [2], context=0, progress=False) == [4]
