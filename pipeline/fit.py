@@ -1,0 +1,453 @@
+"""Constraint-aware fitting of a template's parameters w (paper 000, sections III-IV).
+
+Pieces, each cited to the paper:
+
+- :class:`FitProblem`: the cost J(w) of eq. (3), the mean squared output error of the simulated
+  model against the measurements, with its exact gradient from the engine's sensitivities
+  (sec. IV: grad J = -2/N sum (y_m - y) dy/dw). ``normalise`` divides J by the mean square of the
+  measurements so that the weights of the feasibility terms mean the same in any units (the
+  paper's outputs are volts; ours may be anything).
+- :class:`PseudoFeasibility`: p~(w) of eq. (9), Gaussian bumps at the infeasible points found
+  so far, and the equivalent cost J~(w) = p~ J - log(p~ + mu) of Algorithm 2.
+- :class:`Algorithm3`: the one-shot heuristic cost
+  J'(w) = J~(w) - lambda1 log q(w) + lambda2 [q log q + (1 - q) log(1 - q)] with the online
+  update of q after every simulation, for any unconstrained optimiser.
+- :class:`Algorithm1`: the sequence of constrained problems (5)-(8) with the schedules
+  delta_k1 = eps + (1 - eps)(lambda + eps)^k, delta_k2 = 1 + eps - lambda^k, q_0 = 0.5, solved by
+  COBYLA or SLSQP; q is retrained on every point visited after each outer step.
+- :class:`LevenbergMarquardt`: a low-budget fit (ours): Gauss-Newton steps with the exact
+  Jacobian dy/dw, a failed simulation treated as a rejected step (more damping), and every point
+  recorded for q like the others.
+
+Every simulation is recorded (:class:`Recorder`): point, cost, feasible or not and why. Records
+go to a JSON-lines file when a path is given; a rerun replays them from that file instead of
+simulating again, so an interrupted fit resumes where it stopped.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize
+
+from .data import TimeSeries
+from .errors import ConfigError, DataError
+from .feasibility import LogisticFeasibility, binary_entropy
+
+LOG_EPS = 1e-12
+
+
+@dataclass
+class Evaluation:
+    """One simulation: where, what it cost, whether it failed and why."""
+
+    index: int
+    w: list[float]
+    cost: float | None
+    feasible: bool
+    reason: str | None
+    seconds: float
+    gradient: list[float] | None = None
+    tag: str = ""
+
+
+class Recorder:
+    """Every evaluation in order; optionally appended to a JSON-lines file and replayed from it."""
+
+    def __init__(self, path=None):
+        self.evaluations: list[Evaluation] = []
+        self.path = Path(path) if path else None
+        self._replay: dict[tuple, Evaluation] = {}
+        if self.path and self.path.exists():
+            for line in self.path.read_text().splitlines():
+                if line.strip():
+                    ev = Evaluation(**json.loads(line))
+                    self._replay[self._key(ev.w, ev.gradient is not None)] = ev
+
+    @staticmethod
+    def _key(w, gradient: bool) -> tuple:
+        return (tuple(np.round(np.asarray(w, dtype=float), 15)), gradient)
+
+    def lookup(self, w, gradient: bool) -> Evaluation | None:
+        return self._replay.get(self._key(w, gradient)) or (
+            None if gradient else self._replay.get(self._key(w, True)))
+
+    def add(self, ev: Evaluation) -> Evaluation:
+        ev.index = len(self.evaluations)
+        self.evaluations.append(ev)
+        if self.path:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            with self.path.open("a") as fh:
+                fh.write(json.dumps(asdict(ev)) + "\n")
+                fh.flush()
+        return ev
+
+    @property
+    def simulations(self) -> int:
+        return len(self.evaluations)
+
+    @property
+    def failures(self) -> int:
+        return sum(not e.feasible for e in self.evaluations)
+
+    def points(self):
+        W = np.array([e.w for e in self.evaluations])
+        y = np.array([e.feasible for e in self.evaluations])
+        return W, y
+
+
+class FitProblem:
+    """J(w) (eq. 3) for a compiled model whose free parameters ``parameters`` are w.
+
+    ``data`` holds the model's inputs and the measured outputs (columns named like the model's).
+    """
+
+    def __init__(self, model, data: TimeSeries, parameters: list[str], outputs=None,
+                 fixed: dict | None = None, options=None, normalise: bool = True,
+                 engine=None, recorder: Recorder | None = None):
+        from .engine_casadi import CasadiEngine
+        from .simulate import SimulationOptions
+
+        self.model, self.parameters = model, list(parameters)
+        missing = [p for p in self.parameters if p not in model.parameters]
+        if missing:
+            raise ConfigError(f"model {model.name} has no free parameter(s) {', '.join(missing)}")
+        self.outputs = list(outputs or [o for o in model.output_names if o in data.names])
+        if not self.outputs:
+            raise DataError(f"the data has none of the model's outputs ({', '.join(model.output_names)})",
+                            where=data.source)
+        self.inputs = data.select(model.input_names) if model.input_names else data
+        self.y_meas = data.select(self.outputs).values
+        self.time = data.time
+        self.idx = [model.output_names.index(o) for o in self.outputs]
+        self.fixed = dict(fixed or {})
+        self.options = options if isinstance(options, SimulationOptions) else SimulationOptions.from_dict(options)
+        self.scale = float(np.mean(self.y_meas**2)) if normalise else 1.0
+        self.scale = self.scale if self.scale > 0 else 1.0
+        self.engine = engine or CasadiEngine()
+        self.recorder = recorder or Recorder()
+
+    def params(self, w) -> dict:
+        return {**self.fixed, **dict(zip(self.parameters, map(float, w)))}
+
+    def simulate(self, w, gradient: bool = False):
+        return self.engine.simulate(self.model, self.inputs, self.params(w), t_out=self.time,
+                                    options=self.options,
+                                    sensitivities=self.parameters if gradient else None)
+
+    def evaluate(self, w, gradient: bool = False, tag: str = "") -> Evaluation:
+        """Simulate at w (or replay a recorded run): J(w) and, if asked, grad J(w)."""
+        w = np.asarray(w, dtype=float)
+        old = self.recorder.lookup(w, gradient)
+        if old is not None:
+            return self.recorder.add(Evaluation(0, old.w, old.cost, old.feasible, old.reason,
+                                                old.seconds, old.gradient, tag or old.tag))
+        t0 = time.perf_counter()
+        res = self.simulate(w, gradient)
+        cost = grad = None
+        if res.ok:
+            r = self.y_meas - res.outputs[:, self.idx]
+            cost = float(np.mean(np.sum(r**2, axis=1)) / self.scale)
+            if gradient:
+                S = res.sensitivities[:, self.idx, :]            # (N, ny, nw)
+                grad = (-2.0 * np.einsum("ki,kij->j", r, S) / len(r) / self.scale).tolist()
+        return self.recorder.add(Evaluation(0, w.tolist(), cost, bool(res.ok), res.reason,
+                                            time.perf_counter() - t0, grad, tag))
+
+    def residuals(self, w):
+        """Output residuals y_m - y(w) (N, ny) or None when the simulation fails."""
+        res = self.simulate(w)
+        return None if not res.ok else self.y_meas - res.outputs[:, self.idx]
+
+    def rms_error(self, w) -> float:
+        r = self.residuals(w)
+        return float("nan") if r is None else float(np.sqrt(np.mean(r**2)))
+
+
+class PseudoFeasibility:
+    """p~(w) = 1 - sum_i exp(-|w - w_i|^2 / (2 sigma^2)) + mu over infeasible points (eq. 9).
+
+    The exponent's sign is garbled in the text; it must be negative for the bumps to be local.
+    p~ is kept >= mu so that -log(p~ + mu) stays finite where bumps overlap.
+    """
+
+    def __init__(self, sigma: float = 0.01, mu: float = 1e-6):
+        self.sigma, self.mu = sigma, mu
+        self.infeasible: list[np.ndarray] = []
+
+    def add(self, w) -> None:
+        self.infeasible.append(np.asarray(w, dtype=float))
+
+    def value_and_grad(self, w):
+        w = np.asarray(w, dtype=float)
+        p, g = 1.0 + self.mu, np.zeros_like(w)
+        for wi in self.infeasible:
+            d = w - wi
+            b = np.exp(-d @ d / (2 * self.sigma**2))
+            p -= b
+            g += b * d / self.sigma**2
+        if p < self.mu:
+            return self.mu, np.zeros_like(w)
+        return p, g
+
+    def __call__(self, w) -> float:
+        return self.value_and_grad(w)[0]
+
+    def equivalent_cost(self, J: float | None, w, grad_J=None):
+        """Algorithm 2: J~ = p~ J - log(p~ + mu), or -log(p~ + mu) when the simulation failed."""
+        p, gp = self.value_and_grad(w)
+        barrier = -np.log(p + self.mu)
+        g_barrier = -gp / (p + self.mu)
+        if J is None:
+            return barrier, g_barrier
+        value = p * J + barrier
+        grad = p * (np.zeros_like(gp) if grad_J is None else np.asarray(grad_J)) + J * gp + g_barrier
+        return value, grad
+
+
+def feasibility_terms(q_model, w, lambda1: float, lambda2: float):
+    """-lambda1 log q + lambda2 [q log q + (1-q) log(1-q)] and its gradient (natural logs)."""
+    w2 = np.atleast_2d(w)
+    q = float(np.clip(q_model.predict_proba(w2)[0], LOG_EPS, 1 - LOG_EPS))
+    dq = q_model.grad_proba(w2)[0]
+    neg_entropy = q * np.log(q) + (1 - q) * np.log(1 - q)
+    value = -lambda1 * np.log(q) + lambda2 * neg_entropy
+    grad = (-lambda1 / q + lambda2 * (np.log(q) - np.log(1 - q))) * dq
+    return value, grad
+
+
+@dataclass
+class FitResult:
+    w: np.ndarray
+    cost: float
+    simulations: int
+    failed: int
+    seconds: float
+    feasibility: object = None
+    message: str = ""
+    extra: dict = field(default_factory=dict)
+
+    def normalised(self, axis: int = 0) -> np.ndarray:
+        """w / w[axis]: the law is unchanged by scaling w (paper 000, Table I)."""
+        return self.w / self.w[axis]
+
+
+SCIPY_OPTIMISERS = ("Nelder-Mead", "Powell", "COBYLA", "SLSQP", "BFGS", "CG", "L-BFGS-B")
+_GRADIENT_OPTIMISERS = {"SLSQP", "BFGS", "CG", "L-BFGS-B"}
+
+
+class Algorithm3:
+    """One-shot heuristic of sec. IV (Algorithm 3) with any scipy optimiser.
+
+    ``gradient=True`` gives gradient-based optimisers the exact grad J' from sensitivities
+    (one simulation per gradient instead of n + 1 with finite differences).
+    """
+
+    def __init__(self, optimizer: str = "Powell", lambda1: float = 1.0, lambda2: float = 0.1,
+                 sigma: float = 0.01, mu: float = 1e-6, maxiter: int = 1000, maxfev: int = 1500,
+                 gradient: bool = False, feasibility=None, learning_rate: float | None = None,
+                 fd_step: float = 1e-4, symmetric_axis: int | None = 0):
+        if optimizer not in SCIPY_OPTIMISERS:
+            raise ConfigError(f"optimizer '{optimizer}': choose from {', '.join(SCIPY_OPTIMISERS)}")
+        self.optimizer, self.lambda1, self.lambda2 = optimizer, lambda1, lambda2
+        self.sigma, self.mu, self.maxiter, self.maxfev = sigma, mu, maxiter, maxfev
+        self.gradient, self.feasibility, self.learning_rate = gradient, feasibility, learning_rate
+        self.fd_step, self.symmetric_axis = fd_step, symmetric_axis
+
+    def cost(self, problem: FitProblem, w, gradient: bool):
+        """J'(w) (Algorithm 3, lines 3-10); returns (value, grad or None)."""
+        ev = problem.evaluate(w, gradient=gradient, tag="alg3")
+        if not ev.feasible:
+            self.p_tilde_.add(w)
+        jt, gjt = self.p_tilde_.equivalent_cost(ev.cost, w, ev.gradient)
+        ft, gft = feasibility_terms(self.feasibility_, w, self.lambda1, self.lambda2)
+        self.feasibility_.partial_fit(np.atleast_2d(w), float(ev.feasible), self.learning_rate)
+        if ev.feasible and (self.best_cost_ is None or ev.cost < self.best_cost_):
+            self.best_cost_, self.w_best_ = ev.cost, np.asarray(w, dtype=float).copy()
+        return jt + ft, (gjt + gft if gradient else None)
+
+    def fit(self, problem: FitProblem, w0) -> FitResult:
+        t0 = time.perf_counter()
+        w0 = np.asarray(w0, dtype=float)
+        self.feasibility_ = self.feasibility or LogisticFeasibility(symmetric_axis=self.symmetric_axis)
+        self.p_tilde_ = PseudoFeasibility(self.sigma, self.mu)
+        self.best_cost_, self.w_best_ = None, w0.copy()
+        start = problem.recorder.simulations
+        use_grad = self.gradient and self.optimizer in _GRADIENT_OPTIMISERS
+        options = {"maxiter": self.maxiter}
+        if self.optimizer in ("Nelder-Mead", "Powell"):
+            options["maxfev"] = self.maxfev
+        elif self.optimizer in _GRADIENT_OPTIMISERS and not use_grad:
+            options["eps"] = self.fd_step
+        if self.optimizer == "L-BFGS-B":
+            options["maxfun"] = self.maxfev
+        if self.optimizer == "COBYLA":
+            options["rhobeg"] = 0.5 * float(np.max(np.abs(w0))) or 0.1
+
+        budget = self.maxfev
+
+        def fun(w):
+            if problem.recorder.simulations - start >= budget:
+                raise _BudgetExhausted
+            value, grad = self.cost(problem, w, use_grad)
+            return (value, grad) if use_grad else value
+
+        message = ""
+        try:
+            res = minimize(fun, w0, method=self.optimizer, jac=use_grad or None, options=options)
+            message = str(res.message)
+        except _BudgetExhausted:
+            message = f"simulation budget of {budget} reached"
+        w = self.w_best_
+        cost = self.best_cost_ if self.best_cost_ is not None else float("nan")
+        return FitResult(w, cost, problem.recorder.simulations - start,
+                         sum(not e.feasible for e in problem.recorder.evaluations[start:]),
+                         time.perf_counter() - t0, self.feasibility_, message)
+
+
+class _BudgetExhausted(Exception):
+    pass
+
+
+def delta_schedule(k: int, eps: float = 1e-7, lam: float = 0.8) -> tuple[float, float]:
+    """delta_k1 = eps + (1 - eps)(lam + eps)^k and delta_k2 = 1 + eps - lam^k (sec. V)."""
+    return eps + (1 - eps) * (lam + eps) ** k, 1 + eps - lam**k
+
+
+class Algorithm1:
+    """Iterative constrained optimisation with constraint discovery (Algorithm 1, eqs. 5-8).
+
+    Outer step k solves min J~(w) subject to g_k1 = 1 - delta_k1 - q_k(w) <= 0 and
+    g_k2 = 1 - delta_k2 - H(q_k(w)) <= 0 (H the binary entropy in bits, eq. 8), then retrains
+    q on every point visited so far. q_0 = 0.5 everywhere, so (P_0) is unconstrained.
+    """
+
+    def __init__(self, optimizer: str = "COBYLA", outer: int = 25, inner_maxiter: int = 300,
+                 eps: float = 1e-7, lam: float = 0.8, sigma: float = 0.01, mu: float = 1e-6,
+                 feasibility=None, symmetric_axis: int | None = 0, max_simulations: int | None = None,
+                 gradient: bool = False):
+        if optimizer not in ("COBYLA", "SLSQP"):
+            raise ConfigError("Algorithm 1 needs a constrained optimiser: COBYLA or SLSQP")
+        self.optimizer, self.outer, self.inner_maxiter = optimizer, outer, inner_maxiter
+        self.eps, self.lam, self.sigma, self.mu = eps, lam, sigma, mu
+        self.feasibility, self.symmetric_axis = feasibility, symmetric_axis
+        self.max_simulations, self.gradient = max_simulations, gradient
+
+    def fit(self, problem: FitProblem, w0) -> FitResult:
+        t0 = time.perf_counter()
+        w = np.asarray(w0, dtype=float)
+        q = self.feasibility or LogisticFeasibility(symmetric_axis=self.symmetric_axis)
+        p_tilde = PseudoFeasibility(self.sigma, self.mu)
+        start = problem.recorder.simulations
+        best = [None, w.copy()]
+        budget = self.max_simulations or 10**9
+        use_grad = self.gradient and self.optimizer == "SLSQP"
+        self.deltas_ = []
+
+        def objective(x):
+            if problem.recorder.simulations - start >= budget:
+                raise _BudgetExhausted
+            ev = problem.evaluate(x, gradient=use_grad, tag="alg1")
+            if not ev.feasible:
+                p_tilde.add(x)
+            elif best[0] is None or ev.cost < best[0]:
+                best[0], best[1] = ev.cost, np.asarray(x, dtype=float).copy()
+            value, grad = p_tilde.equivalent_cost(ev.cost, x, ev.gradient)
+            return (value, grad) if use_grad else value
+
+        message = ""
+        try:
+            for k in range(self.outer):
+                d1, d2 = delta_schedule(k, self.eps, self.lam)
+                self.deltas_.append((d1, d2))
+                cons = [{"type": "ineq", "fun": lambda x, d=d1: q.predict_proba(np.atleast_2d(x))[0] - (1 - d)},
+                        {"type": "ineq", "fun": lambda x, d=d2: binary_entropy(
+                            q.predict_proba(np.atleast_2d(x)))[0] - (1 - d)}]
+                opts = {"maxiter": self.inner_maxiter}
+                if self.optimizer == "COBYLA":
+                    opts["rhobeg"] = 0.5 * float(np.max(np.abs(w))) or 0.1
+                res = minimize(objective, w, method=self.optimizer, jac=use_grad or None,
+                               constraints=cons, options=opts)
+                w = res.x
+                W, y = problem.recorder.points()
+                W, y = W[start:], y[start:]
+                if 0 < y.sum() < len(y):  # both classes seen: retrain q on all visited points
+                    q.fit(W, y)
+            message = f"{self.outer} outer iterations"
+        except _BudgetExhausted:
+            message = f"simulation budget of {budget} reached"
+        cost = best[0] if best[0] is not None else float("nan")
+        return FitResult(best[1], cost, problem.recorder.simulations - start,
+                         sum(not e.feasible for e in problem.recorder.evaluations[start:]),
+                         time.perf_counter() - t0, q, message)
+
+
+class LevenbergMarquardt:
+    """Low-budget fit: damped Gauss-Newton on the output residuals with the exact Jacobian.
+
+    One simulation (with sensitivities) per trial step. A failed simulation is a rejected step:
+    the damping grows and the point is recorded as infeasible, as everywhere else. The law is
+    invariant to scaling w, so the step is taken with w[axis] held fixed (that removes the
+    flat direction of J instead of leaving it to the damping).
+    """
+
+    def __init__(self, max_simulations: int = 150, axis: int | None = 0, damping: float = 1e-3,
+                 tol: float = 1e-10, feasibility=None):
+        self.max_simulations, self.axis, self.damping, self.tol = max_simulations, axis, damping, tol
+        self.feasibility = feasibility
+
+    def fit(self, problem: FitProblem, w0) -> FitResult:
+        t0 = time.perf_counter()
+        start = problem.recorder.simulations
+        w = np.asarray(w0, dtype=float).copy()
+        free = [k for k in range(len(w)) if k != self.axis]
+        lam = self.damping
+        current = self._step_data(problem, w)
+        if current is None:
+            raise ConfigError("the start point of the fit does not simulate")
+        message = "budget reached"
+        while problem.recorder.simulations - start < self.max_simulations:
+            r, Jac, cost = current
+            A = Jac[:, free]
+            g = A.T @ r
+            H = A.T @ A
+            step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-30), g)
+            trial = w.copy()
+            trial[free] += step
+            new = self._step_data(problem, trial)
+            if new is not None and new[2] < cost:
+                rel = (cost - new[2]) / max(cost, 1e-300)
+                w, current, lam = trial, new, max(lam / 3, 1e-12)
+                if rel < self.tol or np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(w)):
+                    message = "converged"
+                    break
+            else:
+                lam *= 4
+                if lam > 1e12:
+                    message = "no descent step found"
+                    break
+        q = self.feasibility or LogisticFeasibility(symmetric_axis=self.axis)
+        W, y = problem.recorder.points()
+        if 0 < y[start:].sum() < len(y[start:]):
+            q.fit(W[start:], y[start:])
+        return FitResult(w, current[2], problem.recorder.simulations - start,
+                         sum(not e.feasible for e in problem.recorder.evaluations[start:]),
+                         time.perf_counter() - t0, q, message)
+
+    @staticmethod
+    def _step_data(problem: FitProblem, w):
+        """(residual vector, its Jacobian d r / d w, J) at w, or None when w fails."""
+        res = problem.simulate(w, gradient=True)
+        ev_cost = None
+        if res.ok:
+            r = problem.y_meas - res.outputs[:, problem.idx]
+            ev_cost = float(np.mean(np.sum(r**2, axis=1)) / problem.scale)
+        problem.recorder.add(Evaluation(0, np.asarray(w, float).tolist(), ev_cost, bool(res.ok),
+                                        res.reason, res.seconds, None, "lm"))
+        if not res.ok:
+            return None
+        S = res.sensitivities[:, problem.idx, :]
+        return r.ravel(), -S.reshape(-1, S.shape[2]), ev_cost
