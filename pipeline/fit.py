@@ -60,6 +60,7 @@ class Recorder:
     def __init__(self, path=None):
         self.evaluations: list[Evaluation] = []
         self.path = Path(path) if path else None
+        self.replayed = 0
         self._replay: dict[tuple, Evaluation] = {}
         if self.path and self.path.exists():
             for line in self.path.read_text().splitlines():
@@ -143,6 +144,7 @@ class FitProblem:
         w = np.asarray(w, dtype=float)
         old = self.recorder.lookup(w, gradient)
         if old is not None:
+            self.recorder.replayed += 1
             return self.recorder.add(Evaluation(0, old.w, old.cost, old.feasible, old.reason,
                                                 old.seconds, old.gradient, tag or old.tag))
         t0 = time.perf_counter()
@@ -219,6 +221,38 @@ def feasibility_terms(q_model, w, lambda1: float, lambda2: float):
     return value, grad
 
 
+def restore_feasibility(problem: FitProblem, w0, q, budget: int = 24, seed: int = 0,
+                        on_failure=None, tag: str = "restore"):
+    """A feasible start near ``w0`` (beyond the paper: its algorithms start where they are told).
+
+    When w0 does not simulate, candidates at growing distances from it are ranked by q and the
+    most likely feasible ones simulated, q learning from every outcome (Algorithm 3's online
+    step), until one succeeds. Returns (start point, whether it is feasible).
+    """
+    w0 = np.asarray(w0, dtype=float)
+    ev = problem.evaluate(w0, tag=tag)
+    q.partial_fit(np.atleast_2d(w0), float(ev.feasible))
+    if ev.feasible:
+        return w0, True
+    if on_failure:
+        on_failure(w0)
+    rng = np.random.default_rng(seed)
+    scale, n, used = float(np.linalg.norm(w0)) or 1.0, len(w0), 1
+    for radius in (0.1, 0.3, 1.0, 3.0):
+        cand = w0 + radius * scale * rng.normal(size=(64, n)) / np.sqrt(n)
+        for c in cand[np.argsort(-q.predict_proba(cand))[:6]]:
+            if used >= budget:
+                return w0, False
+            ev = problem.evaluate(c, tag=tag)
+            used += 1
+            q.partial_fit(np.atleast_2d(c), float(ev.feasible))
+            if ev.feasible:
+                return c, True
+            if on_failure:
+                on_failure(c)
+    return w0, False
+
+
 @dataclass
 class FitResult:
     w: np.ndarray
@@ -276,6 +310,9 @@ class Algorithm3:
         self.p_tilde_ = PseudoFeasibility(self.sigma, self.mu)
         self.best_cost_, self.w_best_ = None, w0.copy()
         start = problem.recorder.simulations
+        w0, ok = restore_feasibility(problem, w0, self.feasibility_, on_failure=self.p_tilde_.add)
+        if ok:
+            self.best_cost_, self.w_best_ = problem.recorder.evaluations[-1].cost, w0.copy()
         use_grad = self.gradient and self.optimizer in _GRADIENT_OPTIMISERS
         options = {"maxiter": self.maxiter}
         if self.optimizer in ("Nelder-Mead", "Powell"):
@@ -344,6 +381,10 @@ class Algorithm1:
         start = problem.recorder.simulations
         best = [None, w.copy()]
         budget = self.max_simulations or 10**9
+        w, ok = restore_feasibility(problem, w, LogisticFeasibility(symmetric_axis=self.symmetric_axis),
+                                    on_failure=p_tilde.add)
+        if ok:
+            best[:] = [problem.recorder.evaluations[-1].cost, w.copy()]
         use_grad = self.gradient and self.optimizer == "SLSQP"
         self.deltas_ = []
 
@@ -405,9 +446,11 @@ class LevenbergMarquardt:
         w = np.asarray(w0, dtype=float).copy()
         free = [k for k in range(len(w)) if k != self.axis]
         lam = self.damping
-        current = self._step_data(problem, w)
+        q = self.feasibility or LogisticFeasibility(symmetric_axis=self.axis)
+        w, ok = restore_feasibility(problem, w, q)
+        current = self._step_data(problem, w) if ok else None
         if current is None:
-            raise ConfigError("the start point of the fit does not simulate")
+            raise ConfigError("no start point of the fit simulates (tried around the given one)")
         message = "budget reached"
         while problem.recorder.simulations - start < self.max_simulations:
             r, Jac, cost = current
@@ -429,7 +472,6 @@ class LevenbergMarquardt:
                 if lam > 1e12:
                     message = "no descent step found"
                     break
-        q = self.feasibility or LogisticFeasibility(symmetric_axis=self.axis)
         W, y = problem.recorder.points()
         if 0 < y[start:].sum() < len(y[start:]):
             q.fit(W[start:], y[start:])
