@@ -4,9 +4,11 @@ Pieces, each cited to the paper:
 
 - :class:`FitProblem`: the cost J(w) of eq. (3), the mean squared output error of the simulated
   model against the measurements, with its exact gradient from the engine's sensitivities
-  (sec. IV: grad J = -2/N sum (y_m - y) dy/dw). ``normalise`` divides J by the mean square of the
-  measurements so that the weights of the feasibility terms mean the same in any units (the
-  paper's outputs are volts; ours may be anything).
+  (sec. IV: grad J = -2/N sum (y_m - y) dy/dw). The algorithms see J divided by a scale
+  (``normalise``): by default the cost of the first feasible point, so J starts at 1 in any
+  units and the failure penalty -log(2 mu) of Algorithm 2 (about 13) always exceeds it — with
+  J in raw units a failure can look better than a poor feasible start and attract the search.
+  ``normalise="data"`` divides by the mean square of the measurements, ``None`` keeps eq. (3).
 - :class:`PseudoFeasibility`: p~(w) of eq. (9), Gaussian bumps at the infeasible points found
   so far, and the equivalent cost J~(w) = p~ J - log(p~ + mu) of Algorithm 2.
 - :class:`Algorithm3`: the one-shot heuristic cost
@@ -107,7 +109,7 @@ class FitProblem:
     """
 
     def __init__(self, model, data: TimeSeries, parameters: list[str], outputs=None,
-                 fixed: dict | None = None, options=None, normalise: bool = True,
+                 fixed: dict | None = None, options=None, normalise: str | None = "start",
                  engine=None, recorder: Recorder | None = None):
         from .engine_casadi import CasadiEngine
         from .simulate import SimulationOptions
@@ -126,10 +128,30 @@ class FitProblem:
         self.idx = [model.output_names.index(o) for o in self.outputs]
         self.fixed = dict(fixed or {})
         self.options = options if isinstance(options, SimulationOptions) else SimulationOptions.from_dict(options)
-        self.scale = float(np.mean(self.y_meas**2)) if normalise else 1.0
-        self.scale = self.scale if self.scale > 0 else 1.0
+        if normalise not in ("start", "data", None):
+            raise ConfigError(f"normalise: 'start', 'data' or None, not {normalise!r}")
+        self.normalise = normalise
+        self._scale = float(np.mean(self.y_meas**2)) if normalise == "data" else (
+            None if normalise == "start" else 1.0)
         self.engine = engine or CasadiEngine()
         self.recorder = recorder or Recorder()
+
+    @property
+    def scale(self) -> float:
+        """Divisor of J for the algorithms (fixed at the first feasible cost for 'start')."""
+        if self._scale is None:
+            first = next((e.cost for e in self.recorder.evaluations if e.feasible), None)
+            if first is None:
+                return 1.0
+            self._scale = first if first > 0 else 1.0
+        return self._scale
+
+    def scaled(self, ev: Evaluation):
+        """(J / scale, grad J / scale) of an evaluation (None for a failed one)."""
+        if not ev.feasible:
+            return None, None
+        s = self.scale
+        return ev.cost / s, (None if ev.gradient is None else np.asarray(ev.gradient) / s)
 
     def params(self, w) -> dict:
         return {**self.fixed, **dict(zip(self.parameters, map(float, w)))}
@@ -152,10 +174,10 @@ class FitProblem:
         cost = grad = None
         if res.ok:
             r = self.y_meas - res.outputs[:, self.idx]
-            cost = float(np.mean(np.sum(r**2, axis=1)) / self.scale)
+            cost = float(np.mean(np.sum(r**2, axis=1)))         # eq. (3)
             if gradient:
                 S = res.sensitivities[:, self.idx, :]            # (N, ny, nw)
-                grad = (-2.0 * np.einsum("ki,kij->j", r, S) / len(r) / self.scale).tolist()
+                grad = (-2.0 * np.einsum("ki,kij->j", r, S) / len(r)).tolist()
         return self.recorder.add(Evaluation(0, w.tolist(), cost, bool(res.ok), res.reason,
                                             time.perf_counter() - t0, grad, tag))
 
@@ -283,20 +305,21 @@ class Algorithm3:
     def __init__(self, optimizer: str = "Powell", lambda1: float = 1.0, lambda2: float = 0.1,
                  sigma: float = 0.01, mu: float = 1e-6, maxiter: int = 1000, maxfev: int = 1500,
                  gradient: bool = False, feasibility=None, learning_rate: float | None = None,
-                 fd_step: float = 1e-4, symmetric_axis: int | None = 0):
+                 fd_step: float = 1e-4, symmetric_axis: int | None = 0, tol: float | None = None):
         if optimizer not in SCIPY_OPTIMISERS:
             raise ConfigError(f"optimizer '{optimizer}': choose from {', '.join(SCIPY_OPTIMISERS)}")
         self.optimizer, self.lambda1, self.lambda2 = optimizer, lambda1, lambda2
         self.sigma, self.mu, self.maxiter, self.maxfev = sigma, mu, maxiter, maxfev
         self.gradient, self.feasibility, self.learning_rate = gradient, feasibility, learning_rate
-        self.fd_step, self.symmetric_axis = fd_step, symmetric_axis
+        self.fd_step, self.symmetric_axis, self.tol = fd_step, symmetric_axis, tol
 
     def cost(self, problem: FitProblem, w, gradient: bool):
         """J'(w) (Algorithm 3, lines 3-10); returns (value, grad or None)."""
         ev = problem.evaluate(w, gradient=gradient, tag="alg3")
         if not ev.feasible:
             self.p_tilde_.add(w)
-        jt, gjt = self.p_tilde_.equivalent_cost(ev.cost, w, ev.gradient)
+        J, gJ = problem.scaled(ev)
+        jt, gjt = self.p_tilde_.equivalent_cost(J, w, gJ)
         ft, gft = feasibility_terms(self.feasibility_, w, self.lambda1, self.lambda2)
         self.feasibility_.partial_fit(np.atleast_2d(w), float(ev.feasible), self.learning_rate)
         if ev.feasible and (self.best_cost_ is None or ev.cost < self.best_cost_):
@@ -334,7 +357,9 @@ class Algorithm3:
 
         message = ""
         try:
-            res = minimize(fun, w0, method=self.optimizer, jac=use_grad or None, options=options)
+            # the paper sets xtol = ftol = 1e-16 so that budgets bind; ``tol`` does that when given
+            res = minimize(fun, w0, method=self.optimizer, jac=use_grad or None, tol=self.tol,
+                           options=options)
             message = str(res.message)
         except _BudgetExhausted:
             message = f"simulation budget of {budget} reached"
@@ -365,13 +390,14 @@ class Algorithm1:
     def __init__(self, optimizer: str = "COBYLA", outer: int = 25, inner_maxiter: int = 300,
                  eps: float = 1e-7, lam: float = 0.8, sigma: float = 0.01, mu: float = 1e-6,
                  feasibility=None, symmetric_axis: int | None = 0, max_simulations: int | None = None,
-                 gradient: bool = False):
+                 gradient: bool = False, fd_step: float = 1e-4, tol: float | None = None):
         if optimizer not in ("COBYLA", "SLSQP"):
             raise ConfigError("Algorithm 1 needs a constrained optimiser: COBYLA or SLSQP")
         self.optimizer, self.outer, self.inner_maxiter = optimizer, outer, inner_maxiter
         self.eps, self.lam, self.sigma, self.mu = eps, lam, sigma, mu
         self.feasibility, self.symmetric_axis = feasibility, symmetric_axis
         self.max_simulations, self.gradient = max_simulations, gradient
+        self.fd_step, self.tol = fd_step, tol
 
     def fit(self, problem: FitProblem, w0) -> FitResult:
         t0 = time.perf_counter()
@@ -396,7 +422,8 @@ class Algorithm1:
                 p_tilde.add(x)
             elif best[0] is None or ev.cost < best[0]:
                 best[0], best[1] = ev.cost, np.asarray(x, dtype=float).copy()
-            value, grad = p_tilde.equivalent_cost(ev.cost, x, ev.gradient)
+            J, gJ = problem.scaled(ev)
+            value, grad = p_tilde.equivalent_cost(J, x, gJ)
             return (value, grad) if use_grad else value
 
         message = ""
@@ -410,8 +437,10 @@ class Algorithm1:
                 opts = {"maxiter": self.inner_maxiter}
                 if self.optimizer == "COBYLA":
                     opts["rhobeg"] = 0.5 * float(np.max(np.abs(w))) or 0.1
+                elif not use_grad:
+                    opts["eps"] = self.fd_step  # paper: gradient step 1e-4
                 res = minimize(objective, w, method=self.optimizer, jac=use_grad or None,
-                               constraints=cons, options=opts)
+                               constraints=cons, tol=self.tol, options=opts)
                 w = res.x
                 W, y = problem.recorder.points()
                 W, y = W[start:], y[start:]
@@ -486,7 +515,7 @@ class LevenbergMarquardt:
         ev_cost = None
         if res.ok:
             r = problem.y_meas - res.outputs[:, problem.idx]
-            ev_cost = float(np.mean(np.sum(r**2, axis=1)) / problem.scale)
+            ev_cost = float(np.mean(np.sum(r**2, axis=1)))
         problem.recorder.add(Evaluation(0, np.asarray(w, float).tolist(), ev_cost, bool(res.ok),
                                         res.reason, res.seconds, None, "lm"))
         if not res.ok:

@@ -60,6 +60,14 @@ def mcl_executors() -> list[type]:
     """
 
 
+@hookspec
+def mcl_prioritisers() -> list[type]:
+    """Register prioritiser classes for backward elimination (subclasses of
+    :class:`pipeline.sparsify.Prioritiser`): which parameters may be removed next, in stages.
+    All results are collected; picked by name (``degree`` by default).
+    """
+
+
 @hookspec(firstresult=True)
 def mcl_load_model(path: str) -> Any:
     """Read a ready-made model file (an FMU, a saved compiled model, ...), or return None.

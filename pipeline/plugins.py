@@ -27,6 +27,7 @@ DEFAULT_PLUGINS = (
     "plugins.templates",
     "plugins.feasibility",
     "plugins.executors",
+    "plugins.prioritisers",
 )
 ENV_DISABLE = "MCL_DISABLE_EXTERNAL_PLUGINS"
 ENV_ALLOW = "MCL_PLUGINS"
@@ -103,6 +104,7 @@ class Registry:
         self.templates = _named(self.pm.hook.mcl_templates(), "template")
         self.feasibility_models = _named(self.pm.hook.mcl_feasibility_models(), "feasibility model")
         self.executors = _named(self.pm.hook.mcl_executors(), "executor")
+        self.prioritisers = _named(self.pm.hook.mcl_prioritisers(), "prioritiser")
 
     @property
     def hook(self):

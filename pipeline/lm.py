@@ -1,0 +1,387 @@
+"""Full-discretisation Levenberg-Marquardt for ODE identification (paper 004, sections II-IV).
+
+The unknowns are the states at every discretisation point and the parameters,
+b = [x(t_1); ...; x(t_Nd); a] (eq. 15), and the cost is ||g(b)||^2 with the residual blocks of
+eqs. (16)-(19): for j < N_d
+
+    p_x,j = [ S_x^-1 ((x_{j+1} - x_j)/dt - f(t_{j+1/2}, (x_j + x_{j+1})/2, a)) sqrt(dt)   (midpoint)
+              sqrt(mu_x / 2) x_j sqrt(dt) ;  sqrt(mu_x / 2) x_{j+1} sqrt(dt)             (trapezoid)
+              S_y^-1 (y(t_j) - h(t_j, x_j))   where t_j is a measurement time ]
+
+p_x,Nd = S_y^-1 (y - h) at the last point, and p_a = sqrt(mu_a) a. Every block couples only
+x_j, x_{j+1} and a, which is what the structured solver exploits.
+
+The linear LM step (eq. 23) is solved by :func:`structured_step`: the dynamic-programming
+recursion of section IV / Algorithm 2 with the QR formulas of Appendix B (eqs. 82-83),
+min_r ||[M_r M_s M_1][r; s; 1]||^2 = ||R22 [s; 1]||^2 at r = -R11^-1 R12 [s; 1], where
+R = qr([M_r M_s M_1]) — no Q is ever formed. The N_d states are split in N_s segments whose
+inner eliminations are independent (Algorithm 2, lines 3-10 and 22-27); they run here as one
+batched QR per step across all segments, so the Python work is O(N_d / N_s + N_s).
+:func:`direct_step` solves the same step with a sparse factorisation, as the reference.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+
+@dataclass
+class Blocks:
+    """Linearised residual blocks at b_k, padded to a common row count m.
+
+    For j = 0..N-1: ``g[j]`` (m,), ``X[j]`` = dp_j/dx_j (m, n), ``Z[j]`` = dp_j/dx_{j+1}
+    (m, n; zero for the last block), ``A[j]`` = dp_j/da (m, p). ``ga`` (p,) and ``Aa`` (p, p)
+    are p_a and its Jacobian.
+    """
+
+    g: np.ndarray
+    X: np.ndarray
+    Z: np.ndarray
+    A: np.ndarray
+    ga: np.ndarray
+    Aa: np.ndarray
+
+    @property
+    def shape(self):
+        N, m, n = self.X.shape
+        return N, m, n, self.A.shape[2]
+
+    def cost(self) -> float:
+        return float(np.sum(self.g**2) + np.sum(self.ga**2))
+
+
+def direct_step(blocks: Blocks, lam: float) -> np.ndarray:
+    """gamma of eq. (24) by a sparse solve of the normal equations (reference for tests)."""
+    N, m, n, p = blocks.shape
+    J = jacobian_matrix(blocks)
+    g = np.concatenate([blocks.g.ravel(), blocks.ga])
+    H = (J.T @ J + lam * sp.identity(J.shape[1])).tocsc()
+    return -spla.spsolve(H, J.T @ g)
+
+
+def jacobian_matrix(blocks: Blocks) -> sp.csr_matrix:
+    """dg/db as a sparse matrix (rows: blocks in order, then p_a; columns: x_1..x_N, a)."""
+    N, m, n, p = blocks.shape
+    parts = [(blocks.X, np.arange(N) * n, n), (blocks.Z[:-1], np.arange(1, N) * n, n),
+             (blocks.A, np.full(N, N * n), p)]
+    rows, cols, vals = [], [], []
+    for mats, col0, width in parts:
+        k = len(mats)
+        r = np.arange(k)[:, None, None] * m + np.arange(m)[None, :, None]
+        c = col0[:k, None, None] + np.arange(width)[None, None, :]
+        rows.append(np.broadcast_to(r, mats.shape).ravel())
+        cols.append(np.broadcast_to(c, mats.shape).ravel())
+        vals.append(mats.ravel())
+    rows.append(np.repeat(N * m + np.arange(p), p))
+    cols.append(np.tile(N * n + np.arange(p), p))
+    vals.append(blocks.Aa.ravel())
+    return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                         shape=(N * m + p, N * n + p))
+
+
+def _r_factor(M: np.ndarray) -> np.ndarray:
+    """R of a (batched) QR decomposition; zero rows appended so R is always square-ish."""
+    R = np.linalg.qr(M, mode="r")
+    k = M.shape[-1]
+    if R.shape[-2] < k:  # fewer rows than columns: pad with zero rows (they add nothing)
+        pad = np.zeros(R.shape[:-2] + (k - R.shape[-2], k))
+        R = np.concatenate([R, pad], axis=-2)
+    return R
+
+
+def _eliminate(F: np.ndarray, k: int):
+    """Appendix B: F holds rows [M_r | M_s | M_1] with r the first k columns.
+
+    Returns (R11, R12, R22): r = -R11^-1 R12 [s; 1] and min = ||R22 [s; 1]||^2 (eqs. 82-83).
+    """
+    R = _r_factor(F)
+    return R[..., :k, :k], R[..., :k, k:], R[..., k:, k:]
+
+
+def _solve_upper(R11, rhs):
+    """R11^-1 rhs for (batched) upper-triangular R11; pseudo-inverse where R11 is singular."""
+    try:
+        return np.linalg.solve(R11, rhs)
+    except np.linalg.LinAlgError:
+        return np.linalg.pinv(R11) @ rhs
+
+
+def _damped(block: np.ndarray, n_first: int, lam: float, offset: int = 0) -> np.ndarray:
+    """Append sqrt(lam) I rows on columns [offset, offset + n_first) (the damping of eq. 23)."""
+    if lam <= 0 or n_first == 0:
+        return block
+    shape = block.shape[:-2] + (n_first, block.shape[-1])
+    rows = np.zeros(shape)
+    idx = np.arange(n_first)
+    rows[..., idx, offset + idx] = np.sqrt(lam)
+    return np.concatenate([block, rows], axis=-2)
+
+
+def _forward(blocks: Blocks, lam: float, segments: int):
+    """Lines 3-14 of Algorithm 2: eliminate every state; returns G on (delta, 1) and the laws.
+
+    Segment s eliminates its inner states (eq. 35) with a factor carried in the columns
+    (left boundary, current state, delta, 1); all segments take their k-th step together as one
+    batched QR. Then the boundary states are eliminated in order (eq. 38).
+    """
+    N, m, n, p = blocks.shape
+    Ns = int(max(1, min(segments, N // 2)))
+    bounds = np.linspace(0, N, Ns + 1).round().astype(int)
+    starts, ends = bounds[:-1], bounds[1:]
+    # blocks each segment eliminates: segment 0 from its first state, the others after their
+    # left boundary state x_start (which the boundary recursion eliminates)
+    seqs = [np.arange(starts[s] + (s > 0), ends[s]) for s in range(Ns)]
+    L = max(len(q) for q in seqs)
+    C = 3 * n + p + 1                      # columns (x_j | left, x_{j+1}, delta, 1)
+    K = 2 * n + p + 1                      # carried factor columns (left, x_j, delta, 1)
+    F = np.zeros((Ns, K, K))
+    for s in range(1, Ns):                 # H_{s,1} = q_{zeta(s)} on (x_start, x_start+1, delta, 1)
+        j = starts[s]
+        q = np.hstack([blocks.X[j], blocks.Z[j], blocks.A[j], blocks.g[j][:, None]])
+        F[s] = _r_factor(_damped(q[None], n, lam)[0])[:K]
+    laws = []
+    for i in range(L):
+        act = np.array([s for s in range(Ns) if i < len(seqs[s])])
+        j = np.array([seqs[s][i] for s in act])
+        q = np.zeros((len(act), m, C))
+        q[:, :, :n] = blocks.X[j]
+        q[:, :, 2 * n:3 * n] = blocks.Z[j]
+        q[:, :, 3 * n:3 * n + p] = blocks.A[j]
+        q[:, :, -1] = blocks.g[j]
+        q = _damped(q, n, lam)
+        Fc = np.zeros((len(act), K, C))
+        Fc[:, :, :n] = F[act][:, :, n:2 * n]
+        Fc[:, :, n:2 * n] = F[act][:, :, :n]
+        Fc[:, :, 3 * n:] = F[act][:, :, 2 * n:]
+        R11, R12, R22 = _eliminate(np.concatenate([Fc, q], axis=1), n)
+        F[act] = R22
+        laws.append((act, j, R11, R12))
+    # boundary recursion (eq. 38): G in columns (b_s, delta, 1); w_s = F[s] on (b_s, b_{s+1}, delta, 1)
+    G = F[0][:, n:]
+    boundary = []
+    for s in range(1, Ns):
+        Gx = np.zeros((G.shape[0], K))
+        Gx[:, :n] = G[:, :n]
+        Gx[:, 2 * n:] = G[:, n:]
+        R11, R12, G = _eliminate(np.vstack([Gx, F[s]]), n)
+        boundary.append((R11, R12))
+    # after the last segment G's state columns are all zero (there is no x_{N+1})
+    return G[:, n:], laws, boundary, starts
+
+
+def structured_step(blocks: Blocks, lam: float, segments: int = 1) -> np.ndarray:
+    """gamma of eq. (23) by the segment recursion of Algorithm 2 (Appendix B QR formulas).
+
+    delta is solved from r_k + G (eq. 37), then the boundary states (eq. 40) and the inner
+    states of all segments together (eq. 39) are recovered backwards.
+    Returns gamma = [beta_1; ...; beta_N; delta], ordered as :func:`direct_step`.
+    """
+    N, m, n, p = blocks.shape
+    G, laws, boundary, starts = _forward(blocks, lam, segments)
+    Ns = len(starts)
+    ra = _damped(np.hstack([blocks.Aa, blocks.ga[:, None]])[None], p, lam)[0]
+    R11, R12, _ = _eliminate(np.vstack([G, ra]), p)
+    delta = -_solve_upper(R11, R12[:, -1])
+    b = np.zeros((Ns + 1, n))
+    for s in range(Ns - 1, 0, -1):
+        R11, R12 = boundary[s - 1]
+        b[s] = -_solve_upper(R11, R12 @ np.concatenate([b[s + 1], delta, [1.0]]))
+    beta = np.zeros((N + 1, n))            # row N: the non-existent x_{N+1} (zero columns)
+    beta[starts[1:]] = b[1:Ns]
+    for act, j, R11, R12 in reversed(laws):
+        rest = np.concatenate([b[act], beta[j + 1], np.broadcast_to(delta, (len(act), p)),
+                               np.ones((len(act), 1))], axis=1)
+        beta[j] = -_solve_upper(R11, np.einsum("sij,sj->si", R12, rest)[..., None])[..., 0]
+    return np.concatenate([beta[:N].ravel(), delta])
+
+
+def removal_estimates(blocks: Blocks, a_active: np.ndarray, segments: int = 1) -> np.ndarray:
+    """Algorithm 3 (paper 004): the minimal cost V_e after setting each parameter to zero.
+
+    Linearised at the optimum with lambda = 0 (eq. 46). Eliminating the states (lines 1-13) is
+    shared by every candidate; only the final small problem over delta differs: with the k-th
+    element of delta fixed at -a_k (eq. 45), min over the rest of ||[G; r] [delta; 1]||^2.
+    """
+    p = blocks.shape[3]
+    G, _, _, _ = _forward(blocks, 0.0, segments)
+    rows = np.vstack([G, np.hstack([blocks.Aa, blocks.ga[:, None]])])
+    out = np.empty(p)
+    for k in range(p):
+        keep = [c for c in range(p) if c != k]
+        const = rows[:, -1] - rows[:, k] * a_active[k]     # delta_k = -a_k moves into the constant
+        M = np.hstack([rows[:, keep], const[:, None]])
+        _, _, R22 = _eliminate(M, p - 1)
+        out[k] = float(np.sum(R22**2))
+    return out
+
+
+# -- the discretised identification problem (eqs. 12-19) ------------------------------------------
+def discretisation_grid(t_meas: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Appendix A: N_r^(i) = ceil((t_m^(i+1) - t_m^(i)) / dt) equal steps between measurements.
+
+    Returns (t_d, index of each measurement time in t_d). The text writes floor brackets, but
+    steps no longer than dt need the ceiling.
+    """
+    t_meas = np.asarray(t_meas, dtype=float)
+    pieces, idx = [], []
+    for a, b in zip(t_meas[:-1], t_meas[1:]):
+        k = max(1, int(np.ceil((b - a) / dt - 1e-9)))
+        idx.append(sum(len(x) for x in pieces))
+        pieces.append(a + (b - a) * np.arange(k) / k)
+    idx.append(sum(len(x) for x in pieces))
+    pieces.append(t_meas[-1:])
+    return np.concatenate(pieces), np.array(idx)
+
+
+@dataclass
+class Measurements:
+    """Measurements at arbitrary times; NaN marks an output not measured at that time."""
+
+    time: np.ndarray
+    values: np.ndarray           # (N_m, n_y)
+
+    @classmethod
+    def merge(cls, series: list[tuple[np.ndarray, np.ndarray, int]], n_y: int) -> "Measurements":
+        """From (times, values, output index) triples: each output on its own time grid."""
+        times = np.unique(np.concatenate([np.asarray(t, float) for t, _, _ in series]))
+        vals = np.full((len(times), n_y), np.nan)
+        for t, v, k in series:
+            vals[np.searchsorted(times, t), k] = v
+        return cls(times, vals)
+
+
+class IdentificationProblem:
+    """min ||g(b)||^2 of eq. (14) for x' = f(t, x, a), y = h(t, x) (paper 004, eq. 12).
+
+    ``f(t, x, a)`` and ``h(t, x)`` are Python functions written with CasADi operations (or
+    CasADi Functions); every derivative comes from CasADi. ``Sx``/``Sy`` are the factors of
+    W_x = S_x S_x^T and W_y = S_y S_y^T (eqs. 7-8), as vectors (diagonal) or matrices.
+    """
+
+    def __init__(self, f, h, n_x: int, n_a: int, meas: Measurements, dt: float,
+                 Sx=None, Sy=None, mu_x: float = 1e-8, mu_a: float = 1e-3):
+        import casadi as ca
+
+        self.n, self.p, self.meas = n_x, n_a, meas
+        self.t, self.j_meas = discretisation_grid(meas.time, dt)
+        N, n_y = len(self.t), meas.values.shape[1]
+        self.n_y = n_y
+        Sx_inv = np.linalg.inv(np.diag(np.broadcast_to(Sx if Sx is not None else 1.0, n_x)) if np.ndim(Sx) < 2
+                               else np.asarray(Sx))
+        Sy_inv = np.linalg.inv(np.diag(np.broadcast_to(Sy if Sy is not None else 1.0, n_y)) if np.ndim(Sy) < 2
+                               else np.asarray(Sy))
+        x, z, a = ca.SX.sym("x", n_x), ca.SX.sym("z", n_x), ca.SX.sym("a", n_a)
+        tm, dtj, tj = ca.SX.sym("tm"), ca.SX.sym("dt"), ca.SX.sym("tj")
+        y, mask = ca.SX.sym("y", n_y), ca.SX.sym("mask", n_y)
+        dyn = ca.mtimes(ca.DM(Sx_inv), (z - x) / dtj - f(tm, (x + z) / 2, a)) * ca.sqrt(dtj)
+        reg = np.sqrt(mu_x / 2) * ca.sqrt(dtj)
+        meas_res = ca.mtimes(ca.DM(Sy_inv), mask * (y - h(tj, x)))  # S_y^-1 (y - h) where measured
+        res = ca.vertcat(dyn, reg * x, reg * z, meas_res)
+        last = ca.vertcat(ca.SX.zeros(3 * n_x), meas_res)
+        args = [x, z, a, tm, dtj, tj, y, mask]
+        blk = ca.Function("blk", args, [res, ca.jacobian(res, x), ca.jacobian(res, z), ca.jacobian(res, a)])
+        blk_last = ca.Function("blk_last", args, [last, ca.jacobian(last, x), ca.jacobian(last, z),
+                                                  ca.jacobian(last, a)])
+        self._blk, self._blk_last = blk.map(N - 1, "serial"), blk_last
+        self.m = 3 * n_x + n_y
+        self.mu_a = mu_a
+        # measurements on the grid (zero and masked where there is none)
+        Y = np.zeros((N, n_y))
+        M = np.zeros((N, n_y))
+        ok = ~np.isnan(meas.values)
+        Y[self.j_meas] = np.where(ok, meas.values, 0.0)
+        M[self.j_meas] = ok
+        self.Y, self.M = Y, M
+        self.dt_mid = np.diff(self.t)
+        self.t_mid = self.t[:-1] + self.dt_mid / 2
+
+    @property
+    def N(self) -> int:
+        return len(self.t)
+
+    def blocks(self, X: np.ndarray, a: np.ndarray) -> Blocks:
+        """Residual blocks and their Jacobians at states X (N, n) and parameters a."""
+        N = self.N
+        g, Jx, Jz, Ja = self._blk(X[:-1].T, X[1:].T, np.repeat(a[:, None], N - 1, 1), self.t_mid[None],
+                                  self.dt_mid[None], self.t[None, :-1], self.Y[:-1].T, self.M[:-1].T)
+        gl, Jxl, _, _ = self._blk_last(X[-1], X[-1], a, self.t[-1], 1.0, self.t[-1], self.Y[-1], self.M[-1])
+        m, n, p = self.m, self.n, self.p
+        unstack = (lambda D, w: np.array(D).reshape(m, w, N - 1, order="F").transpose(2, 0, 1))
+        G = np.vstack([np.array(g).T, np.array(gl).T])
+        X_ = np.concatenate([unstack(Jx, n), np.array(Jxl)[None]])
+        Z_ = np.concatenate([unstack(Jz, n), np.zeros((1, m, n))])
+        A_ = np.concatenate([unstack(Ja, p), np.zeros((1, m, p))])
+        sa = np.sqrt(self.mu_a)
+        return Blocks(G, X_, Z_, A_, sa * a, sa * np.eye(p))
+
+    def cost(self, X, a) -> float:
+        return self.blocks(X, a).cost()
+
+    def initial_states(self, guess=None) -> np.ndarray:
+        """Measured outputs interpolated onto the grid where h is the identity, else ``guess``."""
+        X = np.zeros((self.N, self.n)) if guess is None else np.array(guess, dtype=float)
+        for k in range(min(self.n, self.n_y)):
+            ok = ~np.isnan(self.meas.values[:, k])
+            if ok.sum() >= 2 and guess is None:
+                X[:, k] = np.interp(self.t, self.meas.time[ok], self.meas.values[ok, k])
+        return X
+
+
+@dataclass
+class LMResult:
+    X: np.ndarray
+    a: np.ndarray
+    cost: float
+    iterations: int
+    history: list
+    message: str
+
+
+def levenberg_marquardt(problem: IdentificationProblem, X0, a0, active=None, lam0: float = 1e-2,
+                        rho1: float = 3.0, rho2: float = 5.0, sigma: float = 1e-9,
+                        max_iter: int = 200, rtol: float = 1e-12, segments: int = 1,
+                        step=structured_step) -> LMResult:
+    """Algorithm 1 (paper 004) with the structured linear step; ``active`` masks parameters.
+
+    Parameters outside ``active`` stay at zero (a removed network edge); the step is computed
+    with their columns dropped. Stops when the gradient norm ||2 J^T g|| <= sigma, when the
+    relative decrease falls below ``rtol``, or after ``max_iter`` iterations.
+    """
+    X, a = np.array(X0, dtype=float), np.array(a0, dtype=float)
+    active = np.ones(len(a), bool) if active is None else np.asarray(active, bool)
+    a[~active] = 0.0
+    lam, history, message = lam0, [], "max_iter reached"
+    blocks = _restrict(problem.blocks(X, a), active)
+    cost = blocks.cost()
+    for k in range(max_iter):
+        grad = 2 * (jacobian_matrix(blocks).T @ np.concatenate([blocks.g.ravel(), blocks.ga]))
+        if np.linalg.norm(grad) <= sigma:
+            message = "gradient below sigma"
+            break
+        gamma = step(blocks, lam, segments) if step is structured_step else step(blocks, lam)
+        Xn = X + gamma[: X.size].reshape(X.shape)
+        an = a.copy()
+        an[active] += gamma[X.size:]
+        new = _restrict(problem.blocks(Xn, an), active)
+        new_cost = new.cost()
+        history.append((k, cost, lam))
+        if new_cost < cost:
+            done = (cost - new_cost) <= rtol * cost
+            X, a, blocks, cost, lam = Xn, an, new, new_cost, lam / rho1
+            if done:
+                message = "relative decrease below rtol"
+                break
+        else:
+            lam *= rho2
+            if lam > 1e16:
+                message = "no decrease possible"
+                break
+    return LMResult(X, a, cost, len(history), history, message)
+
+
+def _restrict(blocks: Blocks, active) -> Blocks:
+    return Blocks(blocks.g, blocks.X, blocks.Z, blocks.A[:, :, active], blocks.ga[active],
+                  blocks.Aa[np.ix_(active, active)])

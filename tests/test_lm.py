@@ -1,0 +1,124 @@
+"""Full-discretisation LM and backward elimination (paper 004)."""
+import casadi as ca
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from pipeline.lm import (Blocks, IdentificationProblem, Measurements, _restrict, direct_step,
+                         discretisation_grid, levenberg_marquardt, removal_estimates, structured_step)
+from pipeline.sparsify import AllAtOnce, BackwardElimination
+
+MONOMIALS = ["1", "x1", "x2", "x1^2", "x1*x2", "x2^2"]
+DEGREES = [0, 1, 1, 2, 2, 2]
+NAMES = [f"x1:{m}" for m in MONOMIALS] + [f"x2:{m}" for m in MONOMIALS]
+
+
+def library_rhs(t, x, a):
+    phi = ca.vertcat(1, x[0], x[1], x[0] ** 2, x[0] * x[1], x[1] ** 2)
+    return ca.vertcat(ca.dot(a[:6], phi), ca.dot(a[6:], phi))
+
+
+def random_blocks(N, m, n, p, seed):
+    rng = np.random.default_rng(seed)
+    b = Blocks(rng.normal(size=(N, m)), rng.normal(size=(N, m, n)), rng.normal(size=(N, m, n)),
+               rng.normal(size=(N, m, p)), rng.normal(size=p), 0.1 * np.eye(p))
+    b.Z[-1] = 0
+    b.X[::3, -2:] = 0          # rows of unmeasured outputs are zero padding
+    return b
+
+
+@pytest.mark.parametrize("segments", [1, 2, 7, 40])
+def test_structured_step_equals_direct_sparse_solve(segments):
+    b = random_blocks(N=301, m=9, n=3, p=5, seed=segments)
+    ref = direct_step(b, 1e-2)
+    got = structured_step(b, 1e-2, segments)
+    assert np.max(np.abs(got - ref)) <= 1e-10 * np.max(np.abs(ref))
+
+
+def test_appendix_a_grid_keeps_measurement_times():
+    t_m = np.array([0.0, 0.3, 0.35, 1.0, 2.2])
+    t_d, idx = discretisation_grid(t_m, 0.1)
+    assert np.allclose(t_d[idx], t_m)
+    assert np.max(np.diff(t_d)) <= 0.1 + 1e-12 and np.all(np.diff(t_d) > 0)
+
+
+def oscillator_problem(seed=0, partial=True):
+    """x1' = x2, x2' = -2 x1 - 0.4 x2 + 0.5 x1^2 (hidden quadratic term); irregular samples,
+    x2 measured only at every second sample."""
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.uniform(0, 15, 120))
+    t[0] = 0.0
+    sol = solve_ivp(lambda s, x: [x[1], -2 * x[0] - 0.4 * x[1] + 0.5 * x[0] ** 2], (0, 15), [1.0, 0.0],
+                    t_eval=t, rtol=1e-10, atol=1e-12)
+    y = sol.y + rng.normal(0, 0.01, sol.y.shape)
+    series = [(t, y[0], 0), (t[::2], y[1, ::2], 1)] if partial else [(t, y[0], 0), (t, y[1], 1)]
+    meas = Measurements.merge(series, 2)
+    return IdentificationProblem(library_rhs, lambda s, x: x, 2, 12, meas, dt=0.02, Sx=0.1, Sy=0.01,
+                                 mu_x=1e-8, mu_a=1e-6)
+
+
+def test_recovers_hidden_term_with_partial_irregular_measurements():
+    prob = oscillator_problem()
+    res = BackwardElimination("bic", segments=8, lm_options={"max_iter": 60}).fit(
+        prob, prob.initial_states(), np.zeros(12), NAMES, DEGREES * 2)
+    terms = res.terms()
+    assert set(terms) == {"x1:x2", "x2:x1", "x2:x2", "x2:x1^2"}
+    assert terms["x1:x2"] == pytest.approx(1.0, rel=0.02)
+    assert terms["x2:x1"] == pytest.approx(-2.0, rel=0.02)
+    assert terms["x2:x1^2"] == pytest.approx(0.5, rel=0.15)
+
+
+def test_removal_estimate_matches_the_retrained_cost():
+    prob = oscillator_problem(partial=False)
+    fit = levenberg_marquardt(prob, prob.initial_states(), np.zeros(12), segments=4, max_iter=80)
+    est = removal_estimates(prob.blocks(fit.X, fit.a), fit.a, segments=4)
+    for k in (3, 4, 5, 10, 11):  # terms whose true value is zero: the linearisation is accurate there
+        active = np.ones(12, bool)
+        active[k] = False
+        refit = levenberg_marquardt(prob, fit.X, fit.a, active, segments=4, max_iter=80)
+        assert est[k] == pytest.approx(refit.cost, rel=1e-2)
+    assert np.all(est >= fit.cost * (1 - 1e-9))   # removing a term never lowers the minimum
+
+
+def test_pruning_stops_where_the_threshold_says():
+    prob = oscillator_problem(partial=False)
+    tau = 0.05
+    res = BackwardElimination("threshold", threshold=tau, prioritiser=AllAtOnce(), segments=4,
+                              lm_options={"max_iter": 60}).fit(prob, prob.initial_states(), np.zeros(12), NAMES)
+    dense = res.path[0].cost
+    accepted = [s for s in res.path[1:] if s.accepted]
+    refused = [s for s in res.path[1:] if not s.accepted]
+    assert accepted and all(s.cost <= (1 + tau) * dense for s in accepted)
+    assert len(refused) == 1 and refused[0].cost > (1 + tau) * dense   # stops at the first refusal
+    assert res.path[-1] is refused[0]
+
+
+def test_backward_elimination_path_plot(tmp_path):
+    prob = oscillator_problem()
+    res = BackwardElimination("bic", segments=4, lm_options={"max_iter": 40}).fit(
+        prob, prob.initial_states(), np.zeros(12), NAMES, DEGREES * 2)
+    res.plot_path(tmp_path / "path.png")
+    assert (tmp_path / "path.png").stat().st_size > 10_000
+
+
+def test_prioritisers_are_plugins():
+    from pipeline import hookimpl
+    from pipeline.plugins import Registry
+    from pipeline.sparsify import Prioritiser
+
+    class LinearFirst(Prioritiser):
+        name = "linear-first"
+
+        def stages(self, names, degrees):
+            return [[k for k, d in enumerate(degrees) if d == 1]]
+
+    class Plugin:
+        @hookimpl
+        def mcl_prioritisers(self):
+            return [LinearFirst]
+
+    reg = Registry(external=False, extra=[Plugin()])
+    assert {"degree", "all", "linear-first"} <= set(reg.prioritisers)
+    stages = reg.prioritisers["degree"]().stages(NAMES, DEGREES * 2)
+    assert [sorted({DEGREES[k % 6] for k in s}) for s in stages] == [[2], [1], [0]]
+    assert reg.prioritisers["linear-first"]().stages(NAMES, DEGREES * 2) == [[1, 2, 7, 8]]
