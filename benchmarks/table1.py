@@ -45,6 +45,7 @@ def runs(budget: int):
     rows = [(3, opt, False, {"maxiter": 1000, "maxfev": budget}) for opt in SCIPY_OPTIMISERS]
     rows += [(1, opt, False, {"outer": 25, "inner_maxiter": 300, "max_simulations": budget})
              for opt in ("COBYLA", "SLSQP")]
+    rows += [(3, opt, True, {"maxiter": 1000, "maxfev": 150}) for opt in ("SLSQP", "L-BFGS-B")]
     rows += [("LM", "Levenberg-Marquardt", True, {"max_simulations": 150})]
     return rows
 

@@ -164,3 +164,21 @@ def test_every_simulation_is_recorded_and_a_rerun_replays(rc_template, tmp_path)
                                                                  recorder=again), [0.1, 0.1, 0.1])
     assert again.replayed == second.simulations       # nothing simulated twice
     assert np.allclose(first.w, second.w)
+
+
+def test_algorithm3_starts_from_a_pretrained_feasibility_model(rc_template, tmp_path):
+    """Remark 3.1 feeding Algorithm 3: q learned in small configurations steers the first steps."""
+    from pipeline.api import registry
+    from pipeline.executor import SerialExecutor
+    from pipeline.pretrain import pretrain
+
+    model, names = rc_template
+    port = build_graph([LIB], "MCL.Examples.CauerFilter").components["Rnl"].connectors[0]
+    tpl = PolynomialTemplate(lhs=["i"], rhs=["v", "v^3"])
+    pre = pretrain(tpl, port, [LIB], registry(), n_samples=40, seed=3, executor=SerialExecutor(),
+                   directory=tmp_path, progress=False)
+    assert pre.model.predict_proba([[1.0, 0.5, 0.3]])[0] > pre.model.predict_proba([[1.0, 0.5, -0.3]])[0]
+    problem = FitProblem(model, hidden_cubic_data(), names)
+    res = Algorithm3("Powell", maxfev=400, feasibility=pre.model).fit(problem, [0.1, 0.1, 0.1])
+    assert res.feasibility is pre.model and pre.model.n_updates_ > 0   # updated online from there
+    assert max(map(abs, recovered(res))) < 0.05

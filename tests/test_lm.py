@@ -122,3 +122,11 @@ def test_prioritisers_are_plugins():
     stages = reg.prioritisers["degree"]().stages(NAMES, DEGREES * 2)
     assert [sorted({DEGREES[k % 6] for k in s}) for s in stages] == [[2], [1], [0]]
     assert reg.prioritisers["linear-first"]().stages(NAMES, DEGREES * 2) == [[1, 2, 7, 8]]
+
+
+def test_blockwise_gradient_equals_sparse_jacobian_product():
+    from pipeline.lm import jacobian_matrix
+
+    b = random_blocks(N=50, m=7, n=3, p=4, seed=9)
+    ref = 2 * jacobian_matrix(b).T @ np.concatenate([b.g.ravel(), b.ga])
+    assert np.allclose(b.gradient(), ref, rtol=1e-12, atol=1e-12)
