@@ -365,7 +365,7 @@ def levenberg_marquardt(problem: IdentificationProblem, X0, a0, active=None, lam
     active = np.ones(len(a), bool) if active is None else np.asarray(active, bool)
     a[~active] = 0.0
     lam, history, message = lam0, [], "max_iter reached"
-    blocks = _restrict(problem.blocks(X, a), active)
+    blocks = restrict(problem.blocks(X, a), active)
     cost = blocks.cost()
     for k in range(max_iter):
         if np.linalg.norm(blocks.gradient()) <= sigma:
@@ -375,7 +375,7 @@ def levenberg_marquardt(problem: IdentificationProblem, X0, a0, active=None, lam
         Xn = X + gamma[: X.size].reshape(X.shape)
         an = a.copy()
         an[active] += gamma[X.size:]
-        new = _restrict(problem.blocks(Xn, an), active)
+        new = restrict(problem.blocks(Xn, an), active)
         new_cost = new.cost()
         history.append((k, cost, lam))
         if new_cost < cost:
@@ -392,6 +392,7 @@ def levenberg_marquardt(problem: IdentificationProblem, X0, a0, active=None, lam
     return LMResult(X, a, cost, len(history), history, message)
 
 
-def _restrict(blocks: Blocks, active) -> Blocks:
+def restrict(blocks: Blocks, active) -> Blocks:
+    """The blocks with only the ``active`` parameters (the others are fixed at zero)."""
     return Blocks(blocks.g, blocks.X, blocks.Z, blocks.A[:, :, active], blocks.ga[active],
                   blocks.Aa[np.ix_(active, active)])

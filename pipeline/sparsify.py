@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ConfigError
-from .lm import IdentificationProblem, levenberg_marquardt, removal_estimates
+from .lm import IdentificationProblem, levenberg_marquardt, removal_estimates, restrict
 
 
 class Prioritiser:
@@ -142,9 +142,7 @@ class BackwardElimination:
                     break
                 blocks = problem.blocks(X, a)
                 idx = np.flatnonzero(active)
-                from .lm import _restrict
-
-                est = removal_estimates(_restrict(blocks, active), a[idx], self.segments)
+                est = removal_estimates(restrict(blocks, active), a[idx], self.segments)
                 est_by = {k: est[list(idx).index(k)] for k in cand}
                 k = min(est_by, key=est_by.get)
                 trial = active.copy()

@@ -6,6 +6,7 @@ engine only (no in-process sensitivities).
 """
 from __future__ import annotations
 
+import importlib.util
 import os
 import shutil
 import tempfile
@@ -29,9 +30,7 @@ class OpenModelicaCompiler(Compiler):
     automatic = False  # the embedded compiler stays the default; choose with --compiler
 
     def available(self):
-        try:
-            import OMPython  # noqa: F401
-        except ImportError:
+        if importlib.util.find_spec("OMPython") is None:
             return False, "the OMPython package is not installed (pip install OMPython)"
         if not find_omc():
             return False, "omc not found (install OpenModelica, or set OPENMODELICAHOME)"

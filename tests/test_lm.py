@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pipeline.lm import (Blocks, IdentificationProblem, Measurements, _restrict, direct_step,
+from pipeline.lm import (Blocks, IdentificationProblem, Measurements, direct_step,
                          discretisation_grid, levenberg_marquardt, removal_estimates, structured_step)
 from pipeline.sparsify import AllAtOnce, BackwardElimination
 

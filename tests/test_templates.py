@@ -2,7 +2,6 @@
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
-from scipy.optimize import brentq
 
 from helpers import LIB, compiled, rel_err, series
 from pipeline.api import compile_model, registry, simulate
