@@ -143,6 +143,27 @@ def cmd_pretrain(args) -> int:
     return 0
 
 
+def cmd_run(args) -> int:
+    from .discover import run_discovery
+    from .runfile import load_runfile
+
+    spec = load_runfile(args.runfile)
+    report = run_discovery(spec, force=args.force)
+    cause = report["cause"]
+    m = report["misfit"]
+    print(f"misfit: {'significant' if m['significant'] else 'not significant'} "
+          f"(training RMS {m['train_rms']:.4g}, noise {m['noise_estimate']:.4g})")
+    if cause:
+        g = report["gain"]
+        print(f"cause: {cause['effect']} [{cause['evidence']['strength']}]")
+        val = ("" if g["validation_rms_before"] is None else
+               f"; validation RMS {g['validation_rms_before']:.4g} -> {g['validation_rms_after']:.4g}")
+        print(f"gain: training RMS {g['train_rms_before']:.4g} -> {g['train_rms_after']:.4g}{val}")
+    else:
+        print("cause: none (the model explains the data to the noise level)")
+    return 0
+
+
 def cmd_plugins(args) -> int:
     from .plugins import Registry
 
@@ -216,6 +237,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-o", "--output", required=True, help="output directory")
     p.set_defaults(func=cmd_pretrain)
+
+    p = sub.add_parser("run", help="find what a model gets wrong and learn the missing law",
+                       description="Run the discovery described by a YAML run file.")
+    p.add_argument("runfile", help="the run file (YAML)")
+    p.add_argument("--force", action="store_true", help="replace a finished run directory")
+    p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("plugins", help="list installed plugins, compilers and engines")
     p.set_defaults(func=cmd_plugins)

@@ -41,6 +41,7 @@ class Component:
     connectors: list[Connector]
     declaration: str                  # Modelica text, e.g. 'MCL.Electrical.Resistor R1(R = 1);'
     parameters: dict[str, str] = field(default_factory=dict)   # class parameters -> modifier text
+    inputs: list[str] = field(default_factory=list)            # `input` variables (sources)
 
     @property
     def two_connector(self) -> bool:
@@ -237,8 +238,9 @@ def build_graph(sources, model: str) -> SystemGraph:
         members, _ = _members(target)
         connectors = [c for n, (s, o) in members.items() if (c := _connector(n, s, o))]
         params = {n: "" for n, (s, _) in members.items() if "parameter" in s.prefixes}
+        inputs = [n for n, (s, _) in members.items() if "input" in s.prefixes]
         g.add_node(name, component=Component(name, target.full_name, connectors,
-                                             mt.declaration(sym, target.full_name), params))
+                                             mt.declaration(sym, target.full_name), params, inputs))
     sg = SystemGraph(model, g, declarations, [], list(srcs.files))
     from pymoca import ast
 

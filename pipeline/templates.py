@@ -192,6 +192,8 @@ class PolynomialTemplate(Template):
         def side(ws, terms):
             parts = []
             for c, m in zip(ws, terms):
+                if c == 0:  # a term removed by pruning
+                    continue
                 mono = "*".join(rename[n] if p == 1 else f"{rename[n]}^{p}" for n, p in m.powers)
                 parts.append(f"{c:.{digits}g}" + (f"*{mono}" if mono else ""))
             return " + ".join(parts).replace("+ -", "- ") or "0"

@@ -1,0 +1,280 @@
+"""The main job (``mcl run``): what the model gets wrong, which component, which law, what gain.
+
+1. Misfit: simulate the nominal model on the training inputs; the residual RMS is compared with
+   the measurement noise estimated from the data (second differences of a smooth signal are
+   noise: Var(d2 y) = 6 sigma^2), so a correct model comes out not significant.
+2. Cause: every candidate two-connector component (or the named one) is replaced by each
+   template, started from the template's fit to the nominal component's own law (so the first
+   simulation reproduces the nominal model), fitted with the low-budget Levenberg-Marquardt of
+   the fit stage, and pruned by backward elimination (the cost increase of removing a term is
+   estimated from the sensitivities, the best removal refitted, kept if the criterion improves).
+   Candidates are ranked by BIC on the training data.
+3. Extend: the learned class and the extended system as a Modelica package, compiled to an FMU.
+4. Gain: RMS before and after on training and validation data.
+5. Report: report.json and report.html with plots.
+
+The run directory is built in ``<output>.partial`` (each candidate's result saved as it
+finishes, so an interrupted run resumes) and renamed to ``<output>`` at the end.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .data import TimeSeries, read_csv
+from .errors import ConfigError
+from .executor import TaskFailed
+
+LEARNED_PACKAGE = "Learned"
+
+
+def noise_estimate(y: np.ndarray) -> float:
+    """sigma of white measurement noise: robust scale of second differences / sqrt(6)."""
+    d2 = np.diff(np.asarray(y, float), 2, axis=0).ravel()
+    mad = np.median(np.abs(d2 - np.median(d2)))
+    return float(1.4826 * mad / np.sqrt(6.0))
+
+
+def rms(a) -> float:
+    return float(np.sqrt(np.mean(np.square(a))))
+
+
+def probe(model, result, inputs: TimeSeries, params: dict, names: list[str]) -> np.ndarray:
+    """Values of named model variables along a simulation, (N, len(names))."""
+    ode = model.ode
+    N = len(result.time)
+    u = np.array([np.interp(result.time, inputs.time, inputs.column(n)) for n in ode.u_names]).reshape(-1, N)
+    p = model.parameter_vector(params)
+    vals = np.array(ode.probe.map(N)(result.states.T, u, np.repeat(p[:, None], N, 1), result.time[None]))
+    return vals[[ode.probe_names.index(n) for n in names]].T
+
+
+def component_variables(comp) -> tuple[str, str]:
+    """Names of (potential of a, potential of b) and the flow into a of a two-connector component."""
+    a, b = comp.connectors
+    return (f"{comp.name}.{a.name}.{a.potential[0]}", f"{comp.name}.{b.name}.{b.potential[0]}",
+            f"{comp.name}.{a.name}.{a.flow[0]}")
+
+
+def nominal_start(template, v, i, t) -> np.ndarray:
+    """w0: the template's least-squares fit to the nominal component's law (lhs weight 1)."""
+    env = {"v": v, "i": i, "dv": np.gradient(v, t), "di": np.gradient(i, t)}
+    phi = template.features(env)
+    w_rest, *_ = np.linalg.lstsq(phi[:, 1:], -phi[:, 0], rcond=None)
+    return np.concatenate([[1.0], w_rest])
+
+
+def bic(rss: float, n: int, k: int) -> float:
+    return float(n * np.log(max(rss, 1e-300) / n) + k * np.log(n))
+
+
+def aic(rss: float, n: int, k: int) -> float:
+    return float(n * np.log(max(rss, 1e-300) / n) + 2 * k)
+
+
+def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str):
+    """LM fit of the template parameters, then backward elimination of terms (w1 anchors the scale)."""
+    from .fit import FitProblem, LevenbergMarquardt
+
+    score_of = bic if criterion == "bic" else aic
+    n_obs = len(data.time) * len([o for o in model.output_names if o in data.names])
+    active = np.ones(len(names), bool)
+
+    def fit(active_mask, start):
+        params = [n for n, on in zip(names, active_mask) if on]
+        fixed = {n: 0.0 for n, on in zip(names, active_mask) if not on}
+        problem = FitProblem(model, data, params, fixed=fixed)
+        res = LevenbergMarquardt(max_simulations=budget).fit(problem, np.asarray(start)[active_mask])
+        w = np.zeros(len(names))
+        w[active_mask] = res.w
+        r = problem.residuals(res.w)
+        rss = float(np.sum(r**2)) if r is not None else np.inf
+        return w, rss, problem, res
+
+    w, rss, problem, res = fit(active, w0)
+    sims, path = res.simulations, []
+    score = score_of(rss, n_obs, int(active.sum()) - 1)
+    path.append({"removed": None, "rss": rss, "score": score, "accepted": True})
+    while active.sum() > 2:
+        sim = problem.simulate(w[active], gradient=True)
+        sims += 1
+        if not sim.ok:
+            break
+        S = sim.sensitivities[:, problem.idx, :].reshape(-1, int(active.sum()))[:, 1:]
+        H_inv = np.linalg.pinv(S.T @ S)
+        idx = np.flatnonzero(active)[1:]
+        est = w[idx] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
+        k = idx[int(np.argmin(est))]
+        trial = active.copy()
+        trial[k] = False
+        w_t, rss_t, problem_t, res_t = fit(trial, w)
+        sims += res_t.simulations
+        score_t = score_of(rss_t, n_obs, int(trial.sum()) - 1)
+        ok = score_t < score
+        path.append({"removed": names[k], "estimate": float(rss + est.min()), "rss": rss_t,
+                     "score": score_t, "accepted": bool(ok)})
+        if not ok:
+            break
+        active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
+    return w, active, rss, score, sims, path
+
+
+def _candidate_task(ctx, item):
+    """Executor task: one candidate component with one template, fitted and pruned."""
+    from .api import compile_model, registry, simulate
+    from .swap import swap_component
+
+    graph, train, validate, nominal_probe, budget, criterion, workdir = ctx
+    comp_name, tpl_index, tpl_spec = item
+    reg = registry()
+    template = reg.template(tpl_spec)
+    comp = graph.components[comp_name]
+    v, i = nominal_probe[comp_name]
+    w0 = nominal_start(template, v, i, train.time)
+    tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
+                        w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
+    model = compile_model(tm.sources, tm.model_name)
+    w, active, rss, score, sims, path = fit_and_prune(model, train, tm.parameter_names, w0, budget, criterion)
+    params = dict(zip(tm.parameter_names, w))
+    out = {"component": comp_name, "class": comp.cls, "template": tpl_spec, "w0": w0.tolist(),
+           "w": w.tolist(), "active": active.tolist(), "rss": rss, "score": score,
+           "simulations": sims, "pruning": path, "equation": template.equation(w * active),
+           "terms": [str(m) for m in getattr(template, "terms", [])]}
+    res = simulate(model, train, params)
+    out["train_rms"] = rms(train.select(model.output_names).values - res.outputs) if res.ok else None
+    if validate is not None:
+        rv = simulate(model, validate, params)
+        out["validation_rms"] = (rms(validate.select(model.output_names).values - rv.outputs)
+                                 if rv.ok else None)
+    if res.ok:
+        pv = probe(model, res, train, params, [f"{comp_name}.v"])[:, 0]
+        out["v_range"] = [float(pv.min()), float(pv.max())]
+    return out
+
+
+def strength(delta: float) -> str:
+    """Kass & Raftery's reading of a BIC difference."""
+    return ("decisive" if delta > 10 else "strong" if delta > 6 else
+            "positive" if delta > 2 else "weak")
+
+
+def run_discovery(spec, force: bool = False, progress=print) -> dict:
+    """Execute a validated :class:`pipeline.runfile.RunSpec`; returns the report dict."""
+    from .api import compile_model, registry, simulate
+    from .graph import build_graph
+
+    out = spec.output
+    if (out / "report.json").exists() and not force:
+        raise ConfigError(f"run directory {out} holds a finished run; choose another output or use --force")
+    part = out.with_name(out.name + ".partial")
+    (part / "candidates").mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+    reg = registry()
+    nominal = compile_model(spec.sources, spec.model_name)
+    graph = build_graph(spec.sources, spec.model_name)
+    train = read_csv(spec.train)
+    validate = read_csv(spec.validate) if spec.validate else None
+    outputs = [o for o in nominal.output_names if o in train.names]
+    progress(f"[1/5] nominal model {spec.model_name}: simulating the training data")
+    sim0 = simulate(nominal, train)
+    if not sim0.ok:
+        raise ConfigError(f"the nominal model does not simulate the training data: {sim0.reason}")
+    y_meas = train.select(outputs).values
+    y0 = sim0.outputs[:, [nominal.output_names.index(o) for o in outputs]]
+    resid = y_meas - y0
+    sigma = float(np.sqrt(np.mean([noise_estimate(y_meas[:, k]) ** 2 for k in range(len(outputs))])))
+    train_rms0 = rms(resid)
+    significant = bool(train_rms0 > 1.5 * sigma and train_rms0 > 1e-12)
+    report = {"model": spec.model_name, "outputs": outputs,
+              "misfit": {"significant": significant, "train_rms": train_rms0, "noise_estimate": sigma,
+                         "per_output_rms": {o: rms(resid[:, k]) for k, o in enumerate(outputs)}},
+              "cause": None, "candidates": [], "gain": None}
+    progress(f"      residual RMS {train_rms0:.4g} vs noise {sigma:.4g}: "
+             f"{'significant' if significant else 'not significant'}")
+    val0 = None
+    if validate is not None:
+        sv = simulate(nominal, validate)
+        val0 = rms(validate.select(outputs).values - sv.outputs[:, [nominal.output_names.index(o) for o in outputs]])
+    extended_y = None
+    if significant:
+        comps = [c for c in graph.two_connector_components() if not c.inputs]
+        if spec.unknown != "auto":
+            comps = [graph.components[spec.unknown]]
+        nominal_probe = {}
+        for c in comps:
+            va, vb, fa = component_variables(c)
+            pv = probe(nominal, sim0, train, {}, [va, vb, fa])
+            nominal_probe[c.name] = (pv[:, 0] - pv[:, 1], pv[:, 2])
+        items = [(c.name, k, t) for c in comps for k, t in enumerate(spec.templates)]
+        todo = [it for it in items if not (part / "candidates" / f"{it[0]}_{it[1]}.json").exists()]
+        progress(f"[2/5] fitting {len(items)} candidate(s) ({len(items) - len(todo)} already done)")
+        ctx = (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"))
+        with reg.executor(spec.executor) as ex:
+            results = ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates")
+        for it, r in zip(todo, results):
+            if isinstance(r, TaskFailed):
+                r = {"component": it[0], "template": it[2], "failed": r.reason, "score": None}
+            (part / "candidates" / f"{it[0]}_{it[1]}.json").write_text(json.dumps(r, indent=1))
+        cands = [json.loads((part / "candidates" / f"{n}_{k}.json").read_text()) for n, k, _ in items]
+        ranked = sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
+        report["candidates"] = ranked + [c for c in cands if c.get("score") is None]
+        if ranked:
+            best = ranked[0]
+            delta = ranked[1]["score"] - best["score"] if len(ranked) > 1 else float("inf")
+            report["cause"], extended_y = _explain(best, delta, graph, spec, part, train, validate,
+                                                   outputs, reg, progress)
+            report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),
+                              "validation_rms_before": val0, "validation_rms_after": best.get("validation_rms")}
+    if report["gain"] is None:
+        report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
+                          "validation_rms_before": val0, "validation_rms_after": val0}
+    report["seconds"] = time.perf_counter() - t_start
+    progress("[5/5] report")
+    from .report import write_report
+
+    write_report(part, report, train, outputs, y0, extended_y)
+    if out.exists():
+        shutil.rmtree(out)
+    part.rename(out)
+    progress(f"wrote {out}/report.html and report.json")
+    return report
+
+
+def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, progress):
+    """The winner as a law, the extended model (Modelica + FMU) and its simulated outputs."""
+    from .api import compile_model, simulate
+    from .fmu.export import build_fmu
+    from .swap import swap_component
+
+    template = reg.template(best["template"])
+    w = np.asarray(best["w"]) * np.asarray(best["active"])
+    comp = graph.components[best["component"]]
+    progress(f"[3/5] cause: {comp.name} ({comp.cls}): {template.equation(w)}")
+    lo, hi = best.get("v_range") or [-1.0, 1.0]
+    xs = np.linspace(lo, hi, 41)
+    curve = [[float(x), float(f)] for x, f in zip(xs, template.flow_of(w, xs))]
+    nominal_terms = [t for t, a in zip(best.get("terms", []), np.abs(best["w0"]) > 1e-9 * np.max(np.abs(best["w0"]))) if a]
+    new_terms = [t for t, on, w0 in zip(best.get("terms", []), best["active"], best["w0"])
+                 if on and t not in nominal_terms]
+    effect = (f"{comp.name} follows {template.equation(w)}"
+              + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else ""))
+    ext_dir = part / "extended"
+    tm = swap_component(graph, comp.name, template, ext_dir, w=w, package=LEARNED_PACKAGE)
+    progress("[4/5] extended model: compiling to an FMU")
+    ext = compile_model(tm.sources, tm.model_name)
+    fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")
+    res = simulate(ext, train)
+    y_ext = res.outputs[:, [ext.output_names.index(o) for o in outputs]] if res.ok else None
+    cause = {"component": comp.name, "class": comp.cls, "effect": effect,
+             "evidence": {"delta_bic_to_next": delta, "strength": strength(delta)},
+             "law": {"equation": template.equation(w, across="v", flow="i"),
+                     "across": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].potential[0]} - "
+                               f"{comp.name}.{comp.connectors[1].name}.{comp.connectors[1].potential[0]}",
+                     "flow": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].flow[0]}",
+                     "curve": curve},
+             "modelica": str(tm.path.relative_to(part)), "fmu": str(fmu.relative_to(part))}
+    return cause, y_ext

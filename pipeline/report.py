@@ -1,0 +1,103 @@
+"""report.json and report.html: numbers for programs, plots for people."""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def _png(fig) -> str:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return base64.b64encode(buf.getvalue()).decode()
+
+
+def _clean(obj):
+    """JSON-safe: numpy scalars to Python, non-finite floats to null."""
+    if isinstance(obj, dict):
+        return {k: _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    return obj
+
+
+def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_extended) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    directory = Path(directory)
+    (directory / "report.json").write_text(json.dumps(_clean(report), indent=1))
+    figs = []
+    y_meas = train.select(outputs).values
+    fig, axes = plt.subplots(len(outputs), 2, figsize=(12, 3.2 * len(outputs)), squeeze=False)
+    for k, o in enumerate(outputs):
+        ax = axes[k, 0]
+        ax.plot(train.time, y_meas[:, k], ".", ms=2, color="black", label="measured")
+        ax.plot(train.time, y_nominal[:, k], color="tab:red", label="nominal model")
+        if y_extended is not None:
+            ax.plot(train.time, y_extended[:, k], color="tab:green", label="extended model")
+        ax.set_ylabel(o)
+        ax.legend(fontsize=8)
+        ax = axes[k, 1]
+        ax.plot(train.time, y_meas[:, k] - y_nominal[:, k], color="tab:red", lw=0.8, label="nominal residual")
+        if y_extended is not None:
+            ax.plot(train.time, y_meas[:, k] - y_extended[:, k], color="tab:green", lw=0.8,
+                    label="extended residual")
+        ax.axhline(0, color="gray", lw=0.5)
+        ax.legend(fontsize=8)
+    axes[-1, 0].set_xlabel("time")
+    axes[-1, 1].set_xlabel("time")
+    fig.suptitle("training data: where and how much the model is wrong")
+    figs.append(("Measured, nominal and extended outputs; residuals", _png(fig)))
+    cause = report.get("cause")
+    if cause:
+        xs, fs = np.array(cause["law"]["curve"]).T
+        fig, ax = plt.subplots(figsize=(6, 4))
+        ax.plot(xs, fs, color="tab:green", lw=2, label="learned law")
+        ax.set_xlabel(f"across: {cause['law']['across']}")
+        ax.set_ylabel(f"flow: {cause['law']['flow']}")
+        ax.set_title(cause["law"]["equation"], fontsize=9)
+        ax.grid(alpha=0.3)
+        ax.legend()
+        figs.append((f"Learned law of {cause['component']} over the range the data visits", _png(fig)))
+    cands = [c for c in report.get("candidates", []) if c.get("score") is not None]
+    if cands:
+        fig, ax = plt.subplots(figsize=(7, 0.4 * len(cands) + 1.5))
+        labels = [f"{c['component']} ({c['template'].get('name', '?') if isinstance(c['template'], dict) else c['template']})"
+                  for c in cands]
+        scores = [c["score"] - cands[0]["score"] for c in cands]
+        ax.barh(labels[::-1], scores[::-1], color=["tab:green"] + ["tab:gray"] * (len(cands) - 1))
+        ax.set_xlabel("BIC above the best candidate (lower is better)")
+        figs.append(("Candidate ranking", _png(fig)))
+    m = report["misfit"]
+    g = report["gain"]
+    rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{html.escape(str(v))}</td></tr>" for k, v in (
+        ("misfit significant", m["significant"]), ("training RMS (nominal)", f"{m['train_rms']:.4g}"),
+        ("noise estimate", f"{m['noise_estimate']:.4g}"),
+        ("cause", cause["effect"] if cause else "none found"),
+        ("evidence", f"{cause['evidence']['strength']} (ΔBIC {cause['evidence']['delta_bic_to_next']:.3g})"
+         if cause else "-"),
+        ("training RMS after", g["train_rms_after"]), ("validation RMS before", g["validation_rms_before"]),
+        ("validation RMS after", g["validation_rms_after"])))
+    imgs = "".join(f"<h2>{html.escape(t)}</h2><img src='data:image/png;base64,{b}'/>" for t, b in figs)
+    page = (f"<!doctype html><html><head><meta charset='utf-8'><title>mcl: {html.escape(report['model'])}</title>"
+            "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}td{padding:4px 12px}"
+            "img{max-width:100%}</style></head><body>"
+            f"<h1>{html.escape(report['model'])}</h1><table>{rows}</table>{imgs}</body></html>")
+    (directory / "report.html").write_text(page)

@@ -1,0 +1,179 @@
+"""Run files (``mcl run run.yaml``): parsed, validated in one pass, every problem with its line.
+
+    model:
+      sources: [Lib.mo]          # .mo files or package directories, relative to this file
+      name: Lib.Systems.Plant    # or `fmu: plant.fmu`
+    data:
+      train: train.csv
+      validate: validate.csv     # optional held-out data
+    unknown: auto                # or the instance name of the suspect component
+    output: out/plant            # the run directory
+
+Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations``),
+``refinement`` (``criterion``: bic or aic), ``executor`` (``kind``, ``workers``),
+``second`` (``model``/``data`` of another configuration where the learned component is placed).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from .errors import ConfigError, MclError
+
+SCHEMA = {
+    "model": {"sources", "name", "fmu"},
+    "data": {"train", "validate"},
+    "unknown": None,
+    "output": None,
+    "templates": None,
+    "fitting": {"max_simulations", "start"},
+    "refinement": {"criterion"},
+    "executor": {"kind", "workers", "address"},
+    "second": {"model", "data", "component"},
+}
+DEFAULT_TEMPLATES = [{"name": "polynomial", "lhs": ["i"], "rhs": ["v", "v^2", "v^3"]}]
+
+
+@dataclass
+class RunSpec:
+    path: Path
+    sources: list[Path]
+    model_name: str
+    train: Path
+    validate: Path | None
+    unknown: str
+    output: Path
+    templates: list = field(default_factory=lambda: list(DEFAULT_TEMPLATES))
+    max_simulations: int = 60
+    criterion: str = "bic"
+    executor: dict = field(default_factory=lambda: {"kind": "local"})
+    second: dict | None = None
+
+
+def _lines(node, prefix="", out=None) -> dict[str, int]:
+    """Dotted key -> line number (1-based) from a composed YAML node tree."""
+    out = {} if out is None else out
+    if isinstance(node, yaml.MappingNode):
+        for k, v in node.value:
+            key = f"{prefix}.{k.value}" if prefix else str(k.value)
+            out[key] = k.start_mark.line + 1
+            _lines(v, key, out)
+    return out
+
+
+def load_runfile(path) -> RunSpec:
+    """Parse and validate ``path``; all problems are reported together (file:line: key: why)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError("no such run file", where=str(path))
+    text = path.read_text()
+    try:
+        node = yaml.compose(text)
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise ConfigError(f"not valid YAML: {getattr(exc, 'problem', exc)}", where=where) from None
+    if not isinstance(raw, dict):
+        raise ConfigError("the run file must be a mapping of sections", where=str(path))
+    lines = _lines(node)
+    problems: list[str] = []
+
+    def problem(key, why):
+        problems.append(f"{path}:{lines.get(key, 1)}: {key}: {why}")
+
+    for key, value in raw.items():
+        if key not in SCHEMA:
+            problem(key, f"unknown section (known: {', '.join(SCHEMA)})")
+        elif SCHEMA[key] and isinstance(value, dict):
+            for sub in value:
+                if sub not in SCHEMA[key]:
+                    problem(f"{key}.{sub}", f"unknown key (known: {', '.join(sorted(SCHEMA[key]))})")
+    base = path.parent
+    model = raw.get("model") or {}
+    data = raw.get("data") or {}
+    if not isinstance(model, dict) or not model:
+        problem("model", "missing: give model.sources and model.name (or model.fmu)")
+        model = {}
+    if "fmu" in model:
+        problem("model.fmu", "discovery needs the Modelica sources (the template is swapped into "
+                             "them): give model.sources and model.name")
+    sources = model.get("sources", [])
+    sources = [sources] if isinstance(sources, str) else list(sources or [])
+    src_paths = [base / s for s in sources]
+    if model and not sources:
+        problem("model.sources", "missing")
+    for s, p in zip(sources, src_paths):
+        if not p.exists():
+            problem("model.sources", f"'{s}' does not exist")
+    if model and not model.get("name"):
+        problem("model.name", "missing (the class to learn in, e.g. Lib.Systems.Plant)")
+    if not isinstance(data, dict) or "train" not in data:
+        problem("data.train", "missing (a CSV with time, the model's inputs and measured outputs)")
+        data = data if isinstance(data, dict) else {}
+    files = {}
+    for key in ("train", "validate"):
+        if key in data:
+            p = base / str(data[key])
+            files[key] = p
+            if not p.is_file():
+                problem(f"data.{key}", f"'{data[key]}' does not exist")
+    if "output" not in raw:
+        problem("output", "missing (the run directory)")
+    criterion = (raw.get("refinement") or {}).get("criterion", "bic")
+    if criterion not in ("bic", "aic"):
+        problem("refinement.criterion", f"'{criterion}': choose bic or aic")
+    fitting = raw.get("fitting") or {}
+    budget = fitting.get("max_simulations", 60)
+    if not isinstance(budget, int) or budget < 5:
+        problem("fitting.max_simulations", "a whole number of at least 5")
+    templates = raw.get("templates", DEFAULT_TEMPLATES)
+    if not isinstance(templates, list) or not templates:
+        problem("templates", "a non-empty list of templates (name and options)")
+    if problems:
+        raise ConfigError("\n".join(problems))
+    spec = RunSpec(path=path, sources=src_paths, model_name=str(model["name"]), train=files["train"],
+                   validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
+                   output=base / str(raw["output"]), templates=templates, max_simulations=budget,
+                   criterion=criterion, executor=dict(raw.get("executor") or {"kind": "local"}),
+                   second=raw.get("second"))
+    _check_data(spec, lines)
+    return spec
+
+
+def _check_data(spec: RunSpec, lines: dict) -> None:
+    """The data files against the model: readable, columns present (one pass over both files)."""
+    from .api import compile_model
+    from .data import read_csv
+
+    problems = []
+    try:
+        model = compile_model(spec.sources, spec.model_name)
+    except MclError as exc:
+        raise ConfigError(f"{spec.path}:{lines.get('model.name', 1)}: model: {exc}") from None
+    for key, p in (("train", spec.train), ("validate", spec.validate)):
+        if p is None:
+            continue
+        try:
+            ts = read_csv(p)
+        except MclError as exc:
+            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {exc}")
+            continue
+        missing = [u for u in model.input_names if u not in ts.names]
+        if missing:
+            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {p.name} lacks the "
+                            f"model input column(s) {', '.join(missing)}")
+        if not [o for o in model.output_names if o in ts.names]:
+            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {p.name} has none of "
+                            f"the model outputs ({', '.join(model.output_names)})")
+    if spec.unknown != "auto":
+        from .graph import build_graph
+
+        comps = build_graph(spec.sources, spec.model_name).components
+        if spec.unknown not in comps:
+            problems.append(f"{spec.path}:{lines.get('unknown', 1)}: unknown: no component "
+                            f"'{spec.unknown}' in {spec.model_name}")
+    if problems:
+        raise ConfigError("\n".join(problems))

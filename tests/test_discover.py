@@ -1,0 +1,121 @@
+"""`mcl run`: discovery on data generated independently (SciPy), a null case, run-file errors."""
+import json
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from helpers import LIB
+from pipeline.cli import main
+from pipeline.errors import ConfigError
+from pipeline.runfile import load_runfile
+
+CIRCUIT = """
+package Circuit
+  model RC "source, series resistor, capacitor in parallel with a load resistor"
+    input Real u;
+    output Real y;
+    MCL.Electrical.VoltageSource V;
+    MCL.Electrical.Ground G;
+    MCL.Electrical.Resistor R1(R = 1);
+    MCL.Electrical.Capacitor C(C = 0.5);
+    MCL.Electrical.Resistor Rx(R = 2);
+  equation
+    V.u = u;
+    connect(V.p, R1.p);
+    connect(R1.n, C.p);
+    connect(C.p, Rx.p);
+    connect(C.n, G.p);
+    connect(Rx.n, G.p);
+    connect(V.n, G.p);
+    y = C.v;
+  end RC;
+end Circuit;
+"""
+
+
+def rc_data(path, seed, cubic):
+    """The true circuit: Rx conducts i = 0.5 v + cubic v^3 (the nominal model says v / 2)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 20, 401)
+    w, ph = rng.uniform(0.3, 2.5, 4), rng.uniform(0, 6, 4)
+    u = lambda s: sum(np.sin(wk * s + pk) for wk, pk in zip(w, ph))
+    rhs = lambda s, e: [((u(s) - e[0]) / 1.0 - 0.5 * e[0] - cubic * e[0] ** 3) / 0.5]
+    y = solve_ivp(rhs, (0, 20), [0.0], t_eval=t, rtol=1e-10, atol=1e-12).y[0]
+    y = y + rng.normal(0, 0.01 * np.std(y), len(y))
+    np.savetxt(path, np.column_stack([t, u(t), y]), delimiter=",", header="time,u,y", comments="")
+
+
+def setup_run(tmp_path, cubic):
+    (tmp_path / "Circuit.mo").write_text(CIRCUIT)
+    rc_data(tmp_path / "train.csv", 1, cubic)
+    rc_data(tmp_path / "validate.csv", 2, cubic)
+    (tmp_path / "run.yaml").write_text(
+        f"model:\n  sources: [Circuit.mo, {LIB}]\n  name: Circuit.RC\n"
+        "data:\n  train: train.csv\n  validate: validate.csv\nunknown: auto\noutput: out/rc\n")
+    return tmp_path / "run.yaml"
+
+
+def test_electrical_discovery_names_the_component_and_learns_the_law(tmp_path, capsys):
+    run = setup_run(tmp_path, cubic=0.3)
+    assert main(["run", str(run)]) == 0
+    report = json.loads((tmp_path / "out/rc/report.json").read_text())
+    assert report["misfit"]["significant"]
+    cause = report["cause"]
+    assert cause["component"] == "Rx" and cause["evidence"]["strength"] == "decisive"
+    assert "v^3" in cause["effect"]
+    xs, fs = np.array(cause["law"]["curve"]).T
+    truth = 0.5 * xs + 0.3 * xs**3
+    assert np.max(np.abs(fs - truth)) <= 0.05 * np.max(np.abs(truth))
+    g = report["gain"]
+    assert g["validation_rms_after"] <= 0.2 * g["validation_rms_before"]
+    assert (tmp_path / "out/rc" / cause["fmu"]).exists() and (tmp_path / "out/rc/report.html").exists()
+    assert {c["component"] for c in report["candidates"]} == {"R1", "C", "Rx"}
+    assert not (tmp_path / "out/rc.partial").exists()
+    assert "cause: Rx" in capsys.readouterr().out
+
+
+def test_null_case_names_no_cause(tmp_path):
+    run = setup_run(tmp_path, cubic=0.0)
+    assert main(["run", str(run)]) == 0
+    report = json.loads((tmp_path / "out/rc/report.json").read_text())
+    assert not report["misfit"]["significant"] and report["cause"] is None
+
+
+def test_finished_run_is_not_overwritten(tmp_path):
+    run = setup_run(tmp_path, cubic=0.0)
+    assert main(["run", str(run)]) == 0
+    assert main(["run", str(run)]) == 2          # refuses; --force replaces it whole
+    assert main(["run", str(run), "--force"]) == 0
+
+
+def test_run_file_problems_are_reported_together_with_lines(tmp_path):
+    (tmp_path / "Circuit.mo").write_text(CIRCUIT)
+    (tmp_path / "run.yaml").write_text(
+        "model:\n  sources: [Circuit.mo, nope/]\n  name: Circuit.RC\n  colour: red\n"
+        "data:\n  train: missing.csv\nunknwn: auto\noutput: out\n")
+    with pytest.raises(ConfigError) as err:
+        load_runfile(tmp_path / "run.yaml")
+    lines = str(err.value).splitlines()
+    assert any(":2: model.sources: 'nope/' does not exist" in line for line in lines)
+    assert any(":4: model.colour: unknown key" in line for line in lines)
+    assert any(":6: data.train: 'missing.csv' does not exist" in line for line in lines)
+    assert any(":7: unknwn: unknown section" in line for line in lines)
+
+
+def test_data_problems_name_file_and_key(tmp_path):
+    run = setup_run(tmp_path, cubic=0.3)
+    (tmp_path / "train.csv").write_text("time,x,y\n0,1,2\n1,2,3\n")
+    (tmp_path / "validate.csv").write_text("time,u,y\n0,1,2\n0,2,nan\n")
+    with pytest.raises(ConfigError) as err:
+        load_runfile(run)
+    text = str(err.value)
+    assert "data.train: train.csv lacks the model input column(s) u" in text
+    assert "data.validate:" in text and "not strictly increasing" in text
+
+
+def test_malformed_yaml_is_one_line(tmp_path, capsys):
+    (tmp_path / "run.yaml").write_text("model: [unclosed\n")
+    assert main(["run", str(tmp_path / "run.yaml")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not valid YAML" in err[0] and "run.yaml:" in err[0]
