@@ -44,6 +44,51 @@ package Examples "Example systems; every source is driven by a top-level input"
     y = R4.v;
   end CauerFilter;
 
+  model CauerFilterNominal "The Cauer filter as its designer believes it: R3 taken for a linear 20 ohm resistor"
+    input Real u(unit="V") "source voltage";
+    output Real y(unit="V") "voltage across R4";
+    parameter Real l1 = 1.304;
+    parameter Real l2 = 0.8586;
+    parameter Real c1 = 1.072;
+    parameter Real c2 = 1 / (1.704992^2 * l1);
+    parameter Real c3 = 1.682;
+    parameter Real c4 = 1 / (1.179945^2 * l2);
+    parameter Real c5 = 0.7262;
+    MCL.Electrical.VoltageSource V;
+    MCL.Electrical.Ground G;
+    MCL.Electrical.Resistor R1(R=1);
+    MCL.Electrical.Capacitor C1(C=c1);
+    MCL.Electrical.Capacitor C2(C=c2);
+    MCL.Electrical.Capacitor C3(C=c3);
+    MCL.Electrical.Capacitor C4(C=c4);
+    MCL.Electrical.Capacitor C5(C=c5);
+    MCL.Electrical.Inductor L1(L=l1);
+    MCL.Electrical.Inductor L2(L=l2);
+    MCL.Electrical.Resistor Rnl(R=20) "believed linear";
+    MCL.Electrical.Resistor R4(R=1) "measurement resistor";
+  equation
+    V.u = u;
+    connect(V.p, R1.p);
+    connect(R1.n, C1.p);
+    connect(R1.n, C2.p);
+    connect(R1.n, L1.p);
+    connect(C2.n, C3.p);
+    connect(L1.n, C3.p);
+    connect(C3.p, C4.p);
+    connect(C3.p, L2.p);
+    connect(C4.n, C5.p);
+    connect(L2.n, C5.p);
+    connect(C5.p, Rnl.p);
+    connect(Rnl.n, R4.p);
+    connect(V.n, G.p);
+    connect(C1.n, G.p);
+    connect(C3.n, G.p);
+    connect(C5.n, G.p);
+    connect(R4.n, G.p);
+    y = R4.v;
+  end CauerFilterNominal;
+
+
   model MassSpringDamper "Mass on a spring and a damper to the housing, driven by a force"
     input Real u(unit="N") "applied force";
     output Real y(unit="m") "mass position";
