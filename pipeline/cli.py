@@ -164,6 +164,32 @@ def cmd_run(args) -> int:
     return 0
 
 
+def cmd_export(args) -> int:
+    import json
+    import re
+
+    run = Path(args.run_dir)
+    report_file = run / "report.json"
+    if not report_file.is_file():
+        raise ConfigError(f"{run} is not a finished run directory (no report.json)")
+    cause = json.loads(report_file.read_text()).get("cause")
+    if not cause:
+        raise ConfigError(f"{run}: the run learned no component (no cause was found)")
+    text = (run / cause["modelica"]).read_text()
+    cls = cause["learned_class"]
+    m = re.search(rf"^\s*model {re.escape(cls)}\b.*?^\s*end {re.escape(cls)};", text, re.S | re.M)
+    if not m:
+        raise ConfigError(f"{run / cause['modelica']}: class {cls} not found")
+    name = args.name
+    out = Path(args.output) / name
+    out.mkdir(parents=True, exist_ok=True)
+    body = "\n".join("  " + line.strip() if line.strip() else "" for line in m.group(0).splitlines())
+    (out / "package.mo").write_text(f'within ;\npackage {name} "Components learned by mcl"\n{body}\nend {name};\n')
+    shutil.copyfile(run / cause["fmu"], out / Path(cause["fmu"]).name)
+    print(f"exported {name}.{cls} ({cause['law']['equation']}) -> {out}/package.mo")
+    return 0
+
+
 def cmd_plugins(args) -> int:
     from .plugins import Registry
 
@@ -243,6 +269,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("runfile", help="the run file (YAML)")
     p.add_argument("--force", action="store_true", help="replace a finished run directory")
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("export", help="copy a learned component into a reusable Modelica library")
+    p.add_argument("run_dir", help="a finished run directory")
+    p.add_argument("-o", "--output", required=True, help="directory to write the library into")
+    p.add_argument("--name", default="MCLLearned", help="library (package) name")
+    p.set_defaults(func=cmd_export)
 
     p = sub.add_parser("plugins", help="list installed plugins, compilers and engines")
     p.set_defaults(func=cmd_plugins)

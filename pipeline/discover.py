@@ -28,6 +28,7 @@ import numpy as np
 from .data import TimeSeries, read_csv
 from .errors import ConfigError
 from .executor import TaskFailed
+from .swap import class_name_for
 
 LEARNED_PACKAGE = "Learned"
 
@@ -123,6 +124,37 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     return w, active, rss, score, sims, path
 
 
+def _screen_task(ctx, item):
+    """Executor task: the Gauss-Newton prediction of how much a candidate can explain.
+
+    One simulation with sensitivities at w0 (the template fitted to the nominal law):
+    predicted RSS after one Gauss-Newton step = RSS - g^T (S^T S)^+ g with g = S^T r.
+    Cheap, and ranks the candidates well enough to fit only the promising ones fully.
+    """
+    from .api import compile_model, registry, simulate
+    from .swap import swap_component
+
+    graph, train, validate, nominal_probe, budget, criterion, workdir = ctx
+    comp_name, tpl_index, tpl_spec = item
+    template = registry().template(tpl_spec)
+    v, i = nominal_probe[comp_name]
+    w0 = nominal_start(template, v, i, train.time)
+    tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
+                        w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
+    model = compile_model(tm.sources, tm.model_name)
+    params = dict(zip(tm.parameter_names, w0))
+    res = simulate(model, train, params, sensitivities=tm.parameter_names[1:])
+    if not res.ok:
+        return {"component": comp_name, "template": tpl_spec, "predicted_rss": None, "reason": res.reason}
+    idx = [model.output_names.index(o) for o in model.output_names if o in train.names]
+    r = (train.select([model.output_names[k] for k in idx]).values - res.outputs[:, idx]).ravel()
+    S = res.sensitivities[:, idx, :].reshape(-1, len(tm.parameter_names) - 1)
+    g = S.T @ r
+    gain = float(g @ np.linalg.pinv(S.T @ S) @ g)
+    return {"component": comp_name, "template": tpl_spec, "rss0": float(r @ r),
+            "predicted_rss": float(max(r @ r - gain, 0.0))}
+
+
 def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
     from .api import compile_model, registry, simulate
@@ -154,6 +186,10 @@ def _candidate_task(ctx, item):
         pv = probe(model, res, train, params, [f"{comp_name}.v"])[:, 0]
         out["v_range"] = [float(pv.min()), float(pv.max())]
     return out
+
+
+def ctx_of(graph, train, validate, nominal_probe, spec, part):
+    return (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"))
 
 
 def strength(delta: float) -> str:
@@ -210,9 +246,24 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
             pv = probe(nominal, sim0, train, {}, [va, vb, fa])
             nominal_probe[c.name] = (pv[:, 0] - pv[:, 1], pv[:, 2])
         items = [(c.name, k, t) for c in comps for k, t in enumerate(spec.templates)]
+        screen_file = part / "screening.json"
+        if screen_file.exists():
+            screening = json.loads(screen_file.read_text())
+        else:
+            progress(f"[2/5] screening {len(items)} candidate(s): one linearised step each")
+            with reg.executor(spec.executor) as ex:
+                res = ex.map(_screen_task, items, context=ctx_of(graph, train, validate, nominal_probe, spec, part),
+                             timeout=3600, label="screening")
+            screening = [r if not isinstance(r, TaskFailed) else
+                         {"component": it[0], "template": it[2], "predicted_rss": None, "reason": r.reason}
+                         for it, r in zip(items, res)]
+            screen_file.write_text(json.dumps(screening, indent=1))
+        order = sorted(range(len(items)), key=lambda k: (screening[k]["predicted_rss"] is None,
+                                                         screening[k]["predicted_rss"] or 0.0))
+        items = [items[k] for k in order[: spec.screen]]
         todo = [it for it in items if not (part / "candidates" / f"{it[0]}_{it[1]}.json").exists()]
-        progress(f"[2/5] fitting {len(items)} candidate(s) ({len(items) - len(todo)} already done)")
-        ctx = (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"))
+        progress(f"      fitting the {len(items)} most promising ({len(items) - len(todo)} already done)")
+        ctx = ctx_of(graph, train, validate, nominal_probe, spec, part)
         with reg.executor(spec.executor) as ex:
             results = ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates")
         for it, r in zip(todo, results):
@@ -222,6 +273,7 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
         cands = [json.loads((part / "candidates" / f"{n}_{k}.json").read_text()) for n, k, _ in items]
         ranked = sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
         report["candidates"] = ranked + [c for c in cands if c.get("score") is None]
+        report["screening"] = screening
         if ranked:
             best = ranked[0]
             delta = ranked[1]["score"] - best["score"] if len(ranked) > 1 else float("inf")
@@ -276,5 +328,33 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, prog
                                f"{comp.name}.{comp.connectors[1].name}.{comp.connectors[1].potential[0]}",
                      "flow": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].flow[0]}",
                      "curve": curve},
-             "modelica": str(tm.path.relative_to(part)), "fmu": str(fmu.relative_to(part))}
+             "modelica": str(tm.path.relative_to(part)), "fmu": str(fmu.relative_to(part)),
+             "learned_class": class_name_for(comp.name, template)}
+    if spec.second:
+        cause["second_configuration"] = _second(spec, template, w, comp.name, part)
     return cause, y_ext
+
+
+def _second(spec, template, w, component: str, part: Path) -> dict:
+    """The learned law placed into another configuration (``second:`` in the run file)."""
+    from .api import compile_model, simulate
+    from .graph import build_graph
+    from .swap import swap_component
+
+    sec = spec.second
+    base = spec.path.parent
+    sources = [base / s for s in sec["model"]["sources"]]
+    name = sec["model"]["name"]
+    target = sec.get("component", component)
+    data = read_csv(base / sec["data"])
+    nominal = compile_model(sources, name)
+    graph = build_graph(sources, name)
+    tm = swap_component(graph, target, template, part / "second", w=w, package="LearnedSecond")
+    learned = compile_model(tm.sources, tm.model_name)
+    outs = [o for o in nominal.output_names if o in data.names]
+    meas = data.select(outs).values
+    before, after = simulate(nominal, data), simulate(learned, data)
+    pick = (lambda m, r: r.outputs[:, [m.output_names.index(o) for o in outs]])
+    return {"model": name, "component": target,
+            "rms_before": rms(meas - pick(nominal, before)) if before.ok else None,
+            "rms_after": rms(meas - pick(learned, after)) if after.ok else None}

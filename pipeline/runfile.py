@@ -9,7 +9,8 @@
     unknown: auto                # or the instance name of the suspect component
     output: out/plant            # the run directory
 
-Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations``),
+Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations`` per
+fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully),
 ``refinement`` (``criterion``: bic or aic), ``executor`` (``kind``, ``workers``),
 ``second`` (``model``/``data`` of another configuration where the learned component is placed).
 """
@@ -28,7 +29,7 @@ SCHEMA = {
     "unknown": None,
     "output": None,
     "templates": None,
-    "fitting": {"max_simulations", "start"},
+    "fitting": {"max_simulations", "screen"},
     "refinement": {"criterion"},
     "executor": {"kind", "workers", "address"},
     "second": {"model", "data", "component"},
@@ -47,6 +48,7 @@ class RunSpec:
     output: Path
     templates: list = field(default_factory=lambda: list(DEFAULT_TEMPLATES))
     max_simulations: int = 60
+    screen: int = 3
     criterion: str = "bic"
     executor: dict = field(default_factory=lambda: {"kind": "local"})
     second: dict | None = None
@@ -129,6 +131,19 @@ def load_runfile(path) -> RunSpec:
     budget = fitting.get("max_simulations", 60)
     if not isinstance(budget, int) or budget < 5:
         problem("fitting.max_simulations", "a whole number of at least 5")
+    screen = fitting.get("screen", 3)
+    if not isinstance(screen, int) or screen < 1:
+        problem("fitting.screen", "how many screened candidates to fit fully: a whole number >= 1")
+    second = raw.get("second")
+    if second is not None:
+        if not isinstance(second, dict) or not isinstance(second.get("model"), dict) or "data" not in second:
+            problem("second", "give second.model (sources, name) and second.data (a CSV)")
+        else:
+            for s in second["model"].get("sources", []):
+                if not (base / s).exists():
+                    problem("second.model", f"'{s}' does not exist")
+            if not (base / str(second["data"])).is_file():
+                problem("second.data", f"'{second['data']}' does not exist")
     templates = raw.get("templates", DEFAULT_TEMPLATES)
     if not isinstance(templates, list) or not templates:
         problem("templates", "a non-empty list of templates (name and options)")
@@ -136,7 +151,7 @@ def load_runfile(path) -> RunSpec:
         raise ConfigError("\n".join(problems))
     spec = RunSpec(path=path, sources=src_paths, model_name=str(model["name"]), train=files["train"],
                    validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
-                   output=base / str(raw["output"]), templates=templates, max_simulations=budget,
+                   output=base / str(raw["output"]), templates=templates, max_simulations=budget, screen=screen,
                    criterion=criterion, executor=dict(raw.get("executor") or {"kind": "local"}),
                    second=raw.get("second"))
     _check_data(spec, lines)

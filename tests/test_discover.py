@@ -30,6 +30,21 @@ package Circuit
     connect(V.n, G.p);
     y = C.v;
   end RC;
+  model Divider "a second configuration of the same resistor: no capacitor, a 0.5 ohm feed"
+    input Real u;
+    output Real y;
+    MCL.Electrical.VoltageSource V;
+    MCL.Electrical.Ground G;
+    MCL.Electrical.Resistor Rs(R = 0.5);
+    MCL.Electrical.Resistor Rx(R = 2);
+  equation
+    V.u = u;
+    connect(V.p, Rs.p);
+    connect(Rs.n, Rx.p);
+    connect(Rx.n, G.p);
+    connect(V.n, G.p);
+    y = Rx.v;
+  end Divider;
 end Circuit;
 """
 
@@ -119,3 +134,45 @@ def test_malformed_yaml_is_one_line(tmp_path, capsys):
     assert main(["run", str(tmp_path / "run.yaml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not valid YAML" in err[0] and "run.yaml:" in err[0]
+
+
+def divider_data(path):
+    """The divider with the true resistor: (u - e) / 0.5 = 0.5 e + 0.3 e^3, solved by SciPy."""
+    from scipy.optimize import brentq
+
+    t = np.linspace(0, 10, 201)
+    u = 2.0 * np.sin(0.7 * t)
+    e = np.array([brentq(lambda x: (uk - x) / 0.5 - 0.5 * x - 0.3 * x**3, -5, 5) for uk in u])
+    np.savetxt(path, np.column_stack([t, u, e]), delimiter=",", header="time,u,y", comments="")
+
+
+def test_second_configuration_resume_and_export(tmp_path, capsys):
+    run = setup_run(tmp_path, cubic=0.3)
+    divider_data(tmp_path / "divider.csv")
+    run.write_text(run.read_text() + "second:\n  model: {sources: [Circuit.mo, " + str(LIB) +
+                   "], name: Circuit.Divider}\n  data: divider.csv\n")
+    assert main(["run", str(run)]) == 0
+    out = tmp_path / "out/rc"
+    report = json.loads((out / "report.json").read_text())
+    second = report["cause"]["second_configuration"]
+    assert second["component"] == "Rx" and second["rms_after"] <= 0.05 * second["rms_before"]
+    # an interrupted run: the run directory is back to its partial state; the rerun reuses it
+    (out / "report.json").unlink()
+    out.rename(tmp_path / "out/rc.partial")
+    capsys.readouterr()
+    assert main(["run", str(run)]) == 0
+    assert "already done" in capsys.readouterr().out
+    assert json.loads((out / "report.json").read_text())["cause"]["component"] == "Rx"
+    # export the learned resistor as a library and use it in a model of one's own
+    assert main(["export", str(out), "-o", str(tmp_path / "lib"), "--name", "MyParts"]) == 0
+    lib = tmp_path / "lib" / "MyParts"
+    (tmp_path / "Use.mo").write_text(
+        "model Use\n  output Real y;\n  MCL.Electrical.Ground G;\n  MCL.Electrical.VoltageSource V;\n"
+        f"  MyParts.{report['cause']['learned_class']} R;\nequation\n  V.u = 1;\n"
+        "  connect(V.p, R.p);\n  connect(R.n, G.p);\n  connect(V.n, G.p);\n  y = R.i;\nend Use;\n")
+    from pipeline.api import compile_model, simulate
+    from pipeline.data import TimeSeries
+
+    model = compile_model([LIB, lib, tmp_path / "Use.mo"], "Use")
+    res = simulate(model, TimeSeries(np.linspace(0, 1, 11), np.zeros((11, 0)), []))
+    assert res.output("y")[-1] == pytest.approx(0.8, rel=0.02)   # i = 0.5 + 0.3 at v = 1
