@@ -76,7 +76,7 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         ax.grid(alpha=0.3)
         ax.legend()
         figs.append((f"Learned law of {cause['component']} over the range the data visits", _png(fig)))
-    cands = [c for c in report.get("candidates", []) if c.get("score") is not None]
+    cands = [c for c in report.get("candidates", []) if c.get("score") is not None and math.isfinite(c["score"])]
     if cands:
         fig, ax = plt.subplots(figsize=(7, 0.4 * len(cands) + 1.5))
         labels = [f"{c['component']} ({c['template'].get('name', '?') if isinstance(c['template'], dict) else c['template']})"
