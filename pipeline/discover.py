@@ -96,7 +96,16 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         rss = float(np.sum(r**2)) if r is not None else np.inf
         return w, rss, problem, res
 
+    visited = []
+
+    def record(problem, active_mask):
+        for e in problem.recorder.evaluations:
+            full = np.zeros(len(names))
+            full[active_mask] = e.w
+            visited.append([*full.tolist(), bool(e.feasible)])
+
     w, rss, problem, res = fit(active, w0)
+    record(problem, active)
     sims, path = res.simulations, []
     score = score_of(rss, n_obs, int(active.sum()) - 1)
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True})
@@ -113,6 +122,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         trial = active.copy()
         trial[k] = False
         w_t, rss_t, problem_t, res_t = fit(trial, w)
+        record(problem_t, trial)
         sims += res_t.simulations
         score_t = score_of(rss_t, n_obs, int(trial.sum()) - 1)
         ok = score_t < score
@@ -121,7 +131,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         if not ok:
             break
         active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
-    return w, active, rss, score, sims, path
+    return w, active, rss, score, sims, path, visited
 
 
 def _screen_task(ctx, item):
@@ -170,11 +180,13 @@ def _candidate_task(ctx, item):
     tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
                         w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
     model = compile_model(tm.sources, tm.model_name)
-    w, active, rss, score, sims, path = fit_and_prune(model, train, tm.parameter_names, w0, budget, criterion)
+    w, active, rss, score, sims, path, visited = fit_and_prune(model, train, tm.parameter_names, w0,
+                                                               budget, criterion)
     params = dict(zip(tm.parameter_names, w))
     out = {"component": comp_name, "class": comp.cls, "template": tpl_spec, "w0": w0.tolist(),
            "w": w.tolist(), "active": active.tolist(), "rss": rss, "score": score,
            "simulations": sims, "pruning": path, "equation": template.equation(w * active),
+           "visited": visited,
            "terms": [str(m) for m in getattr(template, "terms", [])]}
     res = simulate(model, train, params)
     out["train_rms"] = rms(train.select(model.output_names).values - res.outputs) if res.ok else None
@@ -278,7 +290,7 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
             best = ranked[0]
             delta = ranked[1]["score"] - best["score"] if len(ranked) > 1 else float("inf")
             report["cause"], extended_y = _explain(best, delta, graph, spec, part, train, validate,
-                                                   outputs, reg, progress)
+                                                   outputs, reg, progress, nominal_probe)
             report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),
                               "validation_rms_before": val0, "validation_rms_after": best.get("validation_rms")}
     if report["gain"] is None:
@@ -296,7 +308,7 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
     return report
 
 
-def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, progress):
+def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, progress, nominal_probe):
     """The winner as a law, the extended model (Modelica + FMU) and its simulated outputs."""
     from .api import compile_model, simulate
     from .fmu.export import build_fmu
@@ -309,6 +321,9 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, prog
     lo, hi = best.get("v_range") or [-1.0, 1.0]
     xs = np.linspace(lo, hi, 41)
     curve = [[float(x), float(f)] for x, f in zip(xs, template.flow_of(w, xs))]
+    v_nom, i_nom = nominal_probe[best["component"]]
+    pick = np.linspace(0, len(v_nom) - 1, min(200, len(v_nom))).astype(int)
+    nominal_points = [[float(v_nom[k]), float(i_nom[k])] for k in pick]
     nominal_terms = [t for t, a in zip(best.get("terms", []), np.abs(best["w0"]) > 1e-9 * np.max(np.abs(best["w0"]))) if a]
     new_terms = [t for t, on, w0 in zip(best.get("terms", []), best["active"], best["w0"])
                  if on and t not in nominal_terms]
@@ -327,7 +342,8 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, prog
                      "across": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].potential[0]} - "
                                f"{comp.name}.{comp.connectors[1].name}.{comp.connectors[1].potential[0]}",
                      "flow": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].flow[0]}",
-                     "curve": curve},
+                     "curve": curve, "nominal": nominal_points},
+             "visited": best.get("visited", []), "parameters": template.parameter_names(),
              "modelica": str(tm.path.relative_to(part)), "fmu": str(fmu.relative_to(part)),
              "learned_class": class_name_for(comp.name, template)}
     if spec.second:

@@ -69,6 +69,9 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
     if cause:
         xs, fs = np.array(cause["law"]["curve"]).T
         fig, ax = plt.subplots(figsize=(6, 4))
+        if cause["law"].get("nominal"):
+            vn, fn = np.array(cause["law"]["nominal"]).T
+            ax.plot(vn, fn, ".", color="tab:red", ms=3, label="nominal model (along the training run)")
         ax.plot(xs, fs, color="tab:green", lw=2, label="learned law")
         ax.set_xlabel(f"across: {cause['law']['across']}")
         ax.set_ylabel(f"flow: {cause['law']['flow']}")
@@ -76,6 +79,19 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         ax.grid(alpha=0.3)
         ax.legend()
         figs.append((f"Learned law of {cause['component']} over the range the data visits", _png(fig)))
+    visited = np.array((cause or {}).get("visited") or [], dtype=float)
+    if visited.size:
+        W, ok = visited[:, :-1], visited[:, -1] > 0.5
+        W = W / np.where(W[:, :1] == 0, 1.0, W[:, :1])           # the law is unchanged by scaling w
+        spread = np.argsort(-np.std(W[:, 1:], axis=0))[:2] + 1
+        fig, ax = plt.subplots(figsize=(6, 4.5))
+        names = cause.get("parameters") or [f"w{k + 1}" for k in range(W.shape[1])]
+        ax.scatter(W[ok, spread[0]], W[ok, spread[-1]], c="tab:green", s=14, label="simulated")
+        ax.scatter(W[~ok, spread[0]], W[~ok, spread[-1]], c="tab:red", marker="x", s=20, label="failed")
+        ax.set_xlabel(f"{names[spread[0]]} / {names[0]}")
+        ax.set_ylabel(f"{names[spread[-1]]} / {names[0]}")
+        ax.legend()
+        figs.append(("Feasibility map: parameter values visited while fitting", _png(fig)))
     cands = [c for c in report.get("candidates", []) if c.get("score") is not None and math.isfinite(c["score"])]
     if cands:
         fig, ax = plt.subplots(figsize=(7, 0.4 * len(cands) + 1.5))
