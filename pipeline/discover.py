@@ -276,12 +276,16 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
         todo = [it for it in items if not (part / "candidates" / f"{it[0]}_{it[1]}.json").exists()]
         progress(f"      fitting the {len(items)} most promising ({len(items) - len(todo)} already done)")
         ctx = ctx_of(graph, train, validate, nominal_probe, spec, part)
-        with reg.executor(spec.executor) as ex:
-            results = ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates")
-        for it, r in zip(todo, results):
+        def checkpoint(k, r):  # each candidate is saved as it finishes: a rerun skips it
+            it = todo[k]
             if isinstance(r, TaskFailed):
                 r = {"component": it[0], "template": it[2], "failed": r.reason, "score": None}
-            (part / "candidates" / f"{it[0]}_{it[1]}.json").write_text(json.dumps(r, indent=1))
+            tmp = part / "candidates" / f".{it[0]}_{it[1]}.json"
+            tmp.write_text(json.dumps(r, indent=1))
+            tmp.replace(part / "candidates" / f"{it[0]}_{it[1]}.json")
+
+        with reg.executor(spec.executor) as ex:
+            ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates", on_result=checkpoint)
         cands = [json.loads((part / "candidates" / f"{n}_{k}.json").read_text()) for n, k, _ in items]
         ranked = sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
         report["candidates"] = ranked + [c for c in cands if c.get("score") is None]

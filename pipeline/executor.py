@@ -60,7 +60,10 @@ class Executor:
     name = ""
 
     def map(self, fn: Callable[[Any, Any], Any], items: list, context: Any = None,
-            timeout: float = 300.0, label: str = "batch", progress: bool = True) -> list:
+            timeout: float = 300.0, label: str = "batch", progress: bool = True,
+            on_result: Callable[[int, Any], None] | None = None) -> list:
+        """Results in item order; ``on_result(index, result)`` is called as each one arrives
+        (to checkpoint a long batch)."""
         raise NotImplementedError  # pragma: no cover - interface
 
     def close(self) -> None:
@@ -79,16 +82,18 @@ class SerialExecutor(Executor):
 
     name = "serial"
 
-    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True):
+    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True, on_result=None):
         bar = Progress(label, len(items), enabled=progress)
         out = []
-        for item in items:
+        for k, item in enumerate(items):
             try:
                 r = fn(context, item)
             except Exception as exc:  # noqa: BLE001 - a failed task is a result
                 r = TaskFailed(f"{type(exc).__name__}: {exc}")
             out.append(r)
             bar.update(not isinstance(r, TaskFailed))
+            if on_result:
+                on_result(k, r)
         return out
 
 
@@ -107,7 +112,7 @@ class LocalExecutor(Executor):
         self.workers = workers or max(1, os.cpu_count() or 2)
         self.mp = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
 
-    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True):
+    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True, on_result=None):
         from multiprocessing.connection import wait
 
         bar = Progress(label, len(items), enabled=progress)
@@ -142,6 +147,8 @@ class LocalExecutor(Executor):
                 conn.close()
                 del running[conn]
                 bar.update(not isinstance(results[k], TaskFailed))
+                if on_result:
+                    on_result(k, results[k])
         return [results[k] for k in range(len(items))]
 
 
@@ -181,7 +188,7 @@ class DaskExecutor(Executor):
                                         processes=True, dashboard_address=None)
             self.client = Client(self.cluster)
 
-    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True):
+    def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True, on_result=None):
         from distributed import as_completed
 
         bar = Progress(label, len(items), enabled=progress)
@@ -197,6 +204,8 @@ class DaskExecutor(Executor):
                 except Exception as exc:  # noqa: BLE001 - KilledWorker, CancelledError, ...
                     results[k] = TaskFailed(f"{type(exc).__name__}: {exc}")
                 bar.update(not isinstance(results[k], TaskFailed))
+                if on_result:
+                    on_result(k, results[k])
         except TimeoutError:
             pass
         for k, f in enumerate(futures):

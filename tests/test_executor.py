@@ -30,6 +30,13 @@ def test_local_executor_isolates_crash_hang_and_error():
     assert isinstance(out[6], TaskFailed) and "bad input" in out[6].reason
 
 
+def test_results_are_reported_as_they_arrive():
+    seen = []
+    out = LocalExecutor(workers=2).map(square, [1, 2, 3], context=0, progress=False,
+                                       on_result=lambda k, r: seen.append((k, r)))
+    assert sorted(seen) == [(0, 1), (1, 4), (2, 9)] and out == [1, 4, 9]
+
+
 def test_serial_executor_labels_errors():
     out = SerialExecutor().map(lambda c, x: 1 / x, [1, 0], progress=False)
     assert out[0] == 1 and isinstance(out[1], TaskFailed)
