@@ -290,9 +290,16 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
         ranked = sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
         report["candidates"] = ranked + [c for c in cands if c.get("score") is None]
         report["screening"] = screening
+        # the nominal model is a contender too: a cause must explain the data better than it
+        n_obs = y_meas.size
+        nominal_score = (bic if spec.criterion == "bic" else aic)(float(np.sum(resid**2)), n_obs, 0)
+        report["nominal_score"] = nominal_score
+        ranked = [c for c in ranked if c["score"] < nominal_score]
+        if not ranked:
+            progress("      no candidate explains the data better than the nominal model")
         if ranked:
             best = ranked[0]
-            delta = ranked[1]["score"] - best["score"] if len(ranked) > 1 else float("inf")
+            delta = min([c["score"] for c in ranked[1:]] + [nominal_score]) - best["score"]
             report["cause"], extended_y = _explain(best, delta, graph, spec, part, train, validate,
                                                    outputs, reg, progress, nominal_probe)
             report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),

@@ -180,6 +180,12 @@ def _check_data(spec: RunSpec, lines: dict) -> None:
         if missing:
             problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {p.name} lacks the "
                             f"model input column(s) {', '.join(missing)}")
+        extra = [c for c in ts.names if c not in model.input_names and c not in model.output_names]
+        if extra:
+            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: column(s) "
+                            f"{', '.join(extra)} of {p.name} are not inputs or outputs of {spec.model_name} "
+                            f"(inputs: {', '.join(model.input_names) or 'none'}; outputs: "
+                            f"{', '.join(model.output_names)})")
         if not [o for o in model.output_names if o in ts.names]:
             problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {p.name} has none of "
                             f"the model outputs ({', '.join(model.output_names)})")

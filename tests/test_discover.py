@@ -126,6 +126,7 @@ def test_data_problems_name_file_and_key(tmp_path):
         load_runfile(run)
     text = str(err.value)
     assert "data.train: train.csv lacks the model input column(s) u" in text
+    assert "column(s) x of train.csv are not inputs or outputs of Circuit.RC" in text
     assert "data.validate:" in text and "not strictly increasing" in text
 
 
@@ -176,3 +177,15 @@ def test_second_configuration_resume_and_export(tmp_path, capsys):
     model = compile_model([LIB, lib, tmp_path / "Use.mo"], "Use")
     res = simulate(model, TimeSeries(np.linspace(0, 1, 11), np.zeros((11, 0)), []))
     assert res.output("y")[-1] == pytest.approx(0.8, rel=0.02)   # i = 0.5 + 0.3 at v = 1
+
+
+def test_named_unknown_component(tmp_path):
+    run = setup_run(tmp_path, cubic=0.3)
+    run.write_text(run.read_text().replace("unknown: auto", "unknown: C"))
+    assert main(["run", str(run)]) == 0
+    report = json.loads((tmp_path / "out/rc/report.json").read_text())
+    assert [c["component"] for c in report["candidates"]] == ["C"]    # only the named one
+    assert report["cause"] is None     # a memoryless law for C explains less than the nominal model
+    run.write_text(run.read_text().replace("unknown: C", "unknown: Nope"))
+    with pytest.raises(ConfigError, match="unknown: no component 'Nope'"):
+        load_runfile(run)

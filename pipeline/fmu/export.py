@@ -104,7 +104,12 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
     for _, n in _probe_variables(model):
         var(n, 'causality="local" variability="continuous" initial="calculated"')
     initial = sorted(outputs + states + derivs)
-    unknowns = (lambda idx: "\n".join(f'      <Unknown index="{i}"/>' for i in idx))
+    def section(tag, idx):  # an empty section is invalid FMI 2.0: leave it out
+        if not idx:
+            return ""
+        body = "\n".join(f'      <Unknown index="{i}"/>' for i in idx)
+        return f"    <{tag}>\n{body}\n    </{tag}>\n"
+
     files = "\n".join(f'      <File name="{s}"/>' for s in sources)
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName={quoteattr(model.name)} guid="{guid}"
@@ -122,16 +127,7 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
 {chr(10).join(rows)}
   </ModelVariables>
   <ModelStructure>
-    <Outputs>
-{unknowns(outputs)}
-    </Outputs>
-    <Derivatives>
-{unknowns(derivs)}
-    </Derivatives>
-    <InitialUnknowns>
-{unknowns(initial)}
-    </InitialUnknowns>
-  </ModelStructure>
+{section("Outputs", outputs)}{section("Derivatives", derivs)}{section("InitialUnknowns", initial)}  </ModelStructure>
 </fmiModelDescription>
 """
 
