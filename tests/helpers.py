@@ -38,3 +38,26 @@ def series(t, **columns) -> TimeSeries:
 def rel_err(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))
+
+
+#: A source, a series resistor, a capacitor and the load resistor Rx some tests hide a law in.
+RC_MODEL = """
+model RC "source, series resistor, capacitor in parallel with a load resistor"
+  input Real u;
+  output Real y;
+  MCL.Electrical.VoltageSource V;
+  MCL.Electrical.Ground G;
+  MCL.Electrical.Resistor R1(R = 1);
+  MCL.Electrical.Capacitor C(C = 0.5);
+  MCL.Electrical.Resistor Rx(R = 2);
+equation
+  V.u = u;
+  connect(V.p, R1.p);
+  connect(R1.n, C.p);
+  connect(C.p, Rx.p);
+  connect(C.n, G.p);
+  connect(Rx.n, G.p);
+  connect(V.n, G.p);
+  y = C.v;
+end RC;
+"""

@@ -5,31 +5,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import LIB
+from helpers import LIB, RC_MODEL
 from pipeline.cli import main
 from pipeline.errors import ConfigError
 from pipeline.runfile import load_runfile
 
-CIRCUIT = """
-package Circuit
-  model RC "source, series resistor, capacitor in parallel with a load resistor"
-    input Real u;
-    output Real y;
-    MCL.Electrical.VoltageSource V;
-    MCL.Electrical.Ground G;
-    MCL.Electrical.Resistor R1(R = 1);
-    MCL.Electrical.Capacitor C(C = 0.5);
-    MCL.Electrical.Resistor Rx(R = 2);
-  equation
-    V.u = u;
-    connect(V.p, R1.p);
-    connect(R1.n, C.p);
-    connect(C.p, Rx.p);
-    connect(C.n, G.p);
-    connect(Rx.n, G.p);
-    connect(V.n, G.p);
-    y = C.v;
-  end RC;
+CIRCUIT = "package Circuit\n" + RC_MODEL + """
   model Divider "a second configuration of the same resistor: no capacitor, a 0.5 ohm feed"
     input Real u;
     output Real y;

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import LIB
+from helpers import LIB, RC_MODEL
 from pipeline.api import compile_model, simulate
 from pipeline.data import TimeSeries
 from pipeline.feasibility import LogisticFeasibility
@@ -51,26 +51,7 @@ def test_entropy_and_barrier_terms_at_maximum_uncertainty():
 
 HIDDEN = dict(R1=1.0, C=0.5, g=0.5, cubic=0.3)   # the unknown resistor: i = 0.5 v + 0.3 v^3
 
-CIRCUIT = """
-model RC "source, series resistor, capacitor in parallel with the resistor to learn"
-  input Real u;
-  output Real y;
-  MCL.Electrical.VoltageSource V;
-  MCL.Electrical.Ground G;
-  MCL.Electrical.Resistor R1(R = 1);
-  MCL.Electrical.Capacitor C(C = 0.5);
-  MCL.Electrical.Resistor Rx(R = 2);
-equation
-  V.u = u;
-  connect(V.p, R1.p);
-  connect(R1.n, C.p);
-  connect(C.p, Rx.p);
-  connect(C.n, G.p);
-  connect(Rx.n, G.p);
-  connect(V.n, G.p);
-  y = C.v;
-end RC;
-"""
+CIRCUIT = RC_MODEL
 
 
 def hidden_cubic_data(noise=0.01, seed=0):
