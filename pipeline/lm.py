@@ -281,14 +281,16 @@ class IdentificationProblem:
                                else np.asarray(Sx))
         Sy_inv = np.linalg.inv(np.diag(np.broadcast_to(Sy if Sy is not None else 1.0, n_y)) if np.ndim(Sy) < 2
                                else np.asarray(Sy))
-        x, z, a = ca.SX.sym("x", n_x), ca.SX.sym("z", n_x), ca.SX.sym("a", n_a)
-        tm, dtj, tj = ca.SX.sym("tm"), ca.SX.sym("dt"), ca.SX.sym("tj")
-        y, mask = ca.SX.sym("y", n_y), ca.SX.sym("mask", n_y)
+        sym = ca.MX if getattr(f, "needs_mx", False) else ca.SX
+        x, z, a = sym.sym("x", n_x), sym.sym("z", n_x), sym.sym("a", n_a)
+        tm, dtj, tj = sym.sym("tm"), sym.sym("dt"), sym.sym("tj")
+        y, mask = sym.sym("y", n_y), sym.sym("mask", n_y)
         dyn = ca.mtimes(ca.DM(Sx_inv), (z - x) / dtj - f(tm, (x + z) / 2, a)) * ca.sqrt(dtj)
         reg = np.sqrt(mu_x / 2) * ca.sqrt(dtj)
-        meas_res = ca.mtimes(ca.DM(Sy_inv), mask * (y - h(tj, x)))  # S_y^-1 (y - h) where measured
+        h_x = h(tj, x, a) if _arity(h) == 3 else h(tj, x)   # h may depend on the parameters
+        meas_res = ca.mtimes(ca.DM(Sy_inv), mask * (y - h_x))  # S_y^-1 (y - h) where measured
         res = ca.vertcat(dyn, reg * x, reg * z, meas_res)
-        last = ca.vertcat(ca.SX.zeros(3 * n_x), meas_res)
+        last = ca.vertcat(sym.zeros(3 * n_x), meas_res)
         args = [x, z, a, tm, dtj, tj, y, mask]
         blk = ca.Function("blk", args, [res, ca.jacobian(res, x), ca.jacobian(res, z), ca.jacobian(res, a)])
         blk_last = ca.Function("blk_last", args, [last, ca.jacobian(last, x), ca.jacobian(last, z),
@@ -339,6 +341,55 @@ class IdentificationProblem:
             if ok.sum() >= 2 and guess is None:
                 X[:, k] = np.interp(self.t, self.meas.time[ok], self.meas.values[ok, k])
         return X
+
+
+def _arity(fn) -> int:
+    import inspect
+
+    try:
+        return len(inspect.signature(fn).parameters)
+    except (TypeError, ValueError):
+        return 2
+
+
+class CompiledRhs:
+    """f(t, x, a) and h(t, x, a) from a compiled model, with a template's parameters as a.
+
+    ``parameters`` (names of free parameters, e.g. 'Rx.w2') become a; every other parameter keeps
+    the value in ``fixed`` or its nominal one; the measured inputs enter as a linear interpolant
+    of time. The model's states are x (its semi-explicit states, as the compile stage made them).
+    """
+
+    needs_mx = True  # the model's functions are CasADi MX (they may hold Newton solvers)
+
+    def __init__(self, model, inputs, parameters: list[str], fixed: dict | None = None):
+        import casadi as ca
+
+        self.model, self.names = model, list(parameters)
+        self.p0 = model.parameter_vector(fixed or {})
+        self.idx = [model.ode.p_names.index(n) for n in self.names]
+        u = inputs.select(model.input_names) if model.input_names else None
+        self.u = (ca.interpolant("U", "linear", [u.time], u.values.ravel(order="C"))
+                  if u is not None else None)
+
+    def _p(self, a):
+        import casadi as ca
+
+        p = ca.MX(ca.DM(self.p0))
+        for k, i in enumerate(self.idx):
+            p[i] = a[k]
+        return p
+
+    def _u(self, t):
+        import casadi as ca
+
+        return self.u(t) if self.u is not None else ca.MX(0, 1)
+
+    def __call__(self, t, x, a):
+        return self.model.ode.ode(x, self._u(t), self._p(a), t)
+
+    def output(self, t, x, a):
+        return self.model.ode.out(x, self._u(t), self._p(a), t)
 
 
 @dataclass

@@ -130,3 +130,31 @@ def test_blockwise_gradient_equals_sparse_jacobian_product():
     b = random_blocks(N=50, m=7, n=3, p=4, seed=9)
     ref = 2 * jacobian_matrix(b).T @ np.concatenate([b.g.ravel(), b.ga])
     assert np.allclose(b.gradient(), ref, rtol=1e-12, atol=1e-12)
+
+
+def test_compiled_model_with_template_terms_as_parameters(tmp_path):
+    """f = the compiled RC circuit with Rx replaced by w1 i = w2 v + w3 v^3 (w1 fixed at 1);
+    full-discretisation LM recovers the hidden law from noisy output samples."""
+    from helpers import LIB, RC_MODEL
+    from pipeline.api import compile_model
+    from pipeline.data import TimeSeries
+    from pipeline.graph import build_graph
+    from pipeline.lm import CompiledRhs
+    from pipeline.swap import swap_component, write_package
+    from pipeline.templates import PolynomialTemplate
+
+    path = write_package(tmp_path, "FitCircuit", [RC_MODEL])
+    graph = build_graph([LIB, path], "FitCircuit.RC")
+    tm = swap_component(graph, "Rx", PolynomialTemplate(lhs=["i"], rhs=["v", "v^3"]), tmp_path / "learn")
+    model = compile_model(tm.sources, tm.model_name)
+    t = np.linspace(0, 20, 20001)
+    u = 1.5 * np.sin(0.9 * t) + 0.8 * np.sin(2.3 * t + 1.0)
+    sol = solve_ivp(lambda s, e: [((np.interp(s, t, u) - e[0]) - 0.5 * e[0] - 0.3 * e[0] ** 3) / 0.5],
+                    (0, 20), [0.0], t_eval=t[::50], rtol=1e-10, atol=1e-12, max_step=0.01)
+    rng = np.random.default_rng(0)
+    meas = Measurements(t[::50], (sol.y[0] + rng.normal(0, 0.01, sol.y.shape[1]))[:, None])
+    rhs = CompiledRhs(model, TimeSeries(t, u[:, None], ["u"]), ["Rx.w2", "Rx.w3"], {"Rx.w1": 1.0})
+    prob = IdentificationProblem(rhs, rhs.output, len(model.ode.x_names), 2, meas, dt=0.05,
+                                 Sx=0.1, Sy=0.01, mu_x=1e-8, mu_a=1e-8)
+    fit = levenberg_marquardt(prob, prob.initial_states(), np.array([0.1, 0.1]), segments=8, max_iter=100)
+    assert fit.a == pytest.approx([0.5, 0.3], rel=0.03)
