@@ -311,7 +311,7 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
     progress("[5/5] report")
     from .report import write_report
 
-    write_report(part, report, train, outputs, y0, extended_y)
+    write_report(part, report, train, outputs, y0, extended_y, **spec.report)
     if out.exists():
         shutil.rmtree(out)
     part.rename(out)

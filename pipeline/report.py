@@ -35,7 +35,8 @@ def _clean(obj):
     return obj
 
 
-def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_extended) -> None:
+def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_extended,
+                 title: str | None = None, plots: bool = True) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -43,6 +44,8 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
 
     directory = Path(directory)
     (directory / "report.json").write_text(json.dumps(_clean(report), indent=1))
+    if not plots:
+        return
     figs = []
     y_meas = train.select(outputs).values
     fig, axes = plt.subplots(len(outputs), 2, figsize=(12, 3.2 * len(outputs)), squeeze=False)
@@ -112,8 +115,9 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         ("training RMS after", g["train_rms_after"]), ("validation RMS before", g["validation_rms_before"]),
         ("validation RMS after", g["validation_rms_after"])))
     imgs = "".join(f"<h2>{html.escape(t)}</h2><img src='data:image/png;base64,{b}'/>" for t, b in figs)
-    page = (f"<!doctype html><html><head><meta charset='utf-8'><title>mcl: {html.escape(report['model'])}</title>"
+    heading = html.escape(title or report["model"])
+    page = (f"<!doctype html><html><head><meta charset='utf-8'><title>mcl: {heading}</title>"
             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}td{padding:4px 12px}"
             "img{max-width:100%}</style></head><body>"
-            f"<h1>{html.escape(report['model'])}</h1><table>{rows}</table>{imgs}</body></html>")
+            f"<h1>{heading}</h1><table>{rows}</table>{imgs}</body></html>")
     (directory / "report.html").write_text(page)

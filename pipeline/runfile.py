@@ -12,7 +12,8 @@
 Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations`` per
 fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully),
 ``refinement`` (``criterion``: bic or aic), ``executor`` (``kind``, ``workers``),
-``second`` (``model``/``data`` of another configuration where the learned component is placed).
+``second`` (``model``/``data`` of another configuration where the learned component is placed),
+``report`` (``title`` of report.html, ``plots: false`` for report.json only).
 """
 from __future__ import annotations
 
@@ -33,6 +34,7 @@ SCHEMA = {
     "refinement": {"criterion"},
     "executor": {"kind", "workers", "address"},
     "second": {"model", "data", "component"},
+    "report": {"title", "plots"},
 }
 DEFAULT_TEMPLATES = [{"name": "polynomial", "lhs": ["i"], "rhs": ["v", "v^2", "v^3"]}]
 
@@ -52,6 +54,7 @@ class RunSpec:
     criterion: str = "bic"
     executor: dict = field(default_factory=lambda: {"kind": "local"})
     second: dict | None = None
+    report: dict = field(default_factory=dict)
 
 
 def _lines(node, prefix="", out=None) -> dict[str, int]:
@@ -144,6 +147,9 @@ def load_runfile(path) -> RunSpec:
                     problem("second.model", f"'{s}' does not exist")
             if not (base / str(second["data"])).is_file():
                 problem("second.data", f"'{second['data']}' does not exist")
+    report = raw.get("report") or {}
+    if not isinstance(report, dict) or not isinstance(report.get("plots", True), bool):
+        problem("report", "report.title (text) and report.plots (true or false)")
     templates = raw.get("templates", DEFAULT_TEMPLATES)
     if not isinstance(templates, list) or not templates:
         problem("templates", "a non-empty list of templates (name and options)")
@@ -153,7 +159,7 @@ def load_runfile(path) -> RunSpec:
                    validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
                    output=base / str(raw["output"]), templates=templates, max_simulations=budget, screen=screen,
                    criterion=criterion, executor=dict(raw.get("executor") or {"kind": "local"}),
-                   second=raw.get("second"))
+                   second=raw.get("second"), report=report if isinstance(report, dict) else {})
     _check_data(spec, lines)
     return spec
 

@@ -73,7 +73,9 @@ def test_electrical_discovery_names_the_component_and_learns_the_law(tmp_path, c
 
 def test_null_case_names_no_cause(tmp_path):
     run = setup_run(tmp_path, cubic=0.0)
+    run.write_text(run.read_text() + "report: {title: Null case, plots: false}\n")
     assert main(["run", str(run)]) == 0
+    assert not (tmp_path / "out/rc/report.html").exists()
     report = json.loads((tmp_path / "out/rc/report.json").read_text())
     assert not report["misfit"]["significant"] and report["cause"] is None
 
