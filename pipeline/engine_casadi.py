@@ -40,13 +40,16 @@ class CasadiEngine(Engine):
         t_out = u.time if t_out is None else np.asarray(t_out, dtype=float)
         _check_grid(t_out, u)
         p = model.parameter_vector(params)
-        sel = [model.ode.p_names.index(n) for n in (sensitivities or [])
-               if _known(n, model)]
+        unknown = [n for n in (sensitivities or []) if n not in model.ode.p_names]
+        if unknown:
+            raise DataError(f"no free parameter(s) {', '.join(unknown)} to differentiate by")
+        sel = [model.ode.p_names.index(n) for n in (sensitivities or [])]
         plan = self._plan(model, u, t_out, tuple(sel), opts)
         with quiet_native_output():
             return plan.run(p, opts)
 
     def _plan(self, model, u, t_out, sel, opts):
+        # a cached plan holds its model, so the id cannot be reused while the entry exists
         key = (id(model), id(model.ode.ode), u.time.tobytes(), u.values.tobytes(),
                t_out.tobytes(), sel, opts.rtol, opts.atol, opts.max_steps)
         if key not in self._plans:
@@ -55,12 +58,6 @@ class CasadiEngine(Engine):
                 self._plans.popitem(last=False)
         self._plans.move_to_end(key)
         return self._plans[key]
-
-
-def _known(name, model):
-    if name not in model.ode.p_names:
-        raise DataError(f"no free parameter '{name}' to differentiate by")
-    return True
 
 
 def _check_grid(t_out, u: TimeSeries):
