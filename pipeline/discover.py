@@ -92,8 +92,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         res = LevenbergMarquardt(max_simulations=budget).fit(problem, np.asarray(start)[active_mask])
         w = np.zeros(len(names))
         w[active_mask] = res.w
-        r = problem.residuals(res.w)
-        rss = float(np.sum(r**2)) if r is not None else np.inf
+        rss = res.cost * len(data.time)   # J of eq. (3) is the mean over samples of the RSS
         return w, rss, problem, res
 
     visited = []
@@ -134,6 +133,21 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     return w, active, rss, score, sims, path, visited
 
 
+def _candidate_model(ctx, item):
+    """(template, w0, swapped model description, compiled model) of one candidate."""
+    from .api import compile_model, registry
+    from .swap import swap_component
+
+    graph, train, _, nominal_probe, _, _, workdir = ctx
+    comp_name, tpl_index, tpl_spec = item
+    template = registry().template(tpl_spec)
+    v, i = nominal_probe[comp_name]
+    w0 = nominal_start(template, v, i, train.time)
+    tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
+                        w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
+    return template, w0, tm, compile_model(tm.sources, tm.model_name)
+
+
 def _screen_task(ctx, item):
     """Executor task: the Gauss-Newton prediction of how much a candidate can explain.
 
@@ -141,17 +155,11 @@ def _screen_task(ctx, item):
     predicted RSS after one Gauss-Newton step = RSS - g^T (S^T S)^+ g with g = S^T r.
     Cheap, and ranks the candidates well enough to fit only the promising ones fully.
     """
-    from .api import compile_model, registry, simulate
-    from .swap import swap_component
+    from .api import simulate
 
-    graph, train, validate, nominal_probe, budget, criterion, workdir = ctx
-    comp_name, tpl_index, tpl_spec = item
-    template = registry().template(tpl_spec)
-    v, i = nominal_probe[comp_name]
-    w0 = nominal_start(template, v, i, train.time)
-    tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
-                        w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
-    model = compile_model(tm.sources, tm.model_name)
+    train = ctx[1]
+    comp_name, _, tpl_spec = item
+    template, w0, tm, model = _candidate_model(ctx, item)
     params = dict(zip(tm.parameter_names, w0))
     res = simulate(model, train, params, sensitivities=tm.parameter_names[1:])
     if not res.ok:
@@ -167,19 +175,12 @@ def _screen_task(ctx, item):
 
 def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
-    from .api import compile_model, registry, simulate
-    from .swap import swap_component
+    from .api import simulate
 
-    graph, train, validate, nominal_probe, budget, criterion, workdir = ctx
-    comp_name, tpl_index, tpl_spec = item
-    reg = registry()
-    template = reg.template(tpl_spec)
+    graph, train, validate, _, budget, criterion, _ = ctx
+    comp_name, _, tpl_spec = item
+    template, w0, tm, model = _candidate_model(ctx, item)
     comp = graph.components[comp_name]
-    v, i = nominal_probe[comp_name]
-    w0 = nominal_start(template, v, i, train.time)
-    tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
-                        w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
-    model = compile_model(tm.sources, tm.model_name)
     w, active, rss, score, sims, path, visited = fit_and_prune(model, train, tm.parameter_names, w0,
                                                                budget, criterion)
     params = dict(zip(tm.parameter_names, w))

@@ -94,7 +94,10 @@ class Recorder:
 
     @property
     def failures(self) -> int:
-        return sum(not e.feasible for e in self.evaluations)
+        return self.failures_since(0)
+
+    def failures_since(self, start: int) -> int:
+        return sum(not e.feasible for e in self.evaluations[start:])
 
     def points(self):
         W = np.array([e.w for e in self.evaluations])
@@ -171,20 +174,24 @@ class FitProblem:
                                                 old.seconds, old.gradient, tag or old.tag))
         t0 = time.perf_counter()
         res = self.simulate(w, gradient)
-        cost = grad = None
-        if res.ok:
-            r = self.y_meas - res.outputs[:, self.idx]
-            cost = float(np.mean(np.sum(r**2, axis=1)))         # eq. (3)
-            if gradient:
-                S = res.sensitivities[:, self.idx, :]            # (N, ny, nw)
-                grad = (-2.0 * np.einsum("ki,kij->j", r, S) / len(r)).tolist()
+        r, cost = self.residual_and_cost(res)
+        grad = None
+        if res.ok and gradient:
+            S = res.sensitivities[:, self.idx, :]                # (N, ny, nw)
+            grad = (-2.0 * np.einsum("ki,kij->j", r, S) / len(r)).tolist()
         return self.recorder.add(Evaluation(0, w.tolist(), cost, bool(res.ok), res.reason,
                                             time.perf_counter() - t0, grad, tag))
 
+    def residual_and_cost(self, res):
+        """Output residuals y_m - y (N, ny) and J of eq. (3) of a simulation; (None, None) if failed."""
+        if not res.ok:
+            return None, None
+        r = self.y_meas - res.outputs[:, self.idx]
+        return r, float(np.mean(np.sum(r**2, axis=1)))
+
     def residuals(self, w):
         """Output residuals y_m - y(w) (N, ny) or None when the simulation fails."""
-        res = self.simulate(w)
-        return None if not res.ok else self.y_meas - res.outputs[:, self.idx]
+        return self.residual_and_cost(self.simulate(w))[0]
 
     def rms_error(self, w) -> float:
         r = self.residuals(w)
@@ -366,7 +373,7 @@ class Algorithm3:
         w = self.w_best_
         cost = self.best_cost_ if self.best_cost_ is not None else float("nan")
         return FitResult(w, cost, problem.recorder.simulations - start,
-                         sum(not e.feasible for e in problem.recorder.evaluations[start:]),
+                         problem.recorder.failures_since(start),
                          time.perf_counter() - t0, self.feasibility_, message)
 
 
@@ -451,7 +458,7 @@ class Algorithm1:
             message = f"simulation budget of {budget} reached"
         cost = best[0] if best[0] is not None else float("nan")
         return FitResult(best[1], cost, problem.recorder.simulations - start,
-                         sum(not e.feasible for e in problem.recorder.evaluations[start:]),
+                         problem.recorder.failures_since(start),
                          time.perf_counter() - t0, q, message)
 
 
@@ -505,17 +512,14 @@ class LevenbergMarquardt:
         if 0 < y[start:].sum() < len(y[start:]):
             q.fit(W[start:], y[start:])
         return FitResult(w, current[2], problem.recorder.simulations - start,
-                         sum(not e.feasible for e in problem.recorder.evaluations[start:]),
+                         problem.recorder.failures_since(start),
                          time.perf_counter() - t0, q, message)
 
     @staticmethod
     def _step_data(problem: FitProblem, w):
         """(residual vector, its Jacobian d r / d w, J) at w, or None when w fails."""
         res = problem.simulate(w, gradient=True)
-        ev_cost = None
-        if res.ok:
-            r = problem.y_meas - res.outputs[:, problem.idx]
-            ev_cost = float(np.mean(np.sum(r**2, axis=1)))
+        r, ev_cost = problem.residual_and_cost(res)
         problem.recorder.add(Evaluation(0, np.asarray(w, float).tolist(), ev_cost, bool(res.ok),
                                         res.reason, res.seconds, None, "lm"))
         if not res.ok:

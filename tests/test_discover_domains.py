@@ -7,7 +7,6 @@ Thermal: the surface film conducts more than linearly (a convection-like quadrat
 import json
 
 import numpy as np
-import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import LIB
