@@ -78,26 +78,16 @@ def plot(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from pipeline.pretrain import draw_feasibility
+
     alg1 = [r for r in rows if r["algorithm"] == 1]
     fig = plt.figure(figsize=(6 * len(alg1), 5))
     for k, r in enumerate(alg1):
         ax = fig.add_subplot(1, len(alg1), k + 1, projection="3d")
-        W, y = np.array(r["_visited"]), np.array(r["_labels"], dtype=bool)
+        W = np.array(r["_visited"])
         W = W * np.where(W[:, :1] < 0, -1, 1)  # w and -w are the same law
-        ax.scatter(*W[y].T, c="tab:green", s=8, label="feasible")
-        ax.scatter(*W[~y].T, c="tab:red", s=8, label="infeasible")
-        if r["_coef"] and abs(r["_coef"][2]) > 1e-12:
-            c = r["_coef"]
-            g1, g2 = np.meshgrid(np.linspace(W[:, 0].min(), W[:, 0].max(), 10),
-                                 np.linspace(W[:, 1].min(), W[:, 1].max(), 10))
-            g3 = -(c[0] * g1 + c[1] * g2) / c[2]
-            g3[(g3 < W[:, 2].min()) | (g3 > W[:, 2].max())] = np.nan
-            ax.plot_surface(g1, g2, g3, alpha=0.3, color="tab:blue")
-        ax.set_xlabel("w1")
-        ax.set_ylabel("w2")
-        ax.set_zlabel("w3")
+        draw_feasibility(ax, W, r["_labels"], ["w1", "w2", "w3"], coef=r["_coef"])
         ax.set_title(f"Algorithm 1, {r['optimizer']}")
-        ax.legend()
     fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
 

@@ -202,36 +202,37 @@ def pretrain(template: Template, connector: Connector, sources, registry, n_samp
                           accuracy, time.perf_counter() - t0)
 
 
+def draw_feasibility(ax, W, y, names, axes=(0, 1, 2), coef=None, intercept: float = 0.0) -> None:
+    """Feasible (green) and infeasible (red) points and the plane coef^T w + intercept = 0."""
+    y = np.asarray(y, dtype=bool)
+    axes = [a for a in axes if a < W.shape[1]]
+    for mask, color, label in ((y, "tab:green", "feasible"), (~y, "tab:red", "infeasible")):
+        ax.scatter(*[W[mask, a] for a in axes], c=color, s=12, alpha=0.7, label=f"{label} ({mask.sum()})")
+    if coef is not None and len(axes) == 3 and abs(coef[axes[2]]) > 1e-12:
+        g1, g2 = np.meshgrid(np.linspace(W[:, axes[0]].min(), W[:, axes[0]].max(), 12),
+                             np.linspace(W[:, axes[1]].min(), W[:, axes[1]].max(), 12))
+        g3 = -(coef[axes[0]] * g1 + coef[axes[1]] * g2 + intercept) / coef[axes[2]]
+        zlo, zhi = W[:, axes[2]].min(), W[:, axes[2]].max()
+        ax.plot_surface(g1, g2, np.where((g3 >= zlo) & (g3 <= zhi), g3, np.nan), alpha=0.25,
+                        color="tab:blue")
+    ax.set_xlabel(names[axes[0]])
+    ax.set_ylabel(names[axes[1]])
+    if len(axes) == 3:
+        ax.set_zlabel(names[axes[2]])
+    ax.legend(loc="upper left")
+
+
 def plot_feasibility(result: PretrainResult, path, axes=(0, 1, 2), title: str = "") -> Path:
-    """Feasible (green) and infeasible (red) samples and the learned boundary (paper 000, Fig. 4)."""
+    """Pre-training samples and the learned boundary (paper 000, Fig. 4)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    W, y, names = result.samples, result.labels, result.parameter_names
-    axes = [a for a in axes if a < W.shape[1]]
     fig = plt.figure(figsize=(7.5, 6))
-    three_d = len(axes) == 3
-    ax = fig.add_subplot(111, projection="3d" if three_d else None)
-    for mask, color, label in ((y, "tab:green", "feasible"), (~y, "tab:red", "infeasible")):
-        ax.scatter(*[W[mask, a] for a in axes], c=color, s=12, alpha=0.7, label=f"{label} ({mask.sum()})")
-    coef = getattr(result.model, "coef_", None)
-    if coef is not None and three_d and abs(coef[axes[2]]) > 1e-12:
-        lo, hi = W[:, axes[0]].min(), W[:, axes[0]].max()
-        lo2, hi2 = W[:, axes[1]].min(), W[:, axes[1]].max()
-        g1, g2 = np.meshgrid(np.linspace(lo, hi, 12), np.linspace(lo2, hi2, 12))
-        b = result.model.intercept_
-        g3 = -(coef[axes[0]] * g1 + coef[axes[1]] * g2 + b) / coef[axes[2]]
-        zlo, zhi = W[:, axes[2]].min(), W[:, axes[2]].max()
-        g3 = np.where((g3 >= zlo) & (g3 <= zhi), g3, np.nan)
-        ax.plot_surface(g1, g2, g3, alpha=0.25, color="tab:blue")
-    labels = [names[a] for a in axes]
-    ax.set_xlabel(labels[0])
-    ax.set_ylabel(labels[1])
-    if three_d:
-        ax.set_zlabel(labels[2])
-    ax.legend(loc="upper left")
+    ax = fig.add_subplot(111, projection="3d" if len(result.parameter_names) >= 3 else None)
+    draw_feasibility(ax, result.samples, result.labels, result.parameter_names, axes,
+                     getattr(result.model, "coef_", None), getattr(result.model, "intercept_", 0.0))
     ax.set_title(title or f"feasibility of w: held-out accuracy {result.accuracy:.1%}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
