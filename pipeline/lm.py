@@ -90,14 +90,38 @@ def jacobian_matrix(blocks: Blocks) -> sp.csr_matrix:
                          shape=(N * m + p, N * n + p))
 
 
-def _r_factor(M: np.ndarray) -> np.ndarray:
-    """R of a (batched) QR decomposition; zero rows appended so R is always square-ish."""
-    R = np.linalg.qr(M, mode="r")
-    k = M.shape[-1]
-    if R.shape[-2] < k:  # fewer rows than columns: pad with zero rows (they add nothing)
-        pad = np.zeros(R.shape[:-2] + (k - R.shape[-2], k))
-        R = np.concatenate([R, pad], axis=-2)
-    return R
+try:  # LAPACK dgeqrf on a stack of matrices, in place, without np.linalg.qr's copies and triu
+    from numpy.linalg import _umath_linalg
+
+    def _geqrf(M: np.ndarray) -> np.ndarray:
+        _umath_linalg.qr_r_raw(M, signature="d->d")
+        return M
+except (ImportError, AttributeError):  # pragma: no cover - other numpy layouts
+    def _geqrf(M: np.ndarray) -> np.ndarray:
+        k = min(M.shape[-2:])
+        M[..., :k, :] = np.linalg.qr(M, mode="r")
+        return M
+
+
+def _r_factor(M: np.ndarray, own: bool = False) -> np.ndarray:
+    """R of a (batched) QR decomposition, padded with zero rows to be square.
+
+    ``own``: M is a scratch array that may be overwritten (saves a copy)."""
+    M = M if own and M.dtype == np.float64 and M.flags.c_contiguous else np.array(M, dtype=float)
+    rows, k = M.shape[-2:]
+    _geqrf(M)
+    if rows < k:  # fewer rows than columns: pad with zero rows (they add nothing)
+        M = np.concatenate([M, np.zeros(M.shape[:-2] + (k - rows, k))], axis=-2)
+    return M[..., :k, :] * _upper(k)
+
+
+_UPPER: dict[int, np.ndarray] = {}
+
+
+def _upper(k: int) -> np.ndarray:
+    if k not in _UPPER:
+        _UPPER[k] = np.triu(np.ones((k, k)))
+    return _UPPER[k]
 
 
 def _eliminate(F: np.ndarray, k: int):
@@ -105,7 +129,7 @@ def _eliminate(F: np.ndarray, k: int):
 
     Returns (R11, R12, R22): r = -R11^-1 R12 [s; 1] and min = ||R22 [s; 1]||^2 (eqs. 82-83).
     """
-    R = _r_factor(F)
+    R = _r_factor(F, own=True)
     return R[..., :k, :k], R[..., :k, k:], R[..., k:, k:]
 
 
@@ -128,12 +152,68 @@ def _damped(block: np.ndarray, n_first: int, lam: float, offset: int = 0) -> np.
     return np.concatenate([block, rows], axis=-2)
 
 
+def _workers() -> int:
+    return max(1, int(os.environ.get("MCL_LM_THREADS", os.cpu_count() or 1)))
+
+
+def _in_parallel(fn, groups: list) -> list:
+    """fn over the groups, one thread each: the QRs release the GIL (Algorithm 2's parallel loops)."""
+    if len(groups) == 1:
+        return [fn(groups[0])]
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(len(groups)) as pool:
+        return list(pool.map(fn, groups))
+
+
+def _inner(blocks: Blocks, lam: float, seqs: list, F: np.ndarray):
+    """Lines 3-10 of Algorithm 2 for some segments: eliminate their inner states (eq. 35).
+
+    F[s] is segment s's factor on (left boundary, current state, delta, 1); the segments take
+    their i-th step together as one batched QR of [F[s] (columns reordered); q_j; sqrt(lam) I]
+    on (x_j | left, x_{j+1}, delta, 1). Returns the laws r = -R11^-1 R12 [...] per step and the
+    final factors (F is updated in place).
+    """
+    N, m, n, p = blocks.shape
+    C, K = 3 * n + p + 1, 2 * n + p + 1
+    lengths = np.array([len(q) for q in seqs])
+    first = np.array([q[0] if len(q) else 0 for q in seqs])
+    damp = n if lam > 0 else 0
+    # one scratch stack for all steps (LAPACK works in place); at least C rows so R is square
+    buf = np.empty((len(seqs), max(K + m + damp, C), C))
+    upper = _upper(K)
+    laws = []
+    for i in range(int(lengths.max(initial=0))):
+        act = np.flatnonzero(lengths > i)
+        j = first[act] + i
+        M = buf[:len(act)]
+        M.fill(0.0)
+        Fa = F[act]
+        M[:, :K, :n] = Fa[:, :, n:2 * n]
+        M[:, :K, n:2 * n] = Fa[:, :, :n]
+        M[:, :K, 3 * n:] = Fa[:, :, 2 * n:]
+        q = M[:, K:K + m]
+        q[:, :, :n] = blocks.X[j]
+        q[:, :, 2 * n:3 * n] = blocks.Z[j]
+        q[:, :, 3 * n:3 * n + p] = blocks.A[j]
+        q[:, :, -1] = blocks.g[j]
+        if damp:                           # the damping of eq. (23) on x_j
+            M[:, K + m + np.arange(n), np.arange(n)] = np.sqrt(lam)
+        _geqrf(M)                          # R in the upper triangle (eqs. 82-83)
+        F[act] = M[:, n:C, n:C] * upper
+        laws.append((act, j, np.triu(M[:, :n, :n]), M[:, :n, n:].copy()))
+    return laws, F
+
+
+def _groups(Ns: int) -> list[np.ndarray]:
+    return [g for g in np.array_split(np.arange(Ns), min(_workers(), Ns)) if len(g)]
+
+
 def _forward(blocks: Blocks, lam: float, segments: int):
     """Lines 3-14 of Algorithm 2: eliminate every state; returns G on (delta, 1) and the laws.
 
-    Segment s eliminates its inner states (eq. 35) with a factor carried in the columns
-    (left boundary, current state, delta, 1); all segments take their k-th step together as one
-    batched QR. Then the boundary states are eliminated in order (eq. 38).
+    The segments' inner eliminations (eq. 35) run in parallel, a thread per group of segments;
+    then the boundary states are eliminated in order (eq. 38).
     """
     N, m, n, p = blocks.shape
     Ns = int(max(1, min(segments, N // 2)))
@@ -142,31 +222,18 @@ def _forward(blocks: Blocks, lam: float, segments: int):
     # blocks each segment eliminates: segment 0 from its first state, the others after their
     # left boundary state x_start (which the boundary recursion eliminates)
     seqs = [np.arange(starts[s] + (s > 0), ends[s]) for s in range(Ns)]
-    L = max(len(q) for q in seqs)
-    C = 3 * n + p + 1                      # columns (x_j | left, x_{j+1}, delta, 1)
     K = 2 * n + p + 1                      # carried factor columns (left, x_j, delta, 1)
     F = np.zeros((Ns, K, K))
     for s in range(1, Ns):                 # H_{s,1} = q_{zeta(s)} on (x_start, x_start+1, delta, 1)
         j = starts[s]
         q = np.hstack([blocks.X[j], blocks.Z[j], blocks.A[j], blocks.g[j][:, None]])
         F[s] = _r_factor(_damped(q[None], n, lam)[0])[:K]
-    laws = []
-    for i in range(L):
-        act = np.array([s for s in range(Ns) if i < len(seqs[s])])
-        j = np.array([seqs[s][i] for s in act])
-        q = np.zeros((len(act), m, C))
-        q[:, :, :n] = blocks.X[j]
-        q[:, :, 2 * n:3 * n] = blocks.Z[j]
-        q[:, :, 3 * n:3 * n + p] = blocks.A[j]
-        q[:, :, -1] = blocks.g[j]
-        q = _damped(q, n, lam)
-        Fc = np.zeros((len(act), K, C))
-        Fc[:, :, :n] = F[act][:, :, n:2 * n]
-        Fc[:, :, n:2 * n] = F[act][:, :, :n]
-        Fc[:, :, 3 * n:] = F[act][:, :, 2 * n:]
-        R11, R12, R22 = _eliminate(np.concatenate([Fc, q], axis=1), n)
-        F[act] = R22
-        laws.append((act, j, R11, R12))
+    groups = _groups(Ns)
+    per_group = _in_parallel(lambda g: _inner(blocks, lam, [seqs[s] for s in g], F[g]), groups)
+    laws = []                              # (global segment numbers, j, R11, R12) per step and group
+    for g, (group_laws, Fg) in zip(groups, per_group):
+        F[g] = Fg
+        laws.append([(g[act], j, R11, R12) for act, j, R11, R12 in group_laws])
     # boundary recursion (eq. 38): G in columns (b_s, delta, 1); w_s = F[s] on (b_s, b_{s+1}, delta, 1)
     G = F[0][:, n:]
     boundary = []
@@ -199,11 +266,33 @@ def structured_step(blocks: Blocks, lam: float, segments: int = 1) -> np.ndarray
         b[s] = -_solve_upper(R11, R12 @ np.concatenate([b[s + 1], delta, [1.0]]))
     beta = np.zeros((N + 1, n))            # row N: the non-existent x_{N+1} (zero columns)
     beta[starts[1:]] = b[1:Ns]
-    for act, j, R11, R12 in reversed(laws):
-        rest = np.concatenate([b[act], beta[j + 1], np.broadcast_to(delta, (len(act), p)),
-                               np.ones((len(act), 1))], axis=1)
-        beta[j] = -_solve_upper(R11, np.einsum("sij,sj->si", R12, rest)[..., None])[..., 0]
+
+    def back(group_laws):                  # eq. (39), a thread per group of segments
+        for act, j, R11, R12 in reversed(group_laws):
+            rest = np.concatenate([b[act], beta[j + 1], np.broadcast_to(delta, (len(act), p)),
+                                   np.ones((len(act), 1))], axis=1)
+            beta[j] = -_solve_upper(R11, np.einsum("sij,sj->si", R12, rest)[..., None])[..., 0]
+
+    _in_parallel(back, laws)
     return np.concatenate([beta[:N].ravel(), delta])
+
+
+def reduced_parameter_rows(blocks: Blocks, segments: int = 1) -> np.ndarray:
+    """Lines 1-13 of Algorithm 3: every state eliminated (lambda = 0, eq. 46), leaving rows on
+    (delta, 1) whose squared norm is the linearised cost; shared by every removal candidate."""
+    G, _, _, _ = _forward(blocks, 0.0, segments)
+    return np.vstack([G, np.hstack([blocks.Aa, blocks.ga[:, None]])])
+
+
+def removal_estimate(rows: np.ndarray, a_active: np.ndarray, removed) -> float:
+    """V_e after setting the parameters ``removed`` (indices into the active ones) to zero:
+    delta_k = -a_k (eq. 45) moves into the constant column, the rest of delta is minimised."""
+    removed = list(removed)
+    p = rows.shape[1] - 1
+    keep = [c for c in range(p) if c not in removed]
+    const = rows[:, -1] - rows[:, removed] @ a_active[removed]
+    _, _, R22 = _eliminate(np.hstack([rows[:, keep], const[:, None]]), len(keep))
+    return float(np.sum(R22**2))
 
 
 def removal_estimates(blocks: Blocks, a_active: np.ndarray, segments: int = 1) -> np.ndarray:
@@ -213,17 +302,8 @@ def removal_estimates(blocks: Blocks, a_active: np.ndarray, segments: int = 1) -
     shared by every candidate; only the final small problem over delta differs: with the k-th
     element of delta fixed at -a_k (eq. 45), min over the rest of ||[G; r] [delta; 1]||^2.
     """
-    p = blocks.shape[3]
-    G, _, _, _ = _forward(blocks, 0.0, segments)
-    rows = np.vstack([G, np.hstack([blocks.Aa, blocks.ga[:, None]])])
-    out = np.empty(p)
-    for k in range(p):
-        keep = [c for c in range(p) if c != k]
-        const = rows[:, -1] - rows[:, k] * a_active[k]     # delta_k = -a_k moves into the constant
-        M = np.hstack([rows[:, keep], const[:, None]])
-        _, _, R22 = _eliminate(M, p - 1)
-        out[k] = float(np.sum(R22**2))
-    return out
+    rows = reduced_parameter_rows(blocks, segments)
+    return np.array([removal_estimate(rows, a_active, [k]) for k in range(blocks.shape[3])])
 
 
 # -- the discretised identification problem (eqs. 12-19) ------------------------------------------
@@ -292,10 +372,12 @@ class IdentificationProblem:
         res = ca.vertcat(dyn, reg * x, reg * z, meas_res)
         last = ca.vertcat(sym.zeros(3 * n_x), meas_res)
         args = [x, z, a, tm, dtj, tj, y, mask]
-        blk = ca.Function("blk", args, [res, ca.jacobian(res, x), ca.jacobian(res, z), ca.jacobian(res, a)])
+        jac = [ca.densify(ca.jacobian(res, v)) for v in (x, z, a)]
+        blk = ca.Function("blk", args, [ca.densify(res)] + jac)
         blk_last = ca.Function("blk_last", args, [last, ca.jacobian(last, x), ca.jacobian(last, z),
                                                   ca.jacobian(last, a)])
-        # "thread" map: the per-block residuals and Jacobians are independent (Algorithm 2, line 3)
+        # "thread" map: the per-block residuals and Jacobians are independent (Algorithm 2, line 3).
+        # Evaluated through buffers: no DM copies.
         self._blk = blk.map(N - 1, "thread", max(1, os.cpu_count() or 1))
         self._blk_last = blk_last
         self.m = 3 * n_x + n_y
@@ -316,17 +398,22 @@ class IdentificationProblem:
 
     def blocks(self, X: np.ndarray, a: np.ndarray) -> Blocks:
         """Residual blocks and their Jacobians at states X (N, n) and parameters a."""
-        N = self.N
-        g, Jx, Jz, Ja = self._blk(X[:-1].T, X[1:].T, np.repeat(a[:, None], N - 1, 1), self.t_mid[None],
-                                  self.dt_mid[None], self.t[None, :-1], self.Y[:-1].T, self.M[:-1].T)
+        N, m, n, p = self.N, self.m, self.n, self.p
+        args = [X[:-1], X[1:], np.broadcast_to(a, (N - 1, p)), self.t_mid, self.dt_mid, self.t[:-1], self.Y[:-1], self.M[:-1]]
+        args = [np.ascontiguousarray(v, dtype=float) for v in args]
+        # column-major (rows, N-1 * cols) outputs are C-order (N-1, cols, rows) arrays: the map
+        # writes blocks 0..N-2 into the first N-1 rows, the last block is added by hand
+        out = [np.zeros((N, m)), np.zeros((N, n, m)), np.zeros((N, n, m)), np.zeros((N, p, m))]
+        buf, run = self._blk.buffer()
+        for k, v in enumerate(args):
+            buf.set_arg(k, memoryview(v))
+        for k, v in enumerate(out):
+            buf.set_res(k, memoryview(v[:N - 1]))
+        run()
         gl, Jxl, _, _ = self._blk_last(X[-1], X[-1], a, self.t[-1], 1.0, self.t[-1], self.Y[-1], self.M[-1])
-        m, n, p = self.m, self.n, self.p
-        # DM -> numpy through scipy.sparse: DM.full() is several times slower on wide matrices
-        unstack = (lambda D, w: D.sparse().toarray().reshape(m, w, N - 1, order="F").transpose(2, 0, 1))
-        G = np.vstack([np.array(g).T, np.array(gl).T])
-        X_ = np.concatenate([unstack(Jx, n), np.array(Jxl)[None]])
-        Z_ = np.concatenate([unstack(Jz, n), np.zeros((1, m, n))])
-        A_ = np.concatenate([unstack(Ja, p), np.zeros((1, m, p))])
+        out[0][-1] = np.array(gl).ravel()
+        out[1][-1] = np.array(Jxl).T
+        G, X_, Z_, A_ = out[0], *(v.transpose(0, 2, 1) for v in out[1:])
         sa = np.sqrt(self.mu_a)
         return Blocks(G, X_, Z_, A_, sa * a, sa * np.eye(p))
 
@@ -445,5 +532,7 @@ def levenberg_marquardt(problem: IdentificationProblem, X0, a0, active=None, lam
 
 def restrict(blocks: Blocks, active) -> Blocks:
     """The blocks with only the ``active`` parameters (the others are fixed at zero)."""
+    if np.all(active):
+        return blocks
     return Blocks(blocks.g, blocks.X, blocks.Z, blocks.A[:, :, active], blocks.ga[active],
                   blocks.Aa[np.ix_(active, active)])

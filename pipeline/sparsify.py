@@ -1,7 +1,7 @@
 """Backward elimination: from a dense fitted law to a sparse, readable one (paper 004, sec. V).
 
 Each round estimates, for every remaining candidate parameter, the minimal cost after setting
-it to zero (Algorithm 3, :func:`pipeline.lm.removal_estimates`: the state eliminations are
+it to zero (Algorithm 3, :func:`pipeline.lm.removal_estimate`: the state eliminations are
 shared), retrains the best candidate with Levenberg-Marquardt, and accepts the removal if the
 criterion says so:
 
@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ConfigError
-from .lm import IdentificationProblem, levenberg_marquardt, removal_estimates, restrict
+from .lm import IdentificationProblem, levenberg_marquardt, reduced_parameter_rows, removal_estimate, restrict
 
 
 class Prioritiser:
@@ -98,7 +98,8 @@ class BackwardElimination:
     """Algorithm 3 (paper 004) with retraining and an acceptance criterion."""
 
     def __init__(self, criterion: str = "bic", threshold: float = 0.1, prioritiser=None,
-                 segments: int = 1, lm_options: dict | None = None, validation: IdentificationProblem | None = None):
+                 segments: int = 1, lm_options: dict | None = None, validation: IdentificationProblem | None = None,
+                 batch: int = 1):
         if criterion not in ("threshold", "aic", "bic", "cv"):
             raise ConfigError(f"criterion '{criterion}': choose threshold, aic, bic or cv")
         if criterion == "cv" and validation is None:
@@ -107,6 +108,7 @@ class BackwardElimination:
         self.prioritiser = prioritiser or HighestDegreeFirst()
         self.segments, self.lm_options = segments, dict(lm_options or {})
         self.validation = validation
+        self.batch = max(1, int(batch))
 
     def _score(self, problem, X, a, active, cost, dense_cost) -> float:
         n = max(int(problem.M.sum()), 1)
@@ -126,9 +128,17 @@ class BackwardElimination:
             return new <= 1 + self.threshold
         return new <= old
 
-    def fit(self, problem: IdentificationProblem, X, a, names: list[str], degrees=None) -> SparseResult:
+    def fit(self, problem: IdentificationProblem, X, a, names: list[str], degrees=None,
+            keep=()) -> SparseResult:
+        """Prune ``names`` (the parameters a) stage by stage; names in ``keep`` are never removed.
+
+        With ``batch`` > 1 (beyond the paper, for large networks) a round removes up to that many
+        parameters with the smallest estimates together: the count doubles after an accepted
+        round and halves after a refused one; a stage ends when a single removal is refused.
+        """
         names = list(names)
         degrees = list(degrees) if degrees is not None else [0] * len(names)
+        removable = np.array([nm not in set(keep) for nm in names])
         active = np.ones(len(names), bool)
         fit = levenberg_marquardt(problem, X, a, active, segments=self.segments, **self.lm_options)
         X, a, cost = fit.X, fit.a, fit.cost
@@ -136,25 +146,32 @@ class BackwardElimination:
         score = self._score(problem, X, a, active, cost, dense)
         path = [PruneStep(None, None, cost, score, True, [n for n, on in zip(names, active) if on])]
         for stage in self.prioritiser.stages(names, degrees):
+            size = 1
             while True:
-                cand = [k for k in stage if active[k]]
+                cand = [k for k in stage if active[k] and removable[k]]
                 if not cand or active.sum() <= 1:
                     break
-                blocks = problem.blocks(X, a)
-                idx = np.flatnonzero(active)
-                est = removal_estimates(restrict(blocks, active), a[idx], self.segments)
-                est_by = {k: est[list(idx).index(k)] for k in cand}
-                k = min(est_by, key=est_by.get)
+                G = reduced_parameter_rows(restrict(problem.blocks(X, a), active), self.segments)
+                idx = list(np.flatnonzero(active))
+                a_act = a[active]
+                est = {k: removal_estimate(G, a_act, [idx.index(k)]) for k in cand}
+                take = sorted(cand, key=est.get)[:min(size, len(cand), int(active.sum()) - 1)]
                 trial = active.copy()
-                trial[k] = False
+                trial[take] = False
                 refit = levenberg_marquardt(problem, X, a, trial, segments=self.segments, **self.lm_options)
                 new_score = self._score(problem, refit.X, refit.a, trial, refit.cost, dense)
                 ok = self._accept(new_score, score)
-                path.append(PruneStep(names[k], float(est_by[k]), refit.cost, float(new_score), ok,
-                                      [n for n, on in zip(names, trial) if on]))
+                joint = removal_estimate(G, a_act, [idx.index(k) for k in take])
+                path.append(PruneStep(", ".join(names[k] for k in take), float(joint), refit.cost,
+                                      float(new_score), ok, [n for n, on in zip(names, trial) if on]))
                 if not ok:
+                    if len(take) > 1:       # too many at once: try fewer
+                        size = max(1, len(take) // 2)
+                        continue
                     break                   # this stage is done: move to the next one
                 active, X, a, cost = trial, refit.X, refit.a, refit.cost
+                size = min(2 * size, self.batch)
                 if self.criterion != "threshold":
                     score = new_score
         return SparseResult(names, active, a, X, cost, path)
+
