@@ -6,7 +6,10 @@ shared), retrains the best candidate with Levenberg-Marquardt, and accepts the r
 criterion says so:
 
 - ``threshold``: the cost stays within (1 + tau) of the dense model's;
-- ``aic`` / ``bic``: n log(V / n) + 2k, or + k log n, does not increase (n measured values);
+- ``aic`` / ``bic``: V + 2k, or V + k log n, does not increase (n measured values). With the
+  weights W_x, W_y the covariances of the errors (the statistical reading of eq. 6) the cost V is
+  -2 log L up to a constant; ``variance="estimated"`` uses n log(V / n) instead, for weights
+  that only set relative scales;
 - ``cv``: the cost on held-out measurements (a second problem) does not increase.
 
 Which parameters may be removed next is a plugin point (``mcl_prioritisers``): ``all`` offers
@@ -64,9 +67,40 @@ class SparseResult:
     X: np.ndarray
     cost: float
     path: list[PruneStep] = field(default_factory=list)
+    dense_a: np.ndarray | None = None     # the parameters of the dense fit the pruning started from
 
     def terms(self) -> dict[str, float]:
         return {n: float(v) for n, v, on in zip(self.names, self.a, self.active) if on}
+
+    def equation(self, digits: int = 4) -> str:
+        """The sparse law, one line per state for names 'state:monomial' ("dx1/dt = -9.4*x1 + ..."),
+        else one line per surviving parameter."""
+        lines: dict[str, list[str]] = {}
+        for name, v in self.terms().items():
+            state, _, mono = name.partition(":")
+            if not mono:
+                lines.setdefault(name, []).append(f"{v:.{digits}g}")
+                continue
+            coef = f"{v:.{digits}g}"
+            lines.setdefault(f"d{state}/dt", []).append(coef if mono == "1" else f"{coef}*{mono}")
+        out = [f"{lhs} = " + " + ".join(rhs).replace("+ -", "- ") for lhs, rhs in lines.items()]
+        return "\n".join(out)
+
+    def save(self, directory, grid=None) -> None:
+        """law.txt (the equation), path.png (the pruning path), path.json, and states.csv (the
+        fitted states at the grid points ``grid``, if given)."""
+        import json
+        from pathlib import Path
+
+        d = Path(directory)
+        d.mkdir(parents=True, exist_ok=True)
+        (d / "law.txt").write_text(self.equation() + "\n")
+        (d / "path.json").write_text(json.dumps([s.__dict__ for s in self.path], indent=1))
+        self.plot_path(d / "path.png")
+        if grid is not None:
+            head = "time," + ",".join(f"x{k + 1}" for k in range(self.X.shape[1]))
+            np.savetxt(d / "states.csv", np.column_stack([grid, self.X]), delimiter=",", header=head,
+                       comments="")
 
     def plot_path(self, path) -> None:
         """Cost against the number of remaining terms, accepted and refused removals marked."""
@@ -99,7 +133,7 @@ class BackwardElimination:
 
     def __init__(self, criterion: str = "bic", threshold: float = 0.1, prioritiser=None,
                  segments: int = 1, lm_options: dict | None = None, validation: IdentificationProblem | None = None,
-                 batch: int = 1):
+                 batch: int = 1, variance: str = "known", exchange: bool = False):
         if criterion not in ("threshold", "aic", "bic", "cv"):
             raise ConfigError(f"criterion '{criterion}': choose threshold, aic, bic or cv")
         if criterion == "cv" and validation is None:
@@ -109,19 +143,27 @@ class BackwardElimination:
         self.segments, self.lm_options = segments, dict(lm_options or {})
         self.validation = validation
         self.batch = max(1, int(batch))
+        if variance not in ("known", "estimated"):
+            raise ConfigError(f"variance '{variance}': choose known (weights are covariances) or estimated")
+        self.variance = variance
+        self.exchange = exchange
 
     def _score(self, problem, X, a, active, cost, dense_cost) -> float:
         n = max(int(problem.M.sum()), 1)
         k = int(active.sum())
-        if self.criterion == "aic":
-            return n * np.log(cost / n) + 2 * k
-        if self.criterion == "bic":
-            return n * np.log(cost / n) + k * np.log(n)
+        if self.criterion in ("aic", "bic"):
+            fit = cost if self.variance == "known" else n * np.log(cost / n)
+            return fit + k * self._penalty(problem)
         if self.criterion == "threshold":
             return cost / dense_cost
         Xv = self.validation.initial_states()
         return levenberg_marquardt(self.validation, Xv, a, active, segments=self.segments,
                                    **self.lm_options).cost
+
+    def _penalty(self, problem) -> float:
+        if self.criterion not in ("aic", "bic"):
+            return 0.0
+        return 2.0 if self.criterion == "aic" else float(np.log(max(int(problem.M.sum()), 1)))
 
     def _accept(self, new: float, old: float) -> bool:
         if self.criterion == "threshold":
@@ -141,37 +183,95 @@ class BackwardElimination:
         removable = np.array([nm not in set(keep) for nm in names])
         active = np.ones(len(names), bool)
         fit = levenberg_marquardt(problem, X, a, active, segments=self.segments, **self.lm_options)
-        X, a, cost = fit.X, fit.a, fit.cost
-        dense = cost
-        score = self._score(problem, X, a, active, cost, dense)
-        path = [PruneStep(None, None, cost, score, True, [n for n, on in zip(names, active) if on])]
+        self._dense = fit.cost
+        st = _State(active, fit.X, fit.a, fit.cost, self._score(problem, fit.X, fit.a, active, fit.cost, fit.cost))
+        path = [PruneStep(None, None, float(st.cost), float(st.score), True, list(names))]
         for stage in self.prioritiser.stages(names, degrees):
-            size = 1
             while True:
-                cand = [k for k in stage if active[k] and removable[k]]
-                if not cand or active.sum() <= 1:
+                self._prune_stage(problem, st, [k for k in stage if removable[k]], names, path)
+                if not (self.exchange and self._exchange(problem, st, removable, names, path)):
                     break
-                G = reduced_parameter_rows(restrict(problem.blocks(X, a), active), self.segments)
-                idx = list(np.flatnonzero(active))
-                a_act = a[active]
-                est = {k: removal_estimate(G, a_act, [idx.index(k)]) for k in cand}
-                take = sorted(cand, key=est.get)[:min(size, len(cand), int(active.sum()) - 1)]
-                trial = active.copy()
-                trial[take] = False
-                refit = levenberg_marquardt(problem, X, a, trial, segments=self.segments, **self.lm_options)
-                new_score = self._score(problem, refit.X, refit.a, trial, refit.cost, dense)
-                ok = self._accept(new_score, score)
-                joint = removal_estimate(G, a_act, [idx.index(k) for k in take])
-                path.append(PruneStep(", ".join(names[k] for k in take), float(joint), refit.cost,
-                                      float(new_score), ok, [n for n, on in zip(names, trial) if on]))
-                if not ok:
-                    if len(take) > 1:       # too many at once: try fewer
-                        size = max(1, len(take) // 2)
-                        continue
-                    break                   # this stage is done: move to the next one
-                active, X, a, cost = trial, refit.X, refit.a, refit.cost
-                size = min(2 * size, self.batch)
-                if self.criterion != "threshold":
-                    score = new_score
-        return SparseResult(names, active, a, X, cost, path)
+        return SparseResult(names, st.active, st.a, st.X, st.cost, path, fit.a.copy())
+
+    def _refit(self, problem, st, trial):
+        refit = levenberg_marquardt(problem, st.X, st.a, trial, segments=self.segments, **self.lm_options)
+        return refit, self._score(problem, refit.X, refit.a, trial, refit.cost, self._dense)
+
+    def _prune_stage(self, problem, st, stage: list[int], names, path) -> None:
+        """Remove parameters of one stage until the criterion refuses a single removal."""
+        size = 1
+        while True:
+            cand = [k for k in stage if st.active[k]]
+            if not cand or st.active.sum() <= 1:
+                return
+            G = reduced_parameter_rows(restrict(problem.blocks(st.X, st.a), st.active), self.segments)
+            idx = list(np.flatnonzero(st.active))
+            a_act = st.a[st.active]
+            est = {k: removal_estimate(G, a_act, [idx.index(k)]) for k in cand}
+            take = sorted(cand, key=est.get)[:min(size, len(cand), int(st.active.sum()) - 1)]
+            trial = st.active.copy()
+            trial[take] = False
+            refit, new_score = self._refit(problem, st, trial)
+            # a batch must pass as if it were one removal: its whole cost increase within
+            # one parameter's penalty (BIC would otherwise trade a true term for two false ones)
+            ok = bool(self._accept(new_score, st.score - (len(take) - 1) * self._penalty(problem)))
+            joint = removal_estimate(G, a_act, [idx.index(k) for k in take])
+            path.append(PruneStep(", ".join(names[k] for k in take), float(joint), float(refit.cost),
+                                  float(new_score), ok, [n for n, on in zip(names, trial) if on]))
+            if not ok:
+                if len(take) > 1:           # too many at once: try fewer
+                    size = max(1, len(take) // 2)
+                    continue
+                return                      # this stage is done: move to the next one
+            st.update(trial, refit, new_score if self.criterion != "threshold" else st.score)
+            size = min(2 * size, self.batch)
+
+    def _exchange(self, problem, st, removable, names, path, tries: int = 3) -> bool:
+        """Beyond the paper: swap one kept parameter for one removed one when that fits better.
+
+        Greedy removal decides between nearly collinear terms (x1^2, x1*x2, x2^2 on data where
+        x1 ~ x2) on noise; a wrong early choice is never revisited. Linearised at the current
+        optimum with every parameter free (the same shared recursion as Algorithm 3), the minimal
+        cost of each swapped support is one small least-squares problem; the best few swaps are
+        retrained and the first that lowers the cost (or the validation cost) is kept.
+        Returns whether a swap was made.
+        """
+        kept = [k for k in np.flatnonzero(st.active) if removable[k]]
+        out = [k for k in np.flatnonzero(~st.active) if removable[k]]
+        if not kept or not out:
+            return False
+        G = reduced_parameter_rows(problem.blocks(st.X, st.a), self.segments)
+        est = {}
+        for t in kept:
+            for r in out:
+                support = st.active.copy()
+                support[t], support[r] = False, True
+                est[(t, r)] = removal_estimate(G, st.a, np.flatnonzero(~support))
+        for (t, r) in sorted(est, key=est.get)[:tries]:
+            if est[(t, r)] >= st.cost:
+                break
+            trial = st.active.copy()
+            trial[t], trial[r] = False, True
+            refit, new_score = self._refit(problem, st, trial)
+            better = new_score < st.score if self.criterion == "cv" else refit.cost < st.cost * (1 - 1e-9)
+            path.append(PruneStep(f"{names[t]} -> {names[r]}", float(est[(t, r)]), float(refit.cost),
+                                  float(new_score), bool(better), [n for n, on in zip(names, trial) if on]))
+            if better:
+                st.update(trial, refit, new_score if self.criterion != "threshold" else st.score)
+                return True
+        return False
+
+
+@dataclass
+class _State:
+    """The current support, fit and criterion value of a backward elimination."""
+
+    active: np.ndarray
+    X: np.ndarray
+    a: np.ndarray
+    cost: float
+    score: float
+
+    def update(self, active, fit, score) -> None:
+        self.active, self.X, self.a, self.cost, self.score = active, fit.X, fit.a, fit.cost, score
 

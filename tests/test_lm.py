@@ -93,12 +93,67 @@ def test_pruning_stops_where_the_threshold_says():
     assert res.path[-1] is refused[0]
 
 
+@pytest.mark.parametrize("variance", ["known", "estimated"])
+def test_pruning_stops_where_the_information_criterion_says(variance):
+    prob = oscillator_problem(partial=False)
+    res = BackwardElimination("bic", variance=variance, prioritiser=AllAtOnce(), segments=4,
+                              lm_options={"max_iter": 60}).fit(prob, prob.initial_states(), np.zeros(12), NAMES)
+    n = prob.M.sum()
+
+    def bic(step):   # recomputed from the path: V + k ln n, or n ln(V/n) + k ln n
+        fit = step.cost if variance == "known" else n * np.log(step.cost / n)
+        return fit + len(step.active) * np.log(n)
+
+    best = bic(res.path[0])
+    for step in res.path[1:]:
+        assert step.accepted == (bic(step) <= best)
+        best = bic(step) if step.accepted else best
+    assert not res.path[-1].accepted
+
+
+def test_batch_removal_and_kept_parameters():
+    prob = oscillator_problem(partial=False)
+    one = BackwardElimination("bic", segments=4, lm_options={"max_iter": 60}).fit(
+        prob, prob.initial_states(), np.zeros(12), NAMES, DEGREES * 2)
+    many = BackwardElimination("bic", segments=4, lm_options={"max_iter": 60}, batch=4).fit(
+        prob, prob.initial_states(), np.zeros(12), NAMES, DEGREES * 2, keep=["x1:1"])
+    assert set(many.terms()) == set(one.terms()) | {"x1:1"}
+    assert any(s.accepted and s.removed.count(",") >= 1 for s in many.path[1:])   # several at once
+    assert all("x1:1" in s.active for s in many.path)
+
+
+def test_exchange_swaps_a_wrongly_kept_term_for_the_true_one():
+    from pipeline.sparsify import _State
+
+    prob = oscillator_problem(partial=False)
+    wrong = np.array([n in {"x1:x2", "x2:x1", "x2:x2", "x2:x1*x2"} for n in NAMES])  # x1*x2, not x1^2
+    fit = levenberg_marquardt(prob, prob.initial_states(), np.zeros(12), wrong, segments=4, max_iter=80)
+    pruner = BackwardElimination("bic", segments=4, lm_options={"max_iter": 80}, exchange=True)
+    pruner._dense = fit.cost
+    st = _State(wrong, fit.X, fit.a, fit.cost, pruner._score(prob, fit.X, fit.a, wrong, fit.cost, fit.cost))
+    path = []
+    assert pruner._exchange(prob, st, np.ones(12, bool), NAMES, path)
+    assert {n for n, on in zip(NAMES, st.active) if on} == {"x1:x2", "x2:x1", "x2:x2", "x2:x1^2"}
+    assert path[-1].removed == "x2:x1*x2 -> x2:x1^2" and path[-1].cost < fit.cost
+    assert not pruner._exchange(prob, st, np.ones(12, bool), NAMES, [])   # nothing better left
+
+
+def test_segment_groups_on_more_threads_than_cores(monkeypatch):
+    monkeypatch.setenv("MCL_LM_THREADS", "3")
+    b = random_blocks(N=200, m=6, n=2, p=4, seed=3)
+    assert np.allclose(structured_step(b, 1e-3, 11), direct_step(b, 1e-3), rtol=1e-9, atol=1e-12)
+
+
 def test_backward_elimination_path_plot(tmp_path):
     prob = oscillator_problem()
     res = BackwardElimination("bic", segments=4, lm_options={"max_iter": 40}).fit(
         prob, prob.initial_states(), np.zeros(12), NAMES, DEGREES * 2)
-    res.plot_path(tmp_path / "path.png")
+    res.save(tmp_path, grid=prob.t)
     assert (tmp_path / "path.png").stat().st_size > 10_000
+    law = (tmp_path / "law.txt").read_text()
+    assert law.startswith("dx1/dt = ") and "*x1^2" in law.splitlines()[1]
+    states = np.loadtxt(tmp_path / "states.csv", delimiter=",", skiprows=1)
+    assert states.shape == (prob.N, 3) and np.allclose(states[:, 1:], res.X)
 
 
 def test_prioritisers_are_plugins():
