@@ -108,7 +108,7 @@ def grid_errors(a_dense, a_sparse, states, radius=0.5, n=81):
 
 def run(t_end: float, dt: float, seed: int = 0, segments: int = 8, batch: int = 16) -> dict:
     from pipeline.lm import IdentificationProblem
-    from pipeline.sparsify import AllAtOnce, BackwardElimination
+    from pipeline.sparsify import AllAtOnce, BackwardElimination, print_step
 
     meas = data(t_end, seed)
     prob = IdentificationProblem(rhs, lambda t, x: x, 2, 160, meas, dt=dt, Sx=1.0, Sy=1.0,
@@ -117,7 +117,7 @@ def run(t_end: float, dt: float, seed: int = 0, segments: int = 8, batch: int = 
     rng = np.random.default_rng(seed + 1)
     a0 = rng.normal(0, 0.3, 160)            # small random weights and biases
     t0 = time.perf_counter()
-    pruner = BackwardElimination("bic", variance="estimated", prioritiser=AllAtOnce(), segments=segments,
+    pruner = BackwardElimination("bic", variance="estimated", prioritiser=AllAtOnce(), segments=segments, on_step=print_step,
                                  lm_options={"max_iter": 200, "rtol": 1e-7}, batch=batch)
     res = pruner.fit(prob, prob.initial_states(), a0, nm, keep=[n for n in nm if n.startswith("b")])
     seconds = time.perf_counter() - t0

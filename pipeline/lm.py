@@ -344,8 +344,8 @@ class Measurements:
 class IdentificationProblem:
     """min ||g(b)||^2 of eq. (14) for x' = f(t, x, a), y = h(t, x) (paper 004, eq. 12).
 
-    ``f(t, x, a)`` and ``h(t, x)`` are Python functions written with CasADi operations (or
-    CasADi Functions); every derivative comes from CasADi. ``Sx``/``Sy`` are the factors of
+    ``f(t, x, a)`` and ``h(t, x)`` are Python functions written with CasADi or NumPy operations
+    (or CasADi Functions), traced once on symbols; every derivative comes from CasADi. ``Sx``/``Sy`` are the factors of
     W_x = S_x S_x^T and W_y = S_y S_y^T (eqs. 7-8), as vectors (diagonal) or matrices.
     """
 
@@ -365,9 +365,9 @@ class IdentificationProblem:
         x, z, a = sym.sym("x", n_x), sym.sym("z", n_x), sym.sym("a", n_a)
         tm, dtj, tj = sym.sym("tm"), sym.sym("dt"), sym.sym("tj")
         y, mask = sym.sym("y", n_y), sym.sym("mask", n_y)
-        dyn = ca.mtimes(ca.DM(Sx_inv), (z - x) / dtj - f(tm, (x + z) / 2, a)) * ca.sqrt(dtj)
+        dyn = ca.mtimes(ca.DM(Sx_inv), (z - x) / dtj - _traced(f, tm, (x + z) / 2, a)) * ca.sqrt(dtj)
         reg = np.sqrt(mu_x / 2) * ca.sqrt(dtj)
-        h_x = h(tj, x, a) if _arity(h) == 3 else h(tj, x)   # h may depend on the parameters
+        h_x = _traced(h, tj, x, a) if _arity(h) == 3 else _traced(h, tj, x)   # h may use the parameters
         meas_res = ca.mtimes(ca.DM(Sy_inv), mask * (y - h_x))  # S_y^-1 (y - h) where measured
         res = ca.vertcat(dyn, reg * x, reg * z, meas_res)
         last = ca.vertcat(sym.zeros(3 * n_x), meas_res)
@@ -428,6 +428,21 @@ class IdentificationProblem:
             if ok.sum() >= 2 and guess is None:
                 X[:, k] = np.interp(self.t, self.meas.time[ok], self.meas.values[ok, k])
         return X
+
+
+def _traced(fn, *args):
+    """fn evaluated on CasADi symbols. Plain NumPy code works too: NumPy's elementwise functions
+    dispatch to CasADi's, and a list or object array of results is stacked into a column."""
+    import warnings
+
+    import casadi as ca
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)   # CasADi's notice on NumPy calls
+        out = fn(*args)
+    if isinstance(out, (list, tuple, np.ndarray)):
+        out = ca.vertcat(*[v for v in np.asarray(out, dtype=object).ravel()])
+    return out
 
 
 def _arity(fn) -> int:

@@ -133,7 +133,7 @@ class BackwardElimination:
 
     def __init__(self, criterion: str = "bic", threshold: float = 0.1, prioritiser=None,
                  segments: int = 1, lm_options: dict | None = None, validation: IdentificationProblem | None = None,
-                 batch: int = 1, variance: str = "known", exchange: bool = False):
+                 batch: int = 1, variance: str = "known", exchange: bool = False, on_step=None):
         if criterion not in ("threshold", "aic", "bic", "cv"):
             raise ConfigError(f"criterion '{criterion}': choose threshold, aic, bic or cv")
         if criterion == "cv" and validation is None:
@@ -147,6 +147,7 @@ class BackwardElimination:
             raise ConfigError(f"variance '{variance}': choose known (weights are covariances) or estimated")
         self.variance = variance
         self.exchange = exchange
+        self.on_step = on_step    # called with each PruneStep as it is taken (progress)
 
     def _score(self, problem, X, a, active, cost, dense_cost) -> float:
         n = max(int(problem.M.sum()), 1)
@@ -185,13 +186,19 @@ class BackwardElimination:
         fit = levenberg_marquardt(problem, X, a, active, segments=self.segments, **self.lm_options)
         self._dense = fit.cost
         st = _State(active, fit.X, fit.a, fit.cost, self._score(problem, fit.X, fit.a, active, fit.cost, fit.cost))
-        path = [PruneStep(None, None, float(st.cost), float(st.score), True, list(names))]
+        path: list[PruneStep] = []
+        self._record(path, PruneStep(None, None, float(st.cost), float(st.score), True, list(names)))
         for stage in self.prioritiser.stages(names, degrees):
             while True:
                 self._prune_stage(problem, st, [k for k in stage if removable[k]], names, path)
                 if not (self.exchange and self._exchange(problem, st, removable, names, path)):
                     break
         return SparseResult(names, st.active, st.a, st.X, st.cost, path, fit.a.copy())
+
+    def _record(self, path: list, step: PruneStep) -> None:
+        path.append(step)
+        if self.on_step is not None:
+            self.on_step(step)
 
     def _refit(self, problem, st, trial):
         refit = levenberg_marquardt(problem, st.X, st.a, trial, segments=self.segments, **self.lm_options)
@@ -216,8 +223,8 @@ class BackwardElimination:
             # one parameter's penalty (BIC would otherwise trade a true term for two false ones)
             ok = bool(self._accept(new_score, st.score - (len(take) - 1) * self._penalty(problem)))
             joint = removal_estimate(G, a_act, [idx.index(k) for k in take])
-            path.append(PruneStep(", ".join(names[k] for k in take), float(joint), float(refit.cost),
-                                  float(new_score), ok, [n for n, on in zip(names, trial) if on]))
+            self._record(path, PruneStep(", ".join(names[k] for k in take), float(joint), float(refit.cost),
+                                         float(new_score), ok, [n for n, on in zip(names, trial) if on]))
             if not ok:
                 if len(take) > 1:           # too many at once: try fewer
                     size = max(1, len(take) // 2)
@@ -254,12 +261,18 @@ class BackwardElimination:
             trial[t], trial[r] = False, True
             refit, new_score = self._refit(problem, st, trial)
             better = new_score < st.score if self.criterion == "cv" else refit.cost < st.cost * (1 - 1e-9)
-            path.append(PruneStep(f"{names[t]} -> {names[r]}", float(est[(t, r)]), float(refit.cost),
-                                  float(new_score), bool(better), [n for n, on in zip(names, trial) if on]))
+            self._record(path, PruneStep(f"{names[t]} -> {names[r]}", float(est[(t, r)]), float(refit.cost),
+                                         float(new_score), bool(better), [n for n, on in zip(names, trial) if on]))
             if better:
                 st.update(trial, refit, new_score if self.criterion != "threshold" else st.score)
                 return True
         return False
+
+
+def print_step(step: PruneStep) -> None:
+    """A progress line per step (``BackwardElimination(on_step=print_step)``)."""
+    what = "dense fit" if step.removed is None else ("accepted: " if step.accepted else "refused: ") + step.removed
+    print(f"    {len(step.active):3d} terms, cost {step.cost:.6g}  {what}", flush=True)
 
 
 @dataclass

@@ -213,3 +213,18 @@ def test_compiled_model_with_template_terms_as_parameters(tmp_path):
                                  Sx=0.1, Sy=0.01, mu_x=1e-8, mu_a=1e-8)
     fit = levenberg_marquardt(prob, prob.initial_states(), np.array([0.1, 0.1]), segments=8, max_iter=100)
     assert fit.a == pytest.approx([0.5, 0.3], rel=0.03)
+
+
+def test_model_written_in_plain_numpy():
+    """f with np.sin / np.array instead of CasADi calls: a pendulum's gain recovered."""
+    t = np.linspace(0, 10, 101)
+    sol = solve_ivp(lambda s, x: [x[1], -3.0 * np.sin(x[0]) - 0.2 * x[1]], (0, 10), [1.0, 0.0],
+                    t_eval=t, rtol=1e-10, atol=1e-12)
+    meas = Measurements(t, sol.y.T + np.random.default_rng(1).normal(0, 1e-3, sol.y.T.shape))
+
+    def f(s, x, a):
+        return np.array([x[1], -a[0] * np.sin(x[0]) - a[1] * x[1]])
+
+    prob = IdentificationProblem(f, lambda s, x: x, 2, 2, meas, dt=0.02, Sx=0.1, Sy=1e-3, mu_a=1e-8)
+    fit = levenberg_marquardt(prob, prob.initial_states(), np.zeros(2), segments=4, max_iter=50)
+    assert fit.a == pytest.approx([3.0, 0.2], rel=2e-3)
