@@ -84,15 +84,16 @@ def check_b(terms, x3_hat, x3_true) -> dict:
     return out
 
 
-def run(setting: str, segments: int, seed: int = 0, criterion: str = "bic", exchange: bool = True) -> dict:
+def run(setting: str, segments: int, seed: int = 0, criterion: str | None = None, exchange: bool = True) -> dict:
     from pipeline.lm import IdentificationProblem
     from pipeline.sparsify import BackwardElimination, print_step
 
     meas, sol = data(setting, seed)
-    # the paper's weights in both settings; in (a) W_y = I is the noise covariance, so the cost is
-    # -2 log L and BIC counts in its units; in (b) (variance 1e-4) it is not: BIC estimates the
-    # scale (n log(V / n)). x3 of (b) is simply never measured (NaN).
-    variance = "known" if setting == "a" else "estimated"
+    # the paper's weights in both settings. In (a) W_y = I is the noise covariance, so the cost is
+    # -2 log L and BIC counts in its units. In (b) (variance 1e-4) the cost is mostly
+    # mu_a ||a||^2, not a likelihood: the paper's simplest rule, a cost limit 10 % above the dense
+    # model's, decides. x3 of (b) is simply never measured (NaN).
+    criterion = criterion or ("bic" if setting == "a" else "threshold")
     prob = IdentificationProblem(rhs, lambda t, x: x, 3, 30, meas, dt=1e-3, Sx=np.sqrt(10.0), Sy=1.0,
                                  mu_x=1e-8, mu_a=1e-3)
     X0 = prob.initial_states()
@@ -103,7 +104,7 @@ def run(setting: str, segments: int, seed: int = 0, criterion: str = "bic", exch
         X0[:, 2] = 0.0
     names = [f"x{s + 1}:{m}" for s in range(3) for m in MONOMIALS]
     t0 = time.perf_counter()
-    res = BackwardElimination(criterion, segments=segments, variance=variance, exchange=exchange, on_step=print_step,
+    res = BackwardElimination(criterion, threshold=0.1, segments=segments, exchange=exchange, on_step=print_step,
                               lm_options={"max_iter": 300, "rtol": 1e-10}).fit(
         prob, X0, np.zeros(30), names, DEGREES * 3)
     terms = {f"x{s + 1}": {} for s in range(3)}
@@ -124,16 +125,27 @@ def main(argv=None):
     ap.add_argument("--json", type=Path)
     ap.add_argument("--setting", choices=["a", "b", "both"], default="both")
     ap.add_argument("--segments", type=int, default=16)
-    ap.add_argument("--criterion", choices=["aic", "bic"], default="bic")
+    ap.add_argument("--criterion", choices=["aic", "bic", "threshold"],
+                    help="default: bic in (a), threshold (10 %%) in (b)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seeds", type=int, default=1, help="repeat with this many noise draws and summarise")
     ap.add_argument("--no-exchange", action="store_true", help="the paper's greedy elimination only")
     args = ap.parse_args(argv)
     out = {}
     for s in (["a", "b"] if args.setting == "both" else [args.setting]):
-        out[s] = run(s, args.segments, args.seed, args.criterion, not args.no_exchange)
-        print(f"setting ({s}): {out[s]['n_terms']} terms in {out[s]['seconds']:.1f} s (N_d = {out[s]['N_d']})")
-        print("  " + out[s]["law"].replace("\n", "\n  "))
-        print(f"  check: {out[s]['check']}")
+        runs = []
+        for seed in range(args.seed, args.seed + args.seeds):
+            r = run(s, args.segments, seed, args.criterion, not args.no_exchange)
+            print(f"setting ({s}), noise draw {seed}: {r['n_terms']} terms in {r['seconds']:.1f} s (N_d = {r['N_d']})")
+            print("  " + r["law"].replace("\n", "\n  "))
+            print(f"  check: {r['check']}")
+            runs.append(dict(r, seed=seed))
+        out[s] = runs[0]
+        if len(runs) > 1:
+            key = "structure_of_eq56" if s == "a" else "structure_of_eq57"
+            out[f"{s}_seeds"] = {"runs": [{k: r[k] for k in ("seed", "terms", "n_terms", "check")} for r in runs],
+                                 "found": sum(bool(r["check"][key]) for r in runs), "of": len(runs)}
+            print(f"setting ({s}): the paper's structure in {out[f'{s}_seeds']['found']} of {len(runs)} noise draws")
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
 

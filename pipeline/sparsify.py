@@ -191,7 +191,8 @@ class BackwardElimination:
         for stage in self.prioritiser.stages(names, degrees):
             while True:
                 self._prune_stage(problem, st, [k for k in stage if removable[k]], names, path)
-                if not (self.exchange and self._exchange(problem, st, removable, names, path)):
+                in_stage = np.isin(np.arange(len(names)), stage) & removable
+                if not (self.exchange and self._exchange(problem, st, in_stage, names, path)):
                     break
         return SparseResult(names, st.active, st.a, st.X, st.cost, path, fit.a.copy())
 
@@ -234,7 +235,8 @@ class BackwardElimination:
             size = min(2 * size, self.batch)
 
     def _exchange(self, problem, st, removable, names, path, tries: int = 3) -> bool:
-        """Beyond the paper: swap one kept parameter for one removed one when that fits better.
+        """Beyond the paper: swap one kept parameter for one removed one (both ``removable``: the
+        current stage's) when that fits better.
 
         Greedy removal decides between nearly collinear terms (x1^2, x1*x2, x2^2 on data where
         x1 ~ x2) on noise; a wrong early choice is never revisited. Linearised at the current
