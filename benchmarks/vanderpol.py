@@ -11,9 +11,10 @@ information criterion would count in the wrong units). The pruned and the dense 
 compared with the true error on a grid around the measured states (the paper's Figs. 5-6).
 
 The paper's setting is --t-end 100 --dt 1e-3 (N_d = 10^5 with 160 parameters: hours on two
-cores); the default, --t-end 40 --dt 0.05, keeps the same sampling and noise on a shorter record.
+cores); the default, --t-end 20 --dt 0.05 (N_d = 401, about 15 min), keeps the same sampling
+and noise on a shorter record.
 
-    python benchmarks/vanderpol.py [--json PATH] [--plot PNG] [--t-end 40] [--dt 0.05]
+    python benchmarks/vanderpol.py [--json PATH] [--plot PNG] [--t-end 20] [--dt 0.05] [--tau 0.2]
 """
 from __future__ import annotations
 
@@ -120,7 +121,7 @@ def run(t_end: float, dt: float, seed: int = 0, segments: int = 8, batch: int = 
     a0 = rng.normal(0, 0.3, 160)            # small random weights and biases
     t0 = time.perf_counter()
     pruner = BackwardElimination("threshold", threshold=tau, prioritiser=AllAtOnce(), segments=segments, on_step=print_step,
-                                 lm_options={"max_iter": 200, "rtol": 1e-7}, batch=batch)
+                                 lm_options={"max_iter": 100, "rtol": 1e-7}, batch=batch)
     res = pruner.fit(prob, prob.initial_states(), a0, nm, keep=[n for n in nm if n.startswith("b")])
     seconds = time.perf_counter() - t0
     dense = res.path[0]
@@ -163,7 +164,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description="Paper 004, section VI-B (Van der Pol)")
     ap.add_argument("--json", type=Path)
     ap.add_argument("--plot", type=Path)
-    ap.add_argument("--t-end", type=float, default=40.0)
+    ap.add_argument("--t-end", type=float, default=20.0)
     ap.add_argument("--dt", type=float, default=0.05)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--segments", type=int, default=8)

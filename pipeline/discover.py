@@ -133,12 +133,30 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     return w, active, rss, score, sims, path, visited
 
 
+def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: str, template):
+    """Paper 004's refinement (:func:`pipeline.refine.refine`), scored like :func:`fit_and_prune`:
+    RSS and BIC/AIC of a simulation of the refined law on the training data."""
+    from .api import simulate
+    from .refine import refine
+
+    w, active, path = refine(model, data, names, w0, criterion, terms=getattr(template, "terms", None))
+    outs = [o for o in model.output_names if o in data.names]
+    res, sims = simulate(model, data, dict(zip(names, w * active))), 2   # and refine's start
+    if not res.ok:   # the refined law does not simulate: keep the start (nominal) law
+        w, active = np.asarray(w0, float), np.ones(len(names), bool)
+        res, sims = simulate(model, data, dict(zip(names, w))), 3
+    r = data.select(outs).values - res.outputs[:, [model.output_names.index(o) for o in outs]]
+    rss = float(np.sum(r**2))
+    score = (bic if criterion == "bic" else aic)(rss, r.size, int(active.sum()) - 1)
+    return w * active, active, rss, score, sims, path, []
+
+
 def _candidate_model(ctx, item):
     """(template, w0, swapped model description, compiled model) of one candidate."""
     from .api import compile_model, registry
     from .swap import swap_component
 
-    graph, train, _, nominal_probe, _, _, workdir = ctx
+    graph, train, _, nominal_probe, _, _, workdir, _ = ctx
     comp_name, tpl_index, tpl_spec = item
     template = registry().template(tpl_spec)
     v, i = nominal_probe[comp_name]
@@ -177,12 +195,16 @@ def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
     from .api import simulate
 
-    graph, train, validate, _, budget, criterion, _ = ctx
+    graph, train, validate, _, budget, criterion, _, method = ctx
     comp_name, _, tpl_spec = item
     template, w0, tm, model = _candidate_model(ctx, item)
     comp = graph.components[comp_name]
-    w, active, rss, score, sims, path, visited = fit_and_prune(model, train, tm.parameter_names, w0,
-                                                               budget, criterion)
+    if method == "full-discretisation":
+        w, active, rss, score, sims, path, visited = refine_candidate(model, train, tm.parameter_names, w0,
+                                                                      criterion, template)
+    else:
+        w, active, rss, score, sims, path, visited = fit_and_prune(model, train, tm.parameter_names, w0,
+                                                                   budget, criterion)
     params = dict(zip(tm.parameter_names, w))
     out = {"component": comp_name, "class": comp.cls, "template": tpl_spec, "w0": w0.tolist(),
            "w": w.tolist(), "active": active.tolist(), "rss": rss, "score": score,
@@ -202,7 +224,8 @@ def _candidate_task(ctx, item):
 
 
 def ctx_of(graph, train, validate, nominal_probe, spec, part):
-    return (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"))
+    return (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"),
+            spec.refinement_method)
 
 
 def strength(delta: float) -> str:

@@ -11,7 +11,8 @@
 
 Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations`` per
 fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully),
-``refinement`` (``criterion``: bic or aic), ``executor`` (``kind``, ``workers``),
+``refinement`` (``criterion``: bic or aic; ``method``: simulation, the default, or
+full-discretisation for paper 004's states-and-parameters least squares), ``executor`` (``kind``, ``workers``),
 ``second`` (``model``/``data`` of another configuration where the learned component is placed),
 ``report`` (``title`` of report.html, ``plots: false`` for report.json only).
 """
@@ -31,7 +32,7 @@ SCHEMA = {
     "output": None,
     "templates": None,
     "fitting": {"max_simulations", "screen"},
-    "refinement": {"criterion"},
+    "refinement": {"criterion", "method"},
     "executor": {"kind", "workers", "address"},
     "second": {"model", "data", "component"},
     "report": {"title", "plots"},
@@ -52,6 +53,7 @@ class RunSpec:
     max_simulations: int = 60
     screen: int = 3
     criterion: str = "bic"
+    refinement_method: str = "simulation"
     executor: dict = field(default_factory=lambda: {"kind": "local"})
     second: dict | None = None
     report: dict = field(default_factory=dict)
@@ -130,6 +132,9 @@ def load_runfile(path) -> RunSpec:
     criterion = (raw.get("refinement") or {}).get("criterion", "bic")
     if criterion not in ("bic", "aic"):
         problem("refinement.criterion", f"'{criterion}': choose bic or aic")
+    method = (raw.get("refinement") or {}).get("method", "simulation")
+    if method not in ("simulation", "full-discretisation"):
+        problem("refinement.method", f"'{method}': choose simulation or full-discretisation")
     fitting = raw.get("fitting") or {}
     budget = fitting.get("max_simulations", 60)
     if not isinstance(budget, int) or budget < 5:
@@ -158,7 +163,7 @@ def load_runfile(path) -> RunSpec:
     spec = RunSpec(path=path, sources=src_paths, model_name=str(model["name"]), train=files["train"],
                    validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
                    output=base / str(raw["output"]), templates=templates, max_simulations=budget, screen=screen,
-                   criterion=criterion, executor=dict(raw.get("executor") or {"kind": "local"}),
+                   criterion=criterion, refinement_method=method, executor=dict(raw.get("executor") or {"kind": "local"}),
                    second=raw.get("second"), report=report if isinstance(report, dict) else {})
     _check_data(spec, lines)
     return spec
