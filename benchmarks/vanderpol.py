@@ -121,7 +121,7 @@ def run(t_end: float, dt: float, seed: int = 0, segments: int = 8, batch: int = 
     a0 = rng.normal(0, 0.3, 160)            # small random weights and biases
     t0 = time.perf_counter()
     pruner = BackwardElimination("threshold", threshold=tau, prioritiser=AllAtOnce(), segments=segments, on_step=print_step,
-                                 lm_options={"max_iter": 100, "rtol": 1e-7}, batch=batch)
+                                 lm_options={"max_iter": 100, "rtol": 1e-6}, batch=batch)
     res = pruner.fit(prob, prob.initial_states(), a0, nm, keep=[n for n in nm if n.startswith("b")])
     seconds = time.perf_counter() - t0
     dense = res.path[0]
