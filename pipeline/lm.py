@@ -29,6 +29,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 
+class BlockEvaluationFailed(RuntimeError):
+    """f, h or their derivatives are not finite at some discretisation point."""
+
+
 @dataclass
 class Blocks:
     """Linearised residual blocks at b_k, padded to a common row count m.
@@ -409,8 +413,20 @@ class IdentificationProblem:
             buf.set_arg(k, memoryview(v))
         for k, v in enumerate(out):
             buf.set_res(k, memoryview(v[:N - 1]))
-        run()
-        gl, Jxl, _, _ = self._blk_last(X[-1], X[-1], a, self.t[-1], 1.0, self.t[-1], self.Y[-1], self.M[-1])
+        from .simulate import quiet_native_output
+
+        with quiet_native_output():        # a failed Newton solve prints a dump (and leaves NaN)
+            run()
+            try:
+                gl, Jxl, _, _ = self._blk_last(X[-1], X[-1], a, self.t[-1], 1.0, self.t[-1], self.Y[-1],
+                                               self.M[-1])
+                gl, Jxl = np.array(gl, float), np.array(Jxl, float)
+            except RuntimeError:
+                gl = Jxl = np.nan
+        if not (all(np.isfinite(v[:N - 1]).all() for v in out) and np.isfinite(gl).all()
+                and np.isfinite(Jxl).all()):
+            raise BlockEvaluationFailed("the model could not be evaluated at these states and parameters "
+                                        "(an algebraic loop did not converge or a value is not finite)")
         out[0][-1] = np.array(gl).ravel()
         out[1][-1] = np.array(Jxl).T
         G, X_, Z_, A_ = out[0], *(v.transpose(0, 2, 1) for v in out[1:])
@@ -528,8 +544,11 @@ def levenberg_marquardt(problem: IdentificationProblem, X0, a0, active=None, lam
         Xn = X + gamma[: X.size].reshape(X.shape)
         an = a.copy()
         an[active] += gamma[X.size:]
-        new = restrict(problem.blocks(Xn, an), active)
-        new_cost = new.cost()
+        try:
+            new = restrict(problem.blocks(Xn, an), active)
+            new_cost = new.cost()
+        except BlockEvaluationFailed:      # outside the model's domain: a rejected step (larger lambda)
+            new, new_cost = None, np.inf
         history.append((k, cost, lam))
         if new_cost < cost:
             done = (cost - new_cost) <= rtol * cost

@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ConfigError
-from .lm import IdentificationProblem, levenberg_marquardt, reduced_parameter_rows, removal_estimate, restrict
+from .lm import (BlockEvaluationFailed, IdentificationProblem, LMResult, levenberg_marquardt,
+                 reduced_parameter_rows, removal_estimate, restrict)
 
 
 class Prioritiser:
@@ -202,7 +203,12 @@ class BackwardElimination:
             self.on_step(step)
 
     def _refit(self, problem, st, trial):
-        refit = levenberg_marquardt(problem, st.X, st.a, trial, segments=self.segments, **self.lm_options)
+        """LM on the ``trial`` support from the current fit; a support the model cannot be
+        evaluated on (e.g. a loop that no longer converges) scores infinitely bad."""
+        try:
+            refit = levenberg_marquardt(problem, st.X, st.a, trial, segments=self.segments, **self.lm_options)
+        except BlockEvaluationFailed as err:
+            return LMResult(st.X, st.a, np.inf, 0, [], str(err)), np.inf
         return refit, self._score(problem, refit.X, refit.a, trial, refit.cost, self._dense)
 
     def _prune_stage(self, problem, st, stage: list[int], names, path) -> None:

@@ -228,3 +228,31 @@ def test_model_written_in_plain_numpy():
     prob = IdentificationProblem(f, lambda s, x: x, 2, 2, meas, dt=0.02, Sx=0.1, Sy=1e-3, mu_a=1e-8)
     fit = levenberg_marquardt(prob, prob.initial_states(), np.zeros(2), segments=4, max_iter=50)
     assert fit.a == pytest.approx([3.0, 0.2], rel=2e-3)
+
+
+def test_steps_outside_the_model_domain_are_rejected():
+    """f = -sqrt(a) x is NaN for a < 0. From a = 1 the first Gauss-Newton step overshoots to
+    a < 0: that step is refused (lambda grows) and LM still converges to a = 0.04; states
+    outside the domain are a clear error."""
+    from pipeline.lm import BlockEvaluationFailed
+
+    t = np.linspace(0, 4, 41)
+    meas = Measurements(t, np.exp(-0.2 * t)[:, None])
+    prob = IdentificationProblem(lambda s, z, a: -ca.sqrt(a[0]) * z, lambda s, z: z, 1, 1, meas, dt=0.01,
+                                 Sx=0.01, Sy=1e-3, mu_a=1e-9)
+    X0 = prob.initial_states()
+    failed, evaluate = [], prob.blocks
+
+    def blocks(X, a):
+        try:
+            return evaluate(X, a)
+        except BlockEvaluationFailed:
+            failed.append(a.copy())
+            raise
+
+    prob.blocks = blocks
+    fit = levenberg_marquardt(prob, X0, np.array([1.0]), lam0=1e-9, max_iter=100)
+    assert failed and failed[0][0] < 0
+    assert fit.a[0] == pytest.approx(0.04, rel=1e-2)
+    with pytest.raises(BlockEvaluationFailed):
+        evaluate(X0, np.array([-1.0]))
