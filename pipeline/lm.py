@@ -402,36 +402,41 @@ class IdentificationProblem:
 
     def blocks(self, X: np.ndarray, a: np.ndarray) -> Blocks:
         """Residual blocks and their Jacobians at states X (N, n) and parameters a."""
+        from .simulate import quiet_native_output
+
         N, m, n, p = self.N, self.m, self.n, self.p
-        args = [X[:-1], X[1:], np.broadcast_to(a, (N - 1, p)), self.t_mid, self.dt_mid, self.t[:-1], self.Y[:-1], self.M[:-1]]
-        args = [np.ascontiguousarray(v, dtype=float) for v in args]
-        # column-major (rows, N-1 * cols) outputs are C-order (N-1, cols, rows) arrays: the map
-        # writes blocks 0..N-2 into the first N-1 rows, the last block is added by hand
         out = [np.zeros((N, m)), np.zeros((N, n, m)), np.zeros((N, n, m)), np.zeros((N, p, m))]
+        with quiet_native_output():        # a failed Newton solve prints a dump (and leaves NaN)
+            self._inner_blocks(X, a, out)
+            out[0][-1], out[1][-1] = self._last_block(X, a)
+        if not all(np.isfinite(v).all() for v in out):
+            raise BlockEvaluationFailed("the model could not be evaluated at these states and parameters "
+                                        "(an algebraic loop did not converge or a value is not finite)")
+        G, X_, Z_, A_ = out[0], *(v.transpose(0, 2, 1) for v in out[1:])
+        sa = np.sqrt(self.mu_a)
+        return Blocks(G, X_, Z_, A_, sa * a, sa * np.eye(p))
+
+    def _inner_blocks(self, X, a, out) -> None:
+        """Blocks 0..N-2 by the threaded map, written through buffers into the first N-1 rows of
+        ``out`` (column-major (rows, (N-1) cols) results are C-order (N-1, cols, rows) arrays)."""
+        N, p = self.N, self.p
+        args = [X[:-1], X[1:], np.broadcast_to(a, (N - 1, p)), self.t_mid, self.dt_mid, self.t[:-1],
+                self.Y[:-1], self.M[:-1]]
+        args = [np.ascontiguousarray(v, dtype=float) for v in args]
         buf, run = self._blk.buffer()
         for k, v in enumerate(args):
             buf.set_arg(k, memoryview(v))
         for k, v in enumerate(out):
             buf.set_res(k, memoryview(v[:N - 1]))
-        from .simulate import quiet_native_output
+        run()
 
-        with quiet_native_output():        # a failed Newton solve prints a dump (and leaves NaN)
-            run()
-            try:
-                gl, Jxl, _, _ = self._blk_last(X[-1], X[-1], a, self.t[-1], 1.0, self.t[-1], self.Y[-1],
-                                               self.M[-1])
-                gl, Jxl = np.array(gl, float), np.array(Jxl, float)
-            except RuntimeError:
-                gl = Jxl = np.nan
-        if not (all(np.isfinite(v[:N - 1]).all() for v in out) and np.isfinite(gl).all()
-                and np.isfinite(Jxl).all()):
-            raise BlockEvaluationFailed("the model could not be evaluated at these states and parameters "
-                                        "(an algebraic loop did not converge or a value is not finite)")
-        out[0][-1] = np.array(gl).ravel()
-        out[1][-1] = np.array(Jxl).T
-        G, X_, Z_, A_ = out[0], *(v.transpose(0, 2, 1) for v in out[1:])
-        sa = np.sqrt(self.mu_a)
-        return Blocks(G, X_, Z_, A_, sa * a, sa * np.eye(p))
+    def _last_block(self, X, a):
+        """(residual, d/dx) of the measurement-only block at the last point; NaN if it fails."""
+        try:
+            g, Jx, _, _ = self._blk_last(X[-1], X[-1], a, self.t[-1], 1.0, self.t[-1], self.Y[-1], self.M[-1])
+            return np.array(g, float).ravel(), np.array(Jx, float).T
+        except RuntimeError:
+            return np.nan, np.nan
 
     def cost(self, X, a) -> float:
         return self.blocks(X, a).cost()
