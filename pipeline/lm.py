@@ -409,7 +409,7 @@ class IdentificationProblem:
         with quiet_native_output():        # a failed Newton solve prints a dump (and leaves NaN)
             self._inner_blocks(X, a, out)
             out[0][-1], out[1][-1] = self._last_block(X, a)
-        if not all(np.isfinite(v).all() for v in out):
+        if not all(np.isfinite(np.sum(v)) for v in out):   # one pass: a NaN or inf spoils the sum
             raise BlockEvaluationFailed("the model could not be evaluated at these states and parameters "
                                         "(an algebraic loop did not converge or a value is not finite)")
         G, X_, Z_, A_ = out[0], *(v.transpose(0, 2, 1) for v in out[1:])
