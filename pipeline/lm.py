@@ -349,8 +349,9 @@ class IdentificationProblem:
     """min ||g(b)||^2 of eq. (14) for x' = f(t, x, a), y = h(t, x) (paper 004, eq. 12).
 
     ``f(t, x, a)`` and ``h(t, x)`` are Python functions written with CasADi or NumPy operations
-    (or CasADi Functions), traced once on symbols; every derivative comes from CasADi. ``Sx``/``Sy`` are the factors of
-    W_x = S_x S_x^T and W_y = S_y S_y^T (eqs. 7-8), as vectors (diagonal) or matrices.
+    (or CasADi Functions), traced once on symbols; every derivative comes from CasADi.
+    ``Sx``/``Sy`` are the factors of W_x = S_x S_x^T and W_y = S_y S_y^T (eqs. 7-8), as vectors
+    (diagonal) or matrices.
     """
 
     def __init__(self, f, h, n_x: int, n_a: int, meas: Measurements, dt: float,
@@ -382,7 +383,7 @@ class IdentificationProblem:
                                                   ca.jacobian(last, a)])
         # "thread" map: the per-block residuals and Jacobians are independent (Algorithm 2, line 3).
         # Evaluated through buffers: no DM copies.
-        self._blk = blk.map(N - 1, "thread", max(1, os.cpu_count() or 1))
+        self._blk = blk.map(N - 1, "thread", _workers())
         self._blk_last = blk_last
         self.m = 3 * n_x + n_y
         self.mu_a = mu_a
@@ -462,7 +463,7 @@ def _traced(fn, *args):
         warnings.simplefilter("ignore", FutureWarning)   # CasADi's notice on NumPy calls
         out = fn(*args)
     if isinstance(out, (list, tuple, np.ndarray)):
-        out = ca.vertcat(*[v for v in np.asarray(out, dtype=object).ravel()])
+        out = ca.vertcat(*np.asarray(out, dtype=object).ravel())
     return out
 
 

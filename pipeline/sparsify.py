@@ -211,6 +211,10 @@ class BackwardElimination:
             return LMResult(st.X, st.a, np.inf, 0, [], str(err)), np.inf
         return refit, self._score(problem, refit.X, refit.a, trial, refit.cost, self._dense)
 
+    def _adopt(self, st, trial, refit, new_score) -> None:
+        """Make ``trial`` the current support; the threshold keeps comparing with the dense fit."""
+        st.update(trial, refit, new_score if self.criterion != "threshold" else st.score)
+
     def _prune_stage(self, problem, st, stage: list[int], names, path) -> None:
         """Remove parameters of one stage until the criterion refuses a single removal."""
         size = 1
@@ -237,7 +241,7 @@ class BackwardElimination:
                     size = max(1, len(take) // 2)
                     continue
                 return                      # this stage is done: move to the next one
-            st.update(trial, refit, new_score if self.criterion != "threshold" else st.score)
+            self._adopt(st, trial, refit, new_score)
             size = min(2 * size, self.batch)
 
     def _exchange(self, problem, st, removable, names, path, tries: int = 3) -> bool:
@@ -272,7 +276,7 @@ class BackwardElimination:
             self._record(path, PruneStep(f"{names[t]} -> {names[r]}", float(est[(t, r)]), float(refit.cost),
                                          float(new_score), bool(better), [n for n, on in zip(names, trial) if on]))
             if better:
-                st.update(trial, refit, new_score if self.criterion != "threshold" else st.score)
+                self._adopt(st, trial, refit, new_score)
                 return True
         return False
 
