@@ -25,7 +25,7 @@ from lorenz import lorenz, rhs
 
 
 def problem(n_d: int, seed: int = 0):
-    from pipeline.lm import IdentificationProblem, Measurements
+    from mcl.lm import IdentificationProblem, Measurements
 
     t_end = n_d * 1e-3
     t = np.round(np.arange(0, t_end + 1e-9, 0.01), 10)
@@ -59,7 +59,7 @@ class Clock:
 
 
 def run_ours(prob, clock, segments, max_iter=100):
-    from pipeline.lm import levenberg_marquardt
+    from mcl.lm import levenberg_marquardt
 
     X0 = prob.initial_states()
     clock.start()
@@ -68,7 +68,7 @@ def run_ours(prob, clock, segments, max_iter=100):
 
 
 def run_scipy(prob, clock):
-    from pipeline.lm import jacobian_matrix
+    from mcl.lm import jacobian_matrix
 
     X0 = prob.initial_states()
     n = X0.size
@@ -90,7 +90,7 @@ def run_scipy(prob, clock):
 
 
 def step_times(prob, segments):
-    from pipeline.lm import jacobian_matrix, structured_step
+    from mcl.lm import jacobian_matrix, structured_step
 
     blk = prob.blocks(prob.initial_states(), np.zeros(30))
     t0 = time.perf_counter()

@@ -38,7 +38,7 @@ def lorenz(t, x):
 
 
 def data(setting: str, seed: int):
-    from pipeline.lm import Measurements
+    from mcl.lm import Measurements
 
     rng = np.random.default_rng(seed)
     if setting == "a":
@@ -85,8 +85,8 @@ def check_b(terms, x3_hat, x3_true) -> dict:
 
 
 def run(setting: str, segments: int, seed: int = 0, criterion: str | None = None, exchange: bool = True) -> dict:
-    from pipeline.lm import IdentificationProblem
-    from pipeline.sparsify import BackwardElimination, print_step
+    from mcl.lm import IdentificationProblem
+    from mcl.sparsify import BackwardElimination, log_step
 
     meas, sol = data(setting, seed)
     # the paper's weights in both settings. In (a) W_y = I is the noise covariance, so the cost is
@@ -104,7 +104,7 @@ def run(setting: str, segments: int, seed: int = 0, criterion: str | None = None
         X0[:, 2] = 0.0
     names = [f"x{s + 1}:{m}" for s in range(3) for m in MONOMIALS]
     t0 = time.perf_counter()
-    res = BackwardElimination(criterion, threshold=0.1, segments=segments, exchange=exchange, on_step=print_step,
+    res = BackwardElimination(criterion, threshold=0.1, segments=segments, exchange=exchange, on_step=log_step,
                               lm_options={"max_iter": 300, "rtol": 1e-10}).fit(
         prob, X0, np.zeros(30), names, DEGREES * 3)
     terms = {f"x{s + 1}": {} for s in range(3)}
@@ -151,4 +151,7 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
+    import logging
+
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
     main()

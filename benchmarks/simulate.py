@@ -54,11 +54,11 @@ def main(argv=None):
 
     import rumoca as rm
 
-    from pipeline.api import compile_model, simulate
-    from pipeline.data import TimeSeries
-    from pipeline.engine_casadi import CasadiEngine
-    from pipeline.fmu.export import build_fmu
-    from pipeline.model import FmuModel
+    from mcl.api import compile_model, simulate
+    from mcl.data import TimeSeries
+    from mcl.engine_casadi import CasadiEngine
+    from mcl.fmu.export import build_fmu
+    from mcl.model import FmuModel
 
     a, w, phi = multisine()
     t = np.arange(0.0, T_END + DT / 2, DT)

@@ -27,8 +27,8 @@ TRUE_W3, START = 0.01, [0.1, 0.1, 0.1]
 def make_data(noise=0.05, seed=1):
     from make_input import band_limited_noise
 
-    from pipeline.api import compile_model, simulate
-    from pipeline.data import TimeSeries
+    from mcl.api import compile_model, simulate
+    from mcl.data import TimeSeries
 
     t = np.round(np.arange(0.0, 100.0 + 1e-9, 0.05), 10)
     u = band_limited_noise(t, rms=1.0, seed=0)
@@ -40,7 +40,7 @@ def make_data(noise=0.05, seed=1):
 
 def runs(budget: int):
     """(algorithm, optimiser, gradient, constructor kwargs) of every row."""
-    from pipeline.fit import SCIPY_OPTIMISERS
+    from mcl.fit import SCIPY_OPTIMISERS
 
     rows = [(3, opt, False, {"maxiter": 1000, "maxfev": budget}) for opt in SCIPY_OPTIMISERS]
     rows += [(1, opt, False, {"outer": 25, "inner_maxiter": 300, "max_simulations": budget})
@@ -51,7 +51,7 @@ def runs(budget: int):
 
 
 def run_one(context, row):
-    from pipeline.fit import Algorithm1, Algorithm3, FitProblem, LevenbergMarquardt
+    from mcl.fit import Algorithm1, Algorithm3, FitProblem, LevenbergMarquardt
 
     model, data, names = context
     algorithm, optimizer, gradient, kwargs = row
@@ -78,7 +78,7 @@ def plot(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from pipeline.pretrain import draw_feasibility
+    from mcl.pretrain import draw_feasibility
 
     alg1 = [r for r in rows if r["algorithm"] == 1]
     fig = plt.figure(figsize=(6 * len(alg1), 5))
@@ -100,11 +100,11 @@ def main(argv=None):
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args(argv)
 
-    from pipeline.api import compile_model
-    from pipeline.executor import LocalExecutor
-    from pipeline.graph import build_graph
-    from pipeline.swap import swap_component
-    from pipeline.templates import PolynomialTemplate
+    from mcl.api import compile_model
+    from mcl.executor import LocalExecutor
+    from mcl.graph import build_graph
+    from mcl.swap import swap_component
+    from mcl.templates import PolynomialTemplate
 
     data = make_data()
     graph = build_graph([ROOT / "modelica" / "MCL"], "MCL.Examples.CauerFilter")

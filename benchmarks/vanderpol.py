@@ -74,7 +74,7 @@ def vdp(t, x):
 
 
 def data(t_end: float, seed: int):
-    from pipeline.lm import Measurements
+    from mcl.lm import Measurements
 
     t = np.round(np.arange(0, t_end + 1e-9, 0.1), 10)
     sol = solve_ivp(vdp, (0, t_end), [1.0, 0.0], t_eval=t, rtol=1e-10, atol=1e-10)
@@ -110,8 +110,8 @@ def grid_errors(a_dense, a_sparse, states, radius=0.5, n=81):
 
 
 def run(t_end: float, dt: float, seed: int = 0, segments: int = 8, batch: int = 16, tau: float = 0.2) -> dict:
-    from pipeline.lm import IdentificationProblem
-    from pipeline.sparsify import AllAtOnce, BackwardElimination, print_step
+    from mcl.lm import IdentificationProblem
+    from mcl.sparsify import AllAtOnce, BackwardElimination, log_step
 
     meas = data(t_end, seed)
     prob = IdentificationProblem(rhs, lambda t, x: x, 2, 160, meas, dt=dt, Sx=1.0, Sy=1.0,
@@ -120,7 +120,7 @@ def run(t_end: float, dt: float, seed: int = 0, segments: int = 8, batch: int = 
     rng = np.random.default_rng(seed + 1)
     a0 = rng.normal(0, 0.3, 160)            # small random weights and biases
     t0 = time.perf_counter()
-    pruner = BackwardElimination("threshold", threshold=tau, prioritiser=AllAtOnce(), segments=segments, on_step=print_step,
+    pruner = BackwardElimination("threshold", threshold=tau, prioritiser=AllAtOnce(), segments=segments, on_step=log_step,
                                  lm_options={"max_iter": 100, "rtol": 1e-6}, batch=batch)
     res = pruner.fit(prob, prob.initial_states(), a0, nm, keep=[n for n in nm if n.startswith("b")])
     seconds = time.perf_counter() - t0
@@ -185,4 +185,7 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
+    import logging
+
+    logging.basicConfig(level=logging.INFO, format="%(message)s")
     main()

@@ -1,17 +1,26 @@
 """mcl: learn the constitutive laws of Modelica components from measurements.
 
-Public face: :data:`hookimpl` for plugins, the run API (:func:`compile_model`,
-:func:`load_model`, :func:`simulate`) and the error family rooted at :class:`MclError`.
+The public face:
+
+- :func:`compile_model`, :func:`load_model`, :func:`simulate` — Modelica to a model, a model to
+  a :class:`SimulationResult`;
+- :class:`Discovery` (and :func:`discover`) — what a model gets wrong, which component, which
+  law, what gain; :func:`export_library` for a finished run directory;
+- :class:`TimeSeries`, :func:`read_csv` — data; :data:`hookimpl` for plugins; the error family
+  rooted at :class:`MclError`.
+
+Built-in plugins live in :mod:`mcl.plugins`, the MCL Modelica library in :mod:`mcl.modelica`.
 """
+from .api import compile_model, discover, load_model, simulate
+from .data import TimeSeries, read_csv
+from .discovery import Discovery
+from .discovery.export import export_library
 from .errors import MclError
 from .hookspecs import hookimpl
+from .library import mcl_version
+from .simulation import SimulationOptions, SimulationResult
 
-__all__ = ["hookimpl", "MclError", "compile_model", "load_model", "simulate"]
-
-
-def __getattr__(name):  # the run API imports CasADi: load it on first use, not at import
-    if name in ("compile_model", "load_model", "simulate"):
-        from . import api
-
-        return getattr(api, name)
-    raise AttributeError(name)
+__version__ = mcl_version()
+__all__ = ["compile_model", "load_model", "simulate", "discover", "Discovery", "export_library",
+           "TimeSeries", "read_csv", "SimulationOptions", "SimulationResult", "MclError", "hookimpl",
+           "__version__"]

@@ -4,8 +4,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from .data import TimeSeries
-from .plugins import Registry
-from .simulate import SimulationOptions, SimulationResult
+from .registry import Registry
+from .simulation import SimulationOptions, SimulationResult
 
 _registry: Registry | None = None
 
@@ -19,14 +19,16 @@ def registry() -> Registry:
 
 
 def compile_model(sources, model: str, compiler: str | None = None, options: dict | None = None,
-                  reg: Registry | None = None):
-    """Compile Modelica ``sources`` (files or package directories) for class ``model``."""
+                  reg: Registry | None = None, libraries=()):
+    """Compile class ``model`` of Modelica ``sources`` (files or package directories; may be
+    empty when the class is in a library on the path: ``libraries``, ``MODELICAPATH``, MCL)."""
     reg = reg or registry()
-    sources = [Path(s) for s in sources]
+    sources = [Path(s) for s in ([sources] if isinstance(sources, (str, Path)) else sources)]
+    options = {**(options or {}), "libraries": [str(p) for p in libraries]}
     comp = reg.compiler(sources, compiler)
     context = {"sources": sources, "model": model, "compiler": comp.name}
     with reg.stage("compile", context) as stage:
-        stage.result = comp.compile(sources, model, options or {})
+        stage.result = comp.compile(sources, model, options)
     return stage.result
 
 
@@ -56,3 +58,10 @@ def simulate(model, inputs: TimeSeries, params: dict | None = None, t_out=None,
     with reg.stage("simulate", context) as stage:
         stage.result = eng.simulate(model, inputs, params, t_out, options, sensitivities)
     return stage.result
+
+
+def discover(model: str, train, validate=None, **options):
+    """Run a discovery and return the fitted :class:`mcl.Discovery` (options as its constructor's)."""
+    from .discovery import Discovery
+
+    return Discovery(model, **options).fit(train, validate)

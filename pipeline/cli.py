@@ -29,6 +29,10 @@ def _parse_params(pairs) -> dict[str, float]:
 def _model_from_args(args):
     from .api import load_model
 
+    if not args.sources and args.model:
+        from .api import compile_model
+
+        return compile_model([], args.model, args.compiler, libraries=args.library)
     return load_model(args.sources, args.model, args.compiler)
 
 
@@ -36,7 +40,7 @@ def cmd_compile(args) -> int:
     from .api import compile_model
     from .model import CompiledModel
 
-    model = compile_model(args.sources, args.model, args.compiler)
+    model = compile_model(args.sources, args.model, args.compiler, libraries=args.library)
     out = Path(args.output)
     if isinstance(model, CompiledModel):
         o = model.ode
@@ -144,54 +148,24 @@ def cmd_pretrain(args) -> int:
 
 
 def cmd_run(args) -> int:
-    from .discover import run_discovery
-    from .runfile import load_runfile
+    from .discovery import Discovery
 
-    spec = load_runfile(args.runfile)
-    report = run_discovery(spec, force=args.force)
-    cause = report["cause"]
-    m = report["misfit"]
-    print(f"misfit: {'significant' if m['significant'] else 'not significant'} "
-          f"(training RMS {m['train_rms']:.4g}, noise {m['noise_estimate']:.4g})")
-    if cause:
-        g = report["gain"]
-        print(f"cause: {cause['effect']} [{cause['evidence']['strength']}]")
-        val = ("" if g["validation_rms_before"] is None else
-               f"; validation RMS {g['validation_rms_before']:.4g} -> {g['validation_rms_after']:.4g}")
-        print(f"gain: training RMS {g['train_rms_before']:.4g} -> {g['train_rms_after']:.4g}{val}")
-    else:
-        print("cause: none (the model explains the data to the noise level)")
+    discovery = Discovery.from_runfile(args.runfile, force=args.force, verbose=not args.quiet)
+    discovery.fit(discovery.spec().train, discovery.spec().validate)
+    print(discovery)
     return 0
 
 
 def cmd_export(args) -> int:
-    import json
-    import re
+    from .discovery.export import export_library
 
-    run = Path(args.run_dir)
-    report_file = run / "report.json"
-    if not report_file.is_file():
-        raise ConfigError(f"{run} is not a finished run directory (no report.json)")
-    cause = json.loads(report_file.read_text()).get("cause")
-    if not cause:
-        raise ConfigError(f"{run}: the run learned no component (no cause was found)")
-    text = (run / cause["modelica"]).read_text()
-    cls = cause["learned_class"]
-    m = re.search(rf"^\s*model {re.escape(cls)}\b.*?^\s*end {re.escape(cls)};", text, re.S | re.M)
-    if not m:
-        raise ConfigError(f"{run / cause['modelica']}: class {cls} not found")
-    name = args.name
-    out = Path(args.output) / name
-    out.mkdir(parents=True, exist_ok=True)
-    body = "\n".join("  " + line.strip() if line.strip() else "" for line in m.group(0).splitlines())
-    (out / "package.mo").write_text(f'within ;\npackage {name} "Components learned by mcl"\n{body}\nend {name};\n')
-    shutil.copyfile(run / cause["fmu"], out / Path(cause["fmu"]).name)
-    print(f"exported {name}.{cls} ({cause['law']['equation']}) -> {out}/package.mo")
+    out = export_library(args.run_dir, args.output, args.name)
+    print(f"exported the learned component -> {out}/package.mo")
     return 0
 
 
 def cmd_plugins(args) -> int:
-    from .plugins import Registry
+    from .registry import Registry
 
     reg = Registry()
     print("plugins:")
@@ -210,15 +184,31 @@ def cmd_plugins(args) -> int:
     return 0
 
 
+def _version() -> str:
+    from .library import mcl_version
+
+    return mcl_version()
+
+
+def _library_option(p) -> None:
+    p.add_argument("--library", "-L", action="append", default=[], metavar="DIR",
+                   help="a Modelica library, or a directory of libraries, to search for classes "
+                        "(repeatable; MODELICAPATH and MCL are searched too)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mcl", description="Modelica component learning")
+    parser.add_argument("--version", action="version", version=f"mcl {_version()}")
     parser.add_argument("--verbose", action="store_true", help="show tracebacks and debug logs")
+    parser.add_argument("--quiet", "-q", action="store_true", help="print nothing but the result")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("compile", help="compile Modelica sources to an FMU (or a saved model)",
                        description="Compile Modelica sources (.mo files or package directories).")
-    p.add_argument("sources", nargs="+", help=".mo files or package directories")
+    p.add_argument("sources", nargs="*", help=".mo files or package directories (none: --model is "
+                                              "a class of a library on the library path)")
     p.add_argument("--model", "-m", required=True, help="class to compile, e.g. Pkg.Model")
+    _library_option(p)
     p.add_argument("-o", "--output", required=True,
                    help="OUT.fmu for an FMI 2.0 FMU, or a directory for the in-process model")
     p.add_argument("--compiler", help="compiler plugin by name (see 'mcl plugins')")
@@ -227,8 +217,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("simulate", help="simulate a model with measured inputs",
                        description="Simulate an FMU, a saved model, or Modelica sources (--model).")
-    p.add_argument("sources", nargs="+", metavar="MODEL",
+    p.add_argument("sources", nargs="*", metavar="MODEL",
                    help="an FMU, a saved model directory, or Modelica sources with --model")
+    _library_option(p)
     p.add_argument("--model", "-m", help="class name when MODEL is Modelica sources")
     p.add_argument("--input", "-i", required=True, help="CSV: header row, time first, one column per input")
     p.add_argument("--param", "-p", action="append", metavar="NAME=VALUE", help="set a parameter")
@@ -284,12 +275,18 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
-                        format="mcl: %(levelname)s: %(message)s")
+    from .progress import log, quiet
+
+    # mcl's messages on stderr (results go to stdout); the command owns this handler
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    log.addHandler(handler)
+    log.setLevel(logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO)
     for noisy in ("pymoca", "matplotlib"):
         logging.getLogger(noisy).setLevel(logging.DEBUG if args.verbose else logging.ERROR)
     try:
-        return args.func(args)
+        with quiet(args.quiet):
+            return args.func(args)
     except MclError as exc:
         if args.verbose:
             traceback.print_exc()
@@ -298,6 +295,8 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("mcl: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    finally:
+        log.removeHandler(handler)
 
 
 if __name__ == "__main__":  # pragma: no cover

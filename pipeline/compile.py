@@ -11,8 +11,8 @@ class Compiler:
 
     ``name`` picks it (``--compiler NAME``, YAML ``compiler:``); ``automatic`` says whether it may
     be chosen without being named. :meth:`compile` returns a
-    :class:`~pipeline.model.CompiledModel` (in-process engine and FMU export) or an
-    :class:`~pipeline.model.FmuModel` (FMU engine only).
+    :class:`~mcl.model.CompiledModel` (in-process engine and FMU export) or an
+    :class:`~mcl.model.FmuModel` (FMU engine only).
     """
 
     name = ""
@@ -24,8 +24,8 @@ class Compiler:
         return True, ""
 
     def accepts(self, sources: list[Path]) -> bool:
-        """Whether this compiler reads these source files."""
-        return bool(sources) and all(Path(s).suffix == ".mo" or Path(s).is_dir() for s in sources)
+        """Whether this compiler reads these source files (none: the class is on the library path)."""
+        return all(Path(s).suffix == ".mo" or Path(s).is_dir() for s in sources)
 
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
         raise NotImplementedError  # pragma: no cover - interface

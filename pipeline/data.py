@@ -42,6 +42,21 @@ class TimeSeries:
         idx = [self.names.index(n) for n in names]
         return TimeSeries(self.time, self.values[:, idx], list(names), self.source)
 
+    def to_frame(self):
+        """A pandas DataFrame indexed by ``time``, one column per signal."""
+        import pandas as pd
+
+        return pd.DataFrame(self.values, index=pd.Index(self.time, name="time"), columns=list(self.names))
+
+    def fingerprint(self) -> str:
+        """SHA-256 of the names and samples (identifies in-memory data in a report)."""
+        import hashlib
+
+        h = hashlib.sha256(repr(list(self.names)).encode())
+        h.update(np.ascontiguousarray(self.time).tobytes())
+        h.update(np.ascontiguousarray(self.values).tobytes())
+        return h.hexdigest()
+
     def validate(self) -> "TimeSeries":
         """Raise a DataError for NaN/inf values or a time column that is not increasing."""
         if len(self.time) < 2:
@@ -59,6 +74,37 @@ class TimeSeries:
             raise DataError(f"column '{self.names[c]}' has a missing or non-finite value at data row "
                             f"{r + 1} (t = {self.time[r]:g})", where=self.source)
         return self
+
+
+def as_timeseries(data, what: str = "data") -> TimeSeries:
+    """A :class:`TimeSeries` from a TimeSeries, a pandas DataFrame (a ``time`` column, or the
+    index), a NumPy structured array or a mapping of columns (with ``time``), or a CSV path."""
+    if isinstance(data, TimeSeries):
+        return data.validate()
+    if isinstance(data, (str, os.PathLike)):
+        return read_csv(data)
+    if hasattr(data, "columns") and hasattr(data, "index"):   # a pandas DataFrame
+        cols = [str(c) for c in data.columns]
+        if "time" in cols:
+            k = cols.index("time")
+            arr = np.asarray(data.to_numpy(dtype=float))
+            return TimeSeries(arr[:, k], np.delete(arr, k, axis=1), cols[:k] + cols[k + 1:], f"<{what}>").validate()
+        return TimeSeries(np.asarray(data.index, dtype=float), data.to_numpy(dtype=float), cols,
+                          f"<{what}>").validate()
+    if isinstance(data, np.ndarray) and data.dtype.names:
+        names = list(data.dtype.names)
+        columns = {n: data[n] for n in names}
+    elif isinstance(data, dict):
+        columns = data
+    else:
+        raise DataError(f"{what}: give a pandas DataFrame, a NumPy structured array, a mapping of "
+                        f"columns or a TimeSeries, not {type(data).__name__}")
+    if "time" not in columns:
+        raise DataError(f"{what}: no 'time' column (columns: {', '.join(map(str, columns))})")
+    names = [str(n) for n in columns if n != "time"]
+    values = np.column_stack([np.asarray(columns[n], dtype=float) for n in names]) if names else None
+    t = np.asarray(columns["time"], dtype=float)
+    return TimeSeries(t, values if values is not None else np.empty((len(t), 0)), names, f"<{what}>").validate()
 
 
 def read_csv(path) -> TimeSeries:

@@ -15,7 +15,7 @@ import numpy as np
 from .data import TimeSeries
 from .errors import DataError
 from .model import CompiledModel
-from .simulate import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
+from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
                        quiet_native_output)
 
 N_CHUNKS = 10

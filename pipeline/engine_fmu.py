@@ -21,7 +21,7 @@ import numpy as np
 from .data import TimeSeries
 from .errors import DataError
 from .model import FmuModel
-from .simulate import Engine, SimulationOptions, SimulationResult, prepare_inputs
+from .simulation import Engine, SimulationOptions, SimulationResult, prepare_inputs
 
 
 class FmuEngine(Engine):

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from .errors import ConfigError
+from .progress import Progress
 
 
 @dataclass
@@ -26,32 +27,6 @@ class TaskFailed:
 
     def __bool__(self) -> bool:
         return False
-
-
-class Progress:
-    """A progress line on stderr: rewritten in place on a terminal, every 10% otherwise."""
-
-    def __init__(self, label: str, total: int, stream=None, enabled: bool = True):
-        self.label, self.total, self.done, self.failed = label, total, 0, 0
-        self.stream = stream or sys.stderr
-        self.enabled = enabled and total > 0
-        self.tty = getattr(self.stream, "isatty", lambda: False)()
-        self.start = time.perf_counter()
-        self._next_report = 0.1
-
-    def update(self, ok: bool = True) -> None:
-        self.done += 1
-        self.failed += not ok
-        if not self.enabled:
-            return
-        frac = self.done / self.total
-        if self.tty or frac >= self._next_report or self.done == self.total:
-            self._next_report = frac + 0.1
-            el = time.perf_counter() - self.start
-            eta = el / self.done * (self.total - self.done)
-            end = "\n" if (not self.tty or self.done == self.total) else ""
-            print(f"\r{self.label}: {self.done}/{self.total} ({self.failed} failed) "
-                  f"{el:.0f}s elapsed, ~{eta:.0f}s left", end=end, file=self.stream, flush=True)
 
 
 class Executor:
@@ -115,7 +90,7 @@ class LocalExecutor(Executor):
     def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True, on_result=None):
         from multiprocessing.connection import wait
 
-        bar = Progress(label, len(items), enabled=progress)
+        bar = Progress(label, len(items), workers=self.workers, enabled=progress)
         results: dict[int, Any] = {}
         queue = list(range(len(items)))[::-1]
         running: dict[Any, tuple[int, Any, float]] = {}  # connection -> (index, process, start)
@@ -183,15 +158,17 @@ class DaskExecutor(Executor):
                               "(pip install 'mcl[dask]')") from None
         if address:
             self.cluster, self.client = None, Client(address)
+            self.workers = max(1, len(self.client.scheduler_info().get("workers", {})))
         else:
-            self.cluster = LocalCluster(n_workers=workers or 2, threads_per_worker=1,
+            self.workers = workers or 2
+            self.cluster = LocalCluster(n_workers=self.workers, threads_per_worker=1,
                                         processes=True, dashboard_address=None)
             self.client = Client(self.cluster)
 
     def map(self, fn, items, context=None, timeout=300.0, label="batch", progress=True, on_result=None):
         from distributed import as_completed
 
-        bar = Progress(label, len(items), enabled=progress)
+        bar = Progress(label, len(items), workers=self.workers, enabled=progress)
         ctx = self.client.scatter(context, broadcast=True, hash=False) if context is not None else None
         futures = [self.client.submit(_dask_task, fn, ctx, item, pure=False) for item in items]
         index = {f.key: k for k, f in enumerate(futures)}

@@ -115,7 +115,7 @@ class FitProblem:
                  fixed: dict | None = None, options=None, normalise: str | None = "start",
                  engine=None, recorder: Recorder | None = None):
         from .engine_casadi import CasadiEngine
-        from .simulate import SimulationOptions
+        from .simulation import SimulationOptions
 
         self.model, self.parameters = model, list(parameters)
         missing = [p for p in self.parameters if p not in model.parameters]

@@ -218,9 +218,9 @@ def _connector(name, sym, owner) -> Connector | None:
     return Connector(name, cls.full_name, potential, flow)
 
 
-def build_graph(sources, model: str) -> SystemGraph:
-    """Parse ``sources`` and build the connection graph of class ``model``."""
-    srcs = collect_sources(sources)
+def build_graph(sources, model: str, libraries=()) -> SystemGraph:
+    """Parse ``sources`` (and the libraries they use) and build the connection graph of ``model``."""
+    srcs = collect_sources(sources, model, libraries)
     tree = parse(srcs)
     cls = find_class(tree, model)
     symbols, equations = _members(cls)

@@ -1,7 +1,7 @@
 """Every hook of mcl, in one place: read this module to learn the architecture.
 
 Built-in plugins (``plugins/``) and third-party plugins (entry-point group ``mcl``) implement
-these with :data:`pipeline.hookimpl`. Capability hooks return classes carrying a unique ``name``
+these with :data:`mcl.hookimpl`. Capability hooks return classes carrying a unique ``name``
 (a duplicate name is an error); the YAML file and the command line pick a class by that name.
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ hookimpl = pluggy.HookimplMarker(PROJECT)
 
 @hookspec
 def mcl_compilers() -> list[type]:
-    """Register compiler classes (subclasses of :class:`pipeline.compile.Compiler`).
+    """Register compiler classes (subclasses of :class:`mcl.compile.Compiler`).
 
     Called once per plugin manager; all results are collected. When a user names no compiler,
     the first registered compiler that is available and accepts the sources wins (plugins
@@ -29,7 +29,7 @@ def mcl_compilers() -> list[type]:
 
 @hookspec
 def mcl_engines() -> list[type]:
-    """Register simulation engine classes (subclasses of :class:`pipeline.simulate.Engine`).
+    """Register simulation engine classes (subclasses of :class:`mcl.simulation.Engine`).
 
     All results are collected; a model is simulated by the first engine that accepts it
     (plugins registered later are asked first), unless the user names one.
@@ -38,7 +38,7 @@ def mcl_engines() -> list[type]:
 
 @hookspec
 def mcl_templates() -> list[type]:
-    """Register component template classes (subclasses of :class:`pipeline.templates.Template`).
+    """Register component template classes (subclasses of :class:`mcl.templates.Template`).
 
     All results are collected; a run file or command picks one by ``name`` and passes its
     options to the constructor.
@@ -48,13 +48,13 @@ def mcl_templates() -> list[type]:
 @hookspec
 def mcl_feasibility_models() -> list[type]:
     """Register feasibility model classes q(w; beta) (subclasses of
-    :class:`pipeline.feasibility.FeasibilityModel`). All results are collected; picked by name.
+    :class:`mcl.feasibility.FeasibilityModel`). All results are collected; picked by name.
     """
 
 
 @hookspec
 def mcl_executors() -> list[type]:
-    """Register batch executor classes (subclasses of :class:`pipeline.executor.Executor`).
+    """Register batch executor classes (subclasses of :class:`mcl.executor.Executor`).
 
     All results are collected; picked by name (``local`` by default).
     """
@@ -63,8 +63,20 @@ def mcl_executors() -> list[type]:
 @hookspec
 def mcl_prioritisers() -> list[type]:
     """Register prioritiser classes for backward elimination (subclasses of
-    :class:`pipeline.sparsify.Prioritiser`): which parameters may be removed next, in stages.
+    :class:`mcl.sparsify.Prioritiser`): which parameters may be removed next, in stages.
     All results are collected; picked by name (``degree`` by default).
+    """
+
+
+@hookspec
+def mcl_option_schemas() -> dict[str, dict[str, dict]]:
+    """The JSON Schemas of a plugin's own options, checked before any run starts.
+
+    Return ``{section: {name: schema}}`` with section ``executor``, ``template`` (or any other
+    section with kinds), e.g. ``{"executor": {"inline": {"type": "object", "properties":
+    {"workers": {"type": "integer", "minimum": 1}}, "additionalProperties": False}}}``. The
+    schema describes the options beside ``kind``/``name``; a kind without a schema is not checked.
+    All results are merged; a later plugin's schema for the same name wins.
     """
 
 

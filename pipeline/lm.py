@@ -403,7 +403,7 @@ class IdentificationProblem:
 
     def blocks(self, X: np.ndarray, a: np.ndarray) -> Blocks:
         """Residual blocks and their Jacobians at states X (N, n) and parameters a."""
-        from .simulate import quiet_native_output
+        from .simulation import quiet_native_output
 
         N, m, n, p = self.N, self.m, self.n, self.p
         out = [np.zeros((N, m)), np.zeros((N, n, m)), np.zeros((N, n, m)), np.zeros((N, p, m))]

@@ -22,7 +22,7 @@ _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe")
 
 @dataclass
 class CompiledModel:
-    """A model compiled to CasADi functions (see :class:`pipeline.structure.Ode`)."""
+    """A model compiled to CasADi functions (see :class:`mcl.structure.Ode`)."""
 
     name: str
     ode: Ode

@@ -4,7 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .data import TimeSeries
-from .simulate import SimulationResult
+from .simulation import SimulationResult
 
 
 def plot_simulation(result: SimulationResult, inputs: TimeSeries, path, title: str = "") -> Path:

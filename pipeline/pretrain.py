@@ -28,7 +28,7 @@ from .data import TimeSeries
 from .errors import MclError
 from .executor import TaskFailed
 from .graph import Component, Connector
-from .simulate import SimulationOptions
+from .simulation import SimulationOptions
 from .swap import write_package
 from .templates import Template
 

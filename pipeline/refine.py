@@ -2,9 +2,9 @@
 
 ``refinement: {method: full-discretisation}`` in a run file: instead of fitting the template by
 repeated simulation, the candidate model's states at every sample time and the template's terms
-are the unknowns of the least-squares problem of eq. (12) (:mod:`pipeline.lm`), with
-f = the compiled model's right-hand side (:class:`pipeline.lm.CompiledRhs`) and h = its outputs.
-Backward elimination (:mod:`pipeline.sparsify`) then prunes the terms stage-wise by degree.
+are the unknowns of the least-squares problem of eq. (12) (:mod:`mcl.lm`), with
+f = the compiled model's right-hand side (:class:`mcl.lm.CompiledRhs`) and h = its outputs.
+Backward elimination (:mod:`mcl.sparsify`) then prunes the terms stage-wise by degree.
 The result is checked by simulation, so candidates stay comparable with each other and with the
 nominal model.
 
@@ -30,7 +30,7 @@ def refine(model, data: TimeSeries, names: list[str], w0, criterion: str, terms=
     Returns (w, active, path): the full parameter vector, which terms survive and the pruning
     path as dicts (removed, estimate, cost, score, accepted)."""
     from .api import simulate
-    from .discover import noise_estimate
+    from .stats import noise_estimate
     from .lm import CompiledRhs, IdentificationProblem, Measurements
     from .sparsify import BackwardElimination
 

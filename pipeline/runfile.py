@@ -1,8 +1,9 @@
-"""Run files (``mcl run run.yaml``): parsed, validated in one pass, every problem with its line.
+"""Run files (``mcl run run.yaml``): a JSON Schema checked in one pass, every problem with its line.
 
     model:
+      name: Lib.Systems.Plant    # the class to learn in
       sources: [Lib.mo]          # .mo files or package directories, relative to this file
-      name: Lib.Systems.Plant    # or `fmu: plant.fmu`
+      libraries: [../libs]       # optional: more of the library path (besides MODELICAPATH)
     data:
       train: train.csv
       validate: validate.csv     # optional held-out data
@@ -12,32 +13,74 @@
 Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations`` per
 fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully),
 ``refinement`` (``criterion``: bic or aic; ``method``: simulation, the default, or
-full-discretisation for paper 004's states-and-parameters least squares), ``executor`` (``kind``, ``workers``),
-``second`` (``model``/``data`` of another configuration where the learned component is placed),
-``report`` (``title`` of report.html, ``plots: false`` for report.json only).
+full-discretisation for paper 004's states-and-parameters least squares), ``executor``
+(``kind`` and that kind's options), ``second`` (``model``/``data`` of another configuration where
+the learned component is placed), ``report`` (``title`` of report.html, ``plots: false``).
+
+The options of each executor and template kind are checked against the schema its plugin gives
+(hook ``mcl_option_schemas``), so a third-party plugin's options are checked like a built-in's,
+before anything is compiled.
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
 from .errors import ConfigError, MclError
+from .registry import did_you_mean
 
-SCHEMA = {
-    "model": {"sources", "name", "fmu"},
-    "data": {"train", "validate"},
-    "unknown": None,
-    "output": None,
-    "templates": None,
-    "fitting": {"max_simulations", "screen"},
-    "refinement": {"criterion", "method"},
-    "executor": {"kind", "workers", "address"},
-    "second": {"model", "data", "component"},
-    "report": {"title", "plots"},
-}
 DEFAULT_TEMPLATES = [{"name": "polynomial", "lhs": ["i"], "rhs": ["v", "v^2", "v^3"]}]
+CRITERIA = ("bic", "aic")
+METHODS = ("simulation", "full-discretisation")
+
+_PATH = {"type": "string", "minLength": 1}
+_PATHS = {"anyOf": [_PATH, {"type": "array", "items": _PATH}]}
+_NAME = {"type": "string", "pattern": r"^[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*$"}
+_MODEL = {"type": "object", "additionalProperties": False, "required": ["name"],
+          "properties": {"name": _NAME, "sources": _PATHS, "libraries": _PATHS, "fmu": _PATH}}
+
+
+def schema(option_schemas: dict, kinds: dict) -> dict:
+    """The run file's JSON Schema; ``kinds`` = installed names per section (executor, template)."""
+    return {
+        "type": "object", "additionalProperties": False, "required": ["model", "data", "output"],
+        "properties": {
+            "model": _MODEL,
+            "data": {"type": "object", "additionalProperties": False, "required": ["train"],
+                     "properties": {"train": _PATH, "validate": _PATH}},
+            "unknown": _NAME,
+            "output": _PATH,
+            "templates": {"type": "array", "minItems": 1, "items": _kind_schema(
+                "name", kinds["template"], option_schemas.get("template", {}), allow_string=True)},
+            "fitting": {"type": "object", "additionalProperties": False, "properties": {
+                "max_simulations": {"type": "integer", "minimum": 5},
+                "screen": {"type": "integer", "minimum": 1}}},
+            "refinement": {"type": "object", "additionalProperties": False, "properties": {
+                "criterion": {"enum": list(CRITERIA)}, "method": {"enum": list(METHODS)}}},
+            "executor": _kind_schema("kind", kinds["executor"], option_schemas.get("executor", {})),
+            "second": {"type": "object", "additionalProperties": False, "required": ["model", "data"],
+                       "properties": {"model": _MODEL, "data": _PATH, "component": _NAME}},
+            "report": {"type": "object", "additionalProperties": False, "properties": {
+                "title": {"type": "string"}, "plots": {"type": "boolean"}}},
+        },
+    }
+
+
+def _kind_schema(key: str, names, per_kind: dict, allow_string: bool = False) -> dict:
+    """``{key: <one of names>, ...options}``, the options checked by that kind's own schema."""
+    rules = []
+    for name in names:
+        own = per_kind.get(name)
+        if own is None:
+            continue
+        props = {key: {}, **own.get("properties", {})}
+        then = {**own, "properties": props}
+        rules.append({"if": {"properties": {key: {"const": name}}, "required": [key]}, "then": then})
+    obj = {"type": "object", "required": [key], "properties": {key: {"enum": list(names)}}, "allOf": rules}
+    return {"anyOf": [{"enum": list(names)}, obj]} if allow_string else obj
 
 
 @dataclass
@@ -57,126 +100,215 @@ class RunSpec:
     executor: dict = field(default_factory=lambda: {"kind": "local"})
     second: dict | None = None
     report: dict = field(default_factory=dict)
+    libraries: list[Path] = field(default_factory=list)
+
+    def fingerprint(self) -> dict:
+        """SHA-256 of the run file and the data files (recorded in report.json)."""
+        files = {"run_file": self.path, "train": self.train, "validate": self.validate}
+        return {k: _sha256(p) for k, p in files.items() if p is not None}
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
 
 
 def _lines(node, prefix="", out=None) -> dict[str, int]:
-    """Dotted key -> line number (1-based) from a composed YAML node tree."""
+    """Dotted key (list items by index) -> line number (1-based) from a composed YAML node tree."""
     out = {} if out is None else out
     if isinstance(node, yaml.MappingNode):
         for k, v in node.value:
             key = f"{prefix}.{k.value}" if prefix else str(k.value)
             out[key] = k.start_mark.line + 1
             _lines(v, key, out)
+    elif isinstance(node, yaml.SequenceNode):
+        for n, v in enumerate(node.value):
+            key = f"{prefix}.{n}" if prefix else str(n)
+            out[key] = v.start_mark.line + 1
+            _lines(v, key, out)
     return out
 
 
-def load_runfile(path) -> RunSpec:
-    """Parse and validate ``path``; all problems are reported together (file:line: key: why)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError("no such run file", where=str(path))
-    text = path.read_text()
-    try:
-        node = yaml.compose(text)
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"{path}:{mark.line + 1}" if mark else str(path)
-        raise ConfigError(f"not valid YAML: {getattr(exc, 'problem', exc)}", where=where) from None
-    if not isinstance(raw, dict):
-        raise ConfigError("the run file must be a mapping of sections", where=str(path))
-    lines = _lines(node)
-    problems: list[str] = []
+class _Problems:
+    """Problems of one run file, each ``file:line: key: why``."""
 
-    def problem(key, why):
-        problems.append(f"{path}:{lines.get(key, 1)}: {key}: {why}")
+    def __init__(self, path: Path, lines: dict):
+        self.path, self.lines, self.items = path, lines, []
 
-    for key, value in raw.items():
-        if key not in SCHEMA:
-            problem(key, f"unknown section (known: {', '.join(SCHEMA)})")
-        elif SCHEMA[key] and isinstance(value, dict):
-            for sub in value:
-                if sub not in SCHEMA[key]:
-                    problem(f"{key}.{sub}", f"unknown key (known: {', '.join(sorted(SCHEMA[key]))})")
-    base = path.parent
-    model = raw.get("model") or {}
-    data = raw.get("data") or {}
-    if not isinstance(model, dict) or not model:
-        problem("model", "missing: give model.sources and model.name (or model.fmu)")
-        model = {}
-    if "fmu" in model:
-        problem("model.fmu", "discovery needs the Modelica sources (the template is swapped into "
-                             "them): give model.sources and model.name")
-    sources = model.get("sources", [])
-    sources = [sources] if isinstance(sources, str) else list(sources or [])
-    src_paths = [base / s for s in sources]
-    if model and not sources:
-        problem("model.sources", "missing")
-    for s, p in zip(sources, src_paths):
-        if not p.exists():
-            problem("model.sources", f"'{s}' does not exist")
-    if model and not model.get("name"):
-        problem("model.name", "missing (the class to learn in, e.g. Lib.Systems.Plant)")
-    if not isinstance(data, dict) or "train" not in data:
-        problem("data.train", "missing (a CSV with time, the model's inputs and measured outputs)")
-        data = data if isinstance(data, dict) else {}
-    files = {}
-    for key in ("train", "validate"):
-        if key in data:
-            p = base / str(data[key])
-            files[key] = p
-            if not p.is_file():
-                problem(f"data.{key}", f"'{data[key]}' does not exist")
-    if "output" not in raw:
-        problem("output", "missing (the run directory)")
-    criterion = (raw.get("refinement") or {}).get("criterion", "bic")
-    if criterion not in ("bic", "aic"):
-        problem("refinement.criterion", f"'{criterion}': choose bic or aic")
-    method = (raw.get("refinement") or {}).get("method", "simulation")
-    if method not in ("simulation", "full-discretisation"):
-        problem("refinement.method", f"'{method}': choose simulation or full-discretisation")
-    fitting = raw.get("fitting") or {}
-    budget = fitting.get("max_simulations", 60)
-    if not isinstance(budget, int) or budget < 5:
-        problem("fitting.max_simulations", "a whole number of at least 5")
-    screen = fitting.get("screen", 3)
-    if not isinstance(screen, int) or screen < 1:
-        problem("fitting.screen", "how many screened candidates to fit fully: a whole number >= 1")
-    second = raw.get("second")
-    if second is not None:
-        if not isinstance(second, dict) or not isinstance(second.get("model"), dict) or "data" not in second:
-            problem("second", "give second.model (sources, name) and second.data (a CSV)")
-        else:
-            for s in second["model"].get("sources", []):
-                if not (base / s).exists():
-                    problem("second.model", f"'{s}' does not exist")
-            if not (base / str(second["data"])).is_file():
-                problem("second.data", f"'{second['data']}' does not exist")
-    report = raw.get("report") or {}
-    if not isinstance(report, dict) or not isinstance(report.get("plots", True), bool):
-        problem("report", "report.title (text) and report.plots (true or false)")
-    templates = raw.get("templates", DEFAULT_TEMPLATES)
-    if not isinstance(templates, list) or not templates:
-        problem("templates", "a non-empty list of templates (name and options)")
-    if problems:
-        raise ConfigError("\n".join(problems))
-    spec = RunSpec(path=path, sources=src_paths, model_name=str(model["name"]), train=files["train"],
-                   validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
-                   output=base / str(raw["output"]), templates=templates, max_simulations=budget, screen=screen,
-                   criterion=criterion, refinement_method=method, executor=dict(raw.get("executor") or {"kind": "local"}),
-                   second=raw.get("second"), report=report if isinstance(report, dict) else {})
-    _check_data(spec, lines)
+    def add(self, key: str, why: str) -> None:
+        line = self.lines.get(key)
+        parent = key
+        while line is None and "." in parent:
+            parent = parent.rsplit(".", 1)[0]
+            line = self.lines.get(parent)
+        self.items.append((line or 1, f"{self.path}:{line or 1}: {key or '(top level)'}: {why}"))
+
+    def about(self, key: str) -> bool:
+        """Whether a problem was reported for ``key`` or below it."""
+        return any(f": {key}:" in text or f": {key}." in text for _, text in self.items)
+
+    def raise_if_any(self) -> None:
+        if self.items:
+            ordered = sorted(dict.fromkeys(self.items), key=lambda item: item[0])
+            raise ConfigError("\n".join(text for _, text in ordered))
+
+
+def _describe(error, problems: _Problems) -> None:
+    """One jsonschema error as run-file problems, with the key path and a hint."""
+    key = ".".join(str(p) for p in error.absolute_path)
+    v, inst = error.validator, error.instance
+    if v in ("anyOf", "oneOf") and error.context:
+        # a template given as a mapping or as a name: report the problems of the form it has
+        branch = 1 if isinstance(inst, dict) else 0
+        own = [e for e in error.context if e.relative_schema_path[0] == branch] or error.context
+        for e in own:
+            _describe(e, problems)
+        return
+    if v == "additionalProperties" and isinstance(inst, dict):
+        known = list(error.schema.get("properties", {}))
+        for extra in [k for k in inst if k not in known]:
+            problems.add(f"{key}.{extra}" if key else str(extra),
+                         f"unknown key{did_you_mean(extra, known)} (known: {', '.join(known) or 'none'})")
+    elif v == "required":
+        missing = [r for r in error.validator_value if r not in (inst or {})]
+        for r in missing:
+            problems.add(f"{key}.{r}" if key else r, "missing")
+    elif v == "enum":
+        problems.add(key, f"'{inst}' is not one of {', '.join(map(str, error.validator_value))}"
+                          f"{did_you_mean(inst, error.validator_value)}")
+    elif v == "type":
+        want = error.validator_value
+        problems.add(key, f"must be {' or '.join(want) if isinstance(want, list) else want}, "
+                          f"not {type(inst).__name__} ({inst!r})"[:200])
+    elif v in ("minimum", "maximum", "minItems", "minLength"):
+        n = error.validator_value
+        problems.add(key, {"minimum": f"{inst!r} is less than {n}", "maximum": f"{inst!r} is more than {n}",
+                           "minItems": f"needs at least {n} item(s)", "minLength": "must not be empty"}[v])
+    elif v == "pattern":
+        problems.add(key, f"'{inst}' is not a valid name here")
+    else:
+        problems.add(key, error.message[:200])
+
+
+def load_runfile(path, registry=None) -> RunSpec:
+    """Parse and validate ``path``: the schema, the files it names, the templates' options and
+    the data against the model; every problem together (file:line: key: why)."""
+    spec, lines = parse_runfile(path, registry)
+    check_data(spec, lines)
     return spec
 
 
-def _check_data(spec: RunSpec, lines: dict) -> None:
+def _read_yaml(path: Path):
+    if not path.is_file():
+        raise ConfigError("no such run file", where=str(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+        node = yaml.compose(text)
+        raw = yaml.safe_load(text)
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", where=str(path)) from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{path}:{mark.line + 1}" if mark else str(path)
+        raise ConfigError(f"not valid YAML: {getattr(exc, 'problem', None) or exc}", where=where) from None
+    except RecursionError:
+        raise ConfigError("not valid YAML: nested too deeply", where=str(path)) from None
+    except OSError as exc:
+        raise ConfigError(f"cannot read: {exc.strerror}", where=str(path)) from None
+    if not isinstance(raw, dict):
+        raise ConfigError("the run file must be a mapping of sections (model, data, output, ...)",
+                          where=str(path))
+    return raw, _lines(node)
+
+
+def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
+    """The run file checked without touching the model or the data (no compile)."""
+    import jsonschema
+
+    from .api import registry as default_registry
+
+    path = Path(path)
+    raw, lines = _read_yaml(path)
+    reg = registry or default_registry()
+    problems = _Problems(path, lines)
+    kinds = {"template": list(reg.templates), "executor": list(reg.executors)}
+    validator = jsonschema.Draft202012Validator(schema(reg.option_schemas, kinds))
+    for error in sorted(validator.iter_errors(raw), key=lambda e: list(map(str, e.absolute_path))):
+        _describe(error, problems)
+    files, sources, libraries = _check_files(raw, path.parent, problems, reg)
+    problems.raise_if_any()
+    model, base = raw["model"], path.parent
+    output = base / str(raw["output"])
+    fitting, refinement = raw.get("fitting") or {}, raw.get("refinement") or {}
+    spec = RunSpec(path=path, sources=sources, model_name=model["name"], train=files["train"],
+                   validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
+                   output=output, templates=raw.get("templates", DEFAULT_TEMPLATES),
+                   max_simulations=fitting.get("max_simulations", 60), screen=fitting.get("screen", 3),
+                   criterion=refinement.get("criterion", "bic"),
+                   refinement_method=refinement.get("method", "simulation"),
+                   executor=dict(raw.get("executor") or {"kind": "local"}), second=raw.get("second"),
+                   report=dict(raw.get("report") or {}), libraries=libraries)
+    return spec, lines
+
+
+def _strings(x) -> list[str]:
+    return [x] if isinstance(x, str) else [s for s in (x if isinstance(x, list) else []) if isinstance(s, str)]
+
+
+def _check_files(raw: dict, base: Path, problems: _Problems, reg):
+    """Files the run file names exist, templates build; checked where the shape allows, so
+    these problems come together with the schema's."""
+    section = (lambda k: raw.get(k) if isinstance(raw.get(k), dict) else {})
+    model, data, second = section("model"), section("data"), section("second")
+    sources = [base / s for s in _strings(model.get("sources"))]
+    libraries = [base / s for s in _strings(model.get("libraries"))]
+    if "fmu" in model:
+        problems.add("model.fmu", "discovery needs the Modelica sources (the template is swapped "
+                                  "into them): give model.sources and model.name")
+    for key, names in (("model.sources", _strings(model.get("sources"))),
+                       ("model.libraries", _strings(model.get("libraries")))):
+        for name in names:
+            if not (base / name).exists():
+                problems.add(key, f"'{name}' does not exist")
+    files = {k: base / v for k, v in data.items() if k in ("train", "validate") and isinstance(v, str)}
+    for key, p in files.items():
+        if not p.is_file():
+            problems.add(f"data.{key}", f"'{data[key]}' " + ("is not a file" if p.exists() else "does not exist"))
+    if second:
+        for name in _strings((second.get("model") or {}).get("sources") if isinstance(second.get("model"), dict) else None):
+            if not (base / name).exists():
+                problems.add("second.model.sources", f"'{name}' does not exist")
+        if isinstance(second.get("data"), str):
+            if not (base / second["data"]).is_file():
+                problems.add("second.data", f"'{second['data']}' does not exist")
+            elif not second["data"].lower().endswith(".csv"):
+                problems.add("second.data", f"'{second['data']}' is not a CSV file")
+    templates = raw.get("templates", DEFAULT_TEMPLATES)
+    for k, tpl in enumerate(templates if isinstance(templates, list) else []):
+        name = tpl if isinstance(tpl, str) else tpl.get("name") if isinstance(tpl, dict) else None
+        if name in reg.templates and not problems.about(f"templates.{k}"):
+            try:
+                reg.template(tpl)
+            except MclError as exc:
+                problems.add(f"templates.{k}", exc.message)
+    if isinstance(raw.get("output"), str):
+        output = base / raw["output"]
+        if output.exists() and not output.is_dir():
+            problems.add("output", f"'{raw['output']}' is a file, not a run directory")
+    return files, sources, libraries
+
+
+def check_data(spec: RunSpec, lines: dict) -> None:
     """The data files against the model: readable, columns present (one pass over both files)."""
     from .api import compile_model
     from .data import read_csv
 
-    problems = []
+    problems = _Problems(spec.path, lines)
     try:
-        model = compile_model(spec.sources, spec.model_name)
+        model = compile_model(spec.sources, spec.model_name, libraries=spec.libraries)
     except MclError as exc:
         raise ConfigError(f"{spec.path}:{lines.get('model.name', 1)}: model: {exc}") from None
     for key, p in (("train", spec.train), ("validate", spec.validate)):
@@ -185,27 +317,31 @@ def _check_data(spec: RunSpec, lines: dict) -> None:
         try:
             ts = read_csv(p)
         except MclError as exc:
-            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {exc}")
+            problems.add(f"data.{key}", str(exc))
             continue
-        missing = [u for u in model.input_names if u not in ts.names]
-        if missing:
-            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {p.name} lacks the "
-                            f"model input column(s) {', '.join(missing)}")
-        extra = [c for c in ts.names if c not in model.input_names and c not in model.output_names]
-        if extra:
-            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: column(s) "
-                            f"{', '.join(extra)} of {p.name} are not inputs or outputs of {spec.model_name} "
-                            f"(inputs: {', '.join(model.input_names) or 'none'}; outputs: "
-                            f"{', '.join(model.output_names)})")
-        if not [o for o in model.output_names if o in ts.names]:
-            problems.append(f"{spec.path}:{lines.get('data.' + key, 1)}: data.{key}: {p.name} has none of "
-                            f"the model outputs ({', '.join(model.output_names)})")
+        for why in model_column_problems(model, ts, spec.model_name, p.name):
+            problems.add(f"data.{key}", why)
     if spec.unknown != "auto":
         from .graph import build_graph
 
-        comps = build_graph(spec.sources, spec.model_name).components
+        comps = build_graph(spec.sources, spec.model_name, libraries=spec.libraries).components
         if spec.unknown not in comps:
-            problems.append(f"{spec.path}:{lines.get('unknown', 1)}: unknown: no component "
-                            f"'{spec.unknown}' in {spec.model_name}")
-    if problems:
-        raise ConfigError("\n".join(problems))
+            problems.add("unknown", f"no component '{spec.unknown}' in {spec.model_name}"
+                                    f"{did_you_mean(spec.unknown, comps)}")
+    problems.raise_if_any()
+
+
+def model_column_problems(model, ts, model_name: str, label: str) -> list[str]:
+    """What keeps the time series ``ts`` (called ``label``) from being data for ``model``."""
+    out = []
+    missing = [u for u in model.input_names if u not in ts.names]
+    if missing:
+        out.append(f"{label} lacks the model input column(s) {', '.join(missing)}")
+    extra = [c for c in ts.names if c not in model.input_names and c not in model.output_names]
+    if extra:
+        out.append(f"column(s) {', '.join(extra)} of {label} are not inputs or outputs of {model_name} "
+                   f"(inputs: {', '.join(model.input_names) or 'none'}; outputs: "
+                   f"{', '.join(model.output_names)})")
+    if not [o for o in model.output_names if o in ts.names]:
+        out.append(f"{label} has none of the model outputs ({', '.join(model.output_names)})")
+    return out

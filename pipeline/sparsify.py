@@ -1,7 +1,7 @@
 """Backward elimination: from a dense fitted law to a sparse, readable one (paper 004, sec. V).
 
 Each round estimates, for every remaining candidate parameter, the minimal cost after setting
-it to zero (Algorithm 3, :func:`pipeline.lm.removal_estimate`: the state eliminations are
+it to zero (Algorithm 3, :func:`mcl.lm.removal_estimate`: the state eliminations are
 shared), retrains the best candidate with Levenberg-Marquardt, and accepts the removal if the
 criterion says so:
 
@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .errors import ConfigError
+from .progress import log
 from .lm import (BlockEvaluationFailed, IdentificationProblem, LMResult, levenberg_marquardt,
                  reduced_parameter_rows, removal_estimate, restrict)
 
@@ -281,10 +282,10 @@ class BackwardElimination:
         return False
 
 
-def print_step(step: PruneStep) -> None:
-    """A progress line per step (``BackwardElimination(on_step=print_step)``)."""
+def log_step(step: PruneStep) -> None:
+    """A progress message per step (``BackwardElimination(on_step=log_step)``), logger ``mcl``."""
     what = "dense fit" if step.removed is None else ("accepted: " if step.accepted else "refused: ") + step.removed
-    print(f"    {len(step.active):3d} terms, cost {step.cost:.6g}  {what}", flush=True)
+    log.info("    %3d terms, cost %.6g  %s", len(step.active), step.cost, what)
 
 
 @dataclass

@@ -268,8 +268,11 @@ def make_template(registry_templates: dict[str, type], spec) -> Template:
     spec = {"name": spec} if isinstance(spec, str) else dict(spec)
     name = spec.pop("name", "polynomial")
     if name not in registry_templates:
-        raise ConfigError(f"unknown template '{name}' (installed: {', '.join(registry_templates)})")
+        from .registry import did_you_mean
+
+        raise ConfigError(f"unknown template '{name}'{did_you_mean(name, registry_templates)} "
+                          f"(installed: {', '.join(registry_templates)})")
     try:
         return registry_templates[name](**spec)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise ConfigError(f"template '{name}': {exc}") from None

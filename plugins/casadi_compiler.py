@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline import hookimpl
-from pipeline.compile import Compiler
+from mcl import hookimpl
+from mcl.compile import Compiler
 
 
 class CasadiCompiler(Compiler):
@@ -12,12 +12,12 @@ class CasadiCompiler(Compiler):
     description = "pymoca + CasADi: index reduction, causalisation; in-process model and FMI 2.0 FMU"
 
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
-        from pipeline import dae, frontend, structure
-        from pipeline.model import CompiledModel
+        from mcl import dae, frontend, structure
+        from mcl.model import CompiledModel
 
-        from pipeline.errors import ModelicaError
+        from mcl.errors import ModelicaError
 
-        pymoca_model, srcs = frontend.load(sources, model)
+        pymoca_model, srcs = frontend.load(sources, model, (options or {}).get("libraries", ()))
         try:
             ode = structure.build_ode(dae.from_pymoca(pymoca_model, model), model)
         except ModelicaError as exc:

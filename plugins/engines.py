@@ -1,7 +1,7 @@
 """The two built-in simulation engines: in-process CasADi and FMU (FMPy)."""
-from pipeline import hookimpl
-from pipeline.engine_casadi import CasadiEngine
-from pipeline.engine_fmu import FmuEngine
+from mcl import hookimpl
+from mcl.engine_casadi import CasadiEngine
+from mcl.engine_fmu import FmuEngine
 
 
 @hookimpl

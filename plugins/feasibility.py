@@ -1,6 +1,6 @@
 """Built-in feasibility models: logistic (paper 000's "softmax") and a small neural network."""
-from pipeline import hookimpl
-from pipeline.feasibility import LogisticFeasibility, NeuralFeasibility
+from mcl import hookimpl
+from mcl.feasibility import LogisticFeasibility, NeuralFeasibility
 
 
 @hookimpl

@@ -12,9 +12,9 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from pipeline import hookimpl
-from pipeline.compile import Compiler
-from pipeline.errors import CompileError
+from mcl import hookimpl
+from mcl.compile import Compiler
+from mcl.errors import CompileError
 
 
 def find_omc() -> str | None:
@@ -39,10 +39,10 @@ class OpenModelicaCompiler(Compiler):
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
         from OMPython import ModelicaSystemOMC
 
-        from pipeline.frontend import collect_sources
-        from pipeline.model import FmuModel
+        from mcl.frontend import collect_sources
+        from mcl.model import FmuModel
 
-        files = collect_sources(sources).files
+        files = collect_sources(sources, model, (options or {}).get("libraries", ())).files
         work = Path(tempfile.mkdtemp(prefix="mcl-omc-"))
         try:
             om = ModelicaSystemOMC(work_directory=str(work))

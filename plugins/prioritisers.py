@@ -1,6 +1,6 @@
 """Built-in prioritisers for backward elimination: all at once, highest degree first."""
-from pipeline import hookimpl
-from pipeline.sparsify import AllAtOnce, HighestDegreeFirst
+from mcl import hookimpl
+from mcl.sparsify import AllAtOnce, HighestDegreeFirst
 
 
 @hookimpl

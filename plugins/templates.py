@@ -1,8 +1,25 @@
 """Built-in component templates: polynomial, with memory, neural."""
-from pipeline import hookimpl
-from pipeline.templates import MemoryTemplate, NeuralTemplate, PolynomialTemplate
+from mcl import hookimpl
+from mcl.templates import MemoryTemplate, NeuralTemplate, PolynomialTemplate
+
+_TERMS = {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1}}
+_POLY = {"type": "object", "additionalProperties": False, "properties": {
+    "lhs": _TERMS, "rhs": _TERMS, "degree": {"type": "integer", "minimum": 1, "maximum": 9},
+    "start": {"type": "array", "items": {"type": "number"}}, "prefix": {"type": "string", "pattern": "^[A-Za-z_]\\w*$"}}}
 
 
 @hookimpl
 def mcl_templates():
     return [PolynomialTemplate, MemoryTemplate, NeuralTemplate]
+
+
+@hookimpl
+def mcl_option_schemas():
+    return {"template": {
+        "polynomial": _POLY,
+        "memory": _POLY,
+        "neural": {"type": "object", "additionalProperties": False, "properties": {
+            "hidden": {"type": "integer", "minimum": 1, "maximum": 64},
+            "start": {"type": "array", "items": {"type": "number"}},
+            "seed": {"type": "integer"}}},
+    }}

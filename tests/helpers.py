@@ -5,8 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.api import compile_model
-from pipeline.data import TimeSeries
+from mcl.api import compile_model
+from mcl.data import TimeSeries
 
 ROOT = Path(__file__).resolve().parents[1]
 LIB = ROOT / "modelica" / "MCL"

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from helpers import LIB, multisine
-from pipeline.cli import main
-from pipeline.data import read_csv
-from pipeline.fmu.export import validate_fmu
+from mcl.cli import main
+from mcl.data import read_csv
+from mcl.fmu.export import validate_fmu
 
 
 @pytest.fixture
@@ -69,7 +69,7 @@ def test_user_mistakes_are_one_line(tmp_path, input_csv, args, message):
     bad = tmp_path / "B.mo"
     bad.write_text("package B\n  model M\n    Real x\n  end M;\nend B;\n")
     fmt = dict(lib=LIB, missing=tmp_path / "none.csv", input=input_csv, bad=bad)
-    proc = subprocess.run([sys.executable, "-m", "pipeline.cli", *[a.format(**fmt) for a in args]],
+    proc = subprocess.run([sys.executable, "-m", "mcl", *[a.format(**fmt) for a in args]],
                           capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
@@ -79,6 +79,6 @@ def test_user_mistakes_are_one_line(tmp_path, input_csv, args, message):
 
 def test_help_on_every_subcommand():
     for cmd in ("compile", "simulate", "plugins"):
-        proc = subprocess.run([sys.executable, "-m", "pipeline.cli", cmd, "--help"],
+        proc = subprocess.run([sys.executable, "-m", "mcl", cmd, "--help"],
                               capture_output=True, text=True, timeout=60)
         assert proc.returncode == 0 and "usage: mcl" in proc.stdout

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from pipeline.data import TimeSeries, read_csv, write_csv
-from pipeline.errors import DataError
+from mcl.data import TimeSeries, read_csv, write_csv
+from mcl.errors import DataError
 
 
 def csv(tmp_path, text):

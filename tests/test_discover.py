@@ -6,9 +6,9 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import LIB, RC_MODEL
-from pipeline.cli import main
-from pipeline.errors import ConfigError
-from pipeline.runfile import load_runfile
+from mcl.cli import main
+from mcl.errors import ConfigError
+from mcl.runfile import load_runfile
 
 CIRCUIT = "package Circuit\n" + RC_MODEL + """
   model Divider "a second configuration of the same resistor: no capacitor, a 0.5 ohm feed"
@@ -98,7 +98,7 @@ def test_run_file_problems_are_reported_together_with_lines(tmp_path):
     assert any(":2: model.sources: 'nope/' does not exist" in line for line in lines)
     assert any(":4: model.colour: unknown key" in line for line in lines)
     assert any(":6: data.train: 'missing.csv' does not exist" in line for line in lines)
-    assert any(":7: unknwn: unknown section" in line for line in lines)
+    assert any(":7: unknwn: unknown key (did you mean 'unknown'?)" in line for line in lines)
 
 
 def test_data_problems_name_file_and_key(tmp_path):
@@ -145,7 +145,7 @@ def test_second_configuration_resume_and_export(tmp_path, capsys):
     out.rename(tmp_path / "out/rc.partial")
     capsys.readouterr()
     assert main(["run", str(run)]) == 0
-    assert "already done" in capsys.readouterr().out
+    assert "already done" in capsys.readouterr().err
     assert json.loads((out / "report.json").read_text())["cause"]["component"] == "Rx"
     # export the learned resistor as a library and use it in a model of one's own
     assert main(["export", str(out), "-o", str(tmp_path / "lib"), "--name", "MyParts"]) == 0
@@ -154,8 +154,8 @@ def test_second_configuration_resume_and_export(tmp_path, capsys):
         "model Use\n  output Real y;\n  MCL.Electrical.Ground G;\n  MCL.Electrical.VoltageSource V;\n"
         f"  MyParts.{report['cause']['learned_class']} R;\nequation\n  V.u = 1;\n"
         "  connect(V.p, R.p);\n  connect(R.n, G.p);\n  connect(V.n, G.p);\n  y = R.i;\nend Use;\n")
-    from pipeline.api import compile_model, simulate
-    from pipeline.data import TimeSeries
+    from mcl.api import compile_model, simulate
+    from mcl.data import TimeSeries
 
     model = compile_model([LIB, lib, tmp_path / "Use.mo"], "Use")
     res = simulate(model, TimeSeries(np.linspace(0, 1, 11), np.zeros((11, 0)), []))

@@ -10,7 +10,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from helpers import LIB
-from pipeline.cli import main
+from mcl.cli import main
 
 SYSTEMS = """
 package Plants

@@ -1,13 +1,14 @@
 """Batches: crashes and hangs are isolated and labelled; the Dask executor gives the same results."""
-import io
+import logging
 import os
 import time
 
 import pytest
 
-from pipeline import hookimpl
-from pipeline.executor import DaskExecutor, LocalExecutor, Progress, SerialExecutor, TaskFailed
-from pipeline.plugins import Registry
+from mcl import hookimpl
+from mcl.executor import DaskExecutor, LocalExecutor, SerialExecutor, TaskFailed
+from mcl.progress import Progress
+from mcl.registry import Registry
 
 
 def task(scale, x):
@@ -55,12 +56,16 @@ def test_dask_local_cluster_gives_the_same_results():
     assert isinstance(failing[0], TaskFailed) and failing[1] == 2
 
 
-def test_progress_reports_to_a_stream():
-    buf = io.StringIO()
-    bar = Progress("batch", 4, stream=buf)
-    for ok in (True, False, True, True):
-        bar.update(ok)
-    assert "batch: 4/4 (1 failed)" in buf.getvalue()
+def test_progress_eta_counts_rounds_of_workers(caplog):
+    bar = Progress("batch", 4, workers=2)
+    bar.start -= 10.0            # the first two tasks ran side by side for 10 s
+    bar.update()
+    bar.update()
+    assert bar.eta() == pytest.approx(10.0, rel=0.05)   # one more round of two, not 2 x 5 s
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        bar.update(False)
+        bar.update()
+    assert "batch: 4/4 done (1 failed)" in caplog.text
 
 
 class InlineExecutor(SerialExecutor):

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from helpers import multisine, series
-from pipeline.api import simulate
-from pipeline.fmu.export import build_fmu
-from pipeline.model import FmuModel
+from mcl.api import simulate
+from mcl.fmu.export import build_fmu
+from mcl.model import FmuModel
 
 T = np.linspace(0, 30, 301)
 U = series(T, u=multisine(T))

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from pipeline import hookimpl
-from pipeline.feasibility import LogisticFeasibility, NeuralFeasibility, binary_entropy
-from pipeline.plugins import Registry
+from mcl import hookimpl
+from mcl.feasibility import LogisticFeasibility, NeuralFeasibility, binary_entropy
+from mcl.registry import Registry
 
 
 def test_untrained_model_is_maximally_uncertain():

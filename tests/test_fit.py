@@ -5,14 +5,14 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import LIB, RC_MODEL
-from pipeline.api import compile_model, simulate
-from pipeline.data import TimeSeries
-from pipeline.feasibility import LogisticFeasibility
-from pipeline.fit import (Algorithm1, Algorithm3, FitProblem, LevenbergMarquardt, PseudoFeasibility,
+from mcl.api import compile_model, simulate
+from mcl.data import TimeSeries
+from mcl.feasibility import LogisticFeasibility
+from mcl.fit import (Algorithm1, Algorithm3, FitProblem, LevenbergMarquardt, PseudoFeasibility,
                           Recorder, delta_schedule, feasibility_terms)
-from pipeline.graph import build_graph
-from pipeline.swap import swap_component, write_package
-from pipeline.templates import PolynomialTemplate
+from mcl.graph import build_graph
+from mcl.swap import swap_component, write_package
+from mcl.templates import PolynomialTemplate
 
 
 def test_delta_schedules():
@@ -149,9 +149,9 @@ def test_every_simulation_is_recorded_and_a_rerun_replays(rc_template, tmp_path)
 
 def test_algorithm3_starts_from_a_pretrained_feasibility_model(rc_template, tmp_path):
     """Remark 3.1 feeding Algorithm 3: q learned in small configurations steers the first steps."""
-    from pipeline.api import registry
-    from pipeline.executor import SerialExecutor
-    from pipeline.pretrain import pretrain
+    from mcl.api import registry
+    from mcl.executor import SerialExecutor
+    from mcl.pretrain import pretrain
 
     model, names = rc_template
     port = build_graph([LIB], "MCL.Examples.CauerFilter").components["Rnl"].connectors[0]

@@ -6,9 +6,9 @@ import pytest
 from fmpy import read_model_description
 
 from helpers import compiled, multisine, rel_err, series
-from pipeline.api import simulate
-from pipeline.fmu.export import build_fmu, validate_fmu
-from pipeline.model import FmuModel
+from mcl.api import simulate
+from mcl.fmu.export import build_fmu, validate_fmu
+from mcl.model import FmuModel
 
 EXAMPLES = {
     "MCL.Examples.CauerFilter": lambda t: {"u": multisine(t)},

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from helpers import series
-from pipeline.api import compile_model, simulate
-from pipeline.errors import ModelicaError, UnsupportedConstruct
+from mcl.api import compile_model, simulate
+from mcl.errors import ModelicaError, UnsupportedConstruct
 
 HEADER = "package P\n"
 

@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 
 from helpers import LIB, compiled, multisine, rel_err, series
-from pipeline.api import compile_model, simulate
-from pipeline.cli import main
-from pipeline.errors import ModelicaError
-from pipeline.graph import Component, build_graph
-from pipeline.swap import write_package
+from mcl.api import compile_model, simulate
+from mcl.cli import main
+from mcl.errors import ModelicaError
+from mcl.graph import Component, build_graph
+from mcl.swap import write_package
 
 
 @pytest.fixture(scope="module")

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from pipeline.lm import (Blocks, IdentificationProblem, Measurements, direct_step,
+from mcl.lm import (Blocks, IdentificationProblem, Measurements, direct_step,
                          discretisation_grid, levenberg_marquardt, removal_estimates, structured_step)
-from pipeline.sparsify import AllAtOnce, BackwardElimination
+from mcl.sparsify import AllAtOnce, BackwardElimination
 
 MONOMIALS = ["1", "x1", "x2", "x1^2", "x1*x2", "x2^2"]
 DEGREES = [0, 1, 1, 2, 2, 2]
@@ -123,7 +123,7 @@ def test_batch_removal_and_kept_parameters():
 
 
 def test_exchange_swaps_a_wrongly_kept_term_for_the_true_one():
-    from pipeline.sparsify import _State
+    from mcl.sparsify import _State
 
     prob = oscillator_problem(partial=False)
     wrong = np.array([n in {"x1:x2", "x2:x1", "x2:x2", "x2:x1*x2"} for n in NAMES])  # x1*x2, not x1^2
@@ -157,9 +157,9 @@ def test_backward_elimination_path_plot(tmp_path):
 
 
 def test_prioritisers_are_plugins():
-    from pipeline import hookimpl
-    from pipeline.plugins import Registry
-    from pipeline.sparsify import Prioritiser
+    from mcl import hookimpl
+    from mcl.registry import Registry
+    from mcl.sparsify import Prioritiser
 
     class LinearFirst(Prioritiser):
         name = "linear-first"
@@ -180,7 +180,7 @@ def test_prioritisers_are_plugins():
 
 
 def test_blockwise_gradient_equals_sparse_jacobian_product():
-    from pipeline.lm import jacobian_matrix
+    from mcl.lm import jacobian_matrix
 
     b = random_blocks(N=50, m=7, n=3, p=4, seed=9)
     ref = 2 * jacobian_matrix(b).T @ np.concatenate([b.g.ravel(), b.ga])
@@ -191,12 +191,12 @@ def test_compiled_model_with_template_terms_as_parameters(tmp_path):
     """f = the compiled RC circuit with Rx replaced by w1 i = w2 v + w3 v^3 (w1 fixed at 1);
     full-discretisation LM recovers the hidden law from noisy output samples."""
     from helpers import LIB, RC_MODEL
-    from pipeline.api import compile_model
-    from pipeline.data import TimeSeries
-    from pipeline.graph import build_graph
-    from pipeline.lm import CompiledRhs
-    from pipeline.swap import swap_component, write_package
-    from pipeline.templates import PolynomialTemplate
+    from mcl.api import compile_model
+    from mcl.data import TimeSeries
+    from mcl.graph import build_graph
+    from mcl.lm import CompiledRhs
+    from mcl.swap import swap_component, write_package
+    from mcl.templates import PolynomialTemplate
 
     path = write_package(tmp_path, "FitCircuit", [RC_MODEL])
     graph = build_graph([LIB, path], "FitCircuit.RC")
@@ -234,7 +234,7 @@ def test_steps_outside_the_model_domain_are_rejected():
     """f = -sqrt(a) x is NaN for a < 0. From a = 1 the first Gauss-Newton step overshoots to
     a < 0: that step is refused (lambda grows) and LM still converges to a = 0.04; states
     outside the domain are a clear error."""
-    from pipeline.lm import BlockEvaluationFailed
+    from mcl.lm import BlockEvaluationFailed
 
     t = np.linspace(0, 4, 41)
     meas = Measurements(t, np.exp(-0.2 * t)[:, None])

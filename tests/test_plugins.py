@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from helpers import LIB, series
-from pipeline import hookimpl, hookspecs
-from pipeline.api import compile_model, simulate
-from pipeline.compile import Compiler
-from pipeline.errors import PluginError
-from pipeline.plugins import Registry
+from mcl import hookimpl, hookspecs
+from mcl.api import compile_model, simulate
+from mcl.compile import Compiler
+from mcl.errors import PluginError
+from mcl.registry import Registry
 
 HERE = Path(__file__).resolve().parent
 ODE_YAML = "Decay:\n  states: {x: {start: 2.0, der: '-k*x + u'}}\n  inputs: [u]\n" \
@@ -177,14 +177,14 @@ class ScipyEngine:
     name = "scipy-lsoda"
 
     def accepts(self, model):
-        from pipeline.model import CompiledModel
+        from mcl.model import CompiledModel
 
         return isinstance(model, CompiledModel)
 
     def simulate(self, model, inputs, params=None, t_out=None, options=None, sensitivities=None):
         from scipy.integrate import solve_ivp
 
-        from pipeline.simulate import SimulationResult
+        from mcl.simulation import SimulationResult
 
         u = inputs.select(model.input_names)
         t_out = u.time if t_out is None else t_out

@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 
 from helpers import LIB
-from pipeline.api import registry
-from pipeline.cli import main
-from pipeline.graph import build_graph
-from pipeline.pretrain import build_configurations, plot_feasibility, pretrain
-from pipeline.templates import PolynomialTemplate
+from mcl.api import registry
+from mcl.cli import main
+from mcl.graph import build_graph
+from mcl.pretrain import build_configurations, plot_feasibility, pretrain
+from mcl.templates import PolynomialTemplate
 from test_templates import OWN
 
 PAPER = PolynomialTemplate(lhs=["i"], rhs=["v^2", "v^3"])

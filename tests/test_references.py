@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from helpers import DATA, LIB, compiled, multisine, rel_err, series
-from pipeline.api import simulate
+from mcl.api import simulate
 
 TIGHT = {"rtol": 1e-10, "atol": 1e-12}
 

@@ -5,17 +5,17 @@ import numpy as np
 import pytest
 
 from helpers import LIB
-from pipeline.cli import main
+from mcl.cli import main
 from test_discover import CIRCUIT, rc_data, setup_run
 
 
 def test_refine_learns_and_prunes_the_hidden_law(tmp_path):
-    from pipeline.api import compile_model
-    from pipeline.data import read_csv
-    from pipeline.graph import build_graph
-    from pipeline.refine import refine
-    from pipeline.swap import swap_component
-    from pipeline.templates import PolynomialTemplate
+    from mcl.api import compile_model
+    from mcl.data import read_csv
+    from mcl.graph import build_graph
+    from mcl.refine import refine
+    from mcl.swap import swap_component
+    from mcl.templates import PolynomialTemplate
 
     (tmp_path / "Circuit.mo").write_text(CIRCUIT)
     rc_data(tmp_path / "train.csv", 1, 0.3)
@@ -46,8 +46,8 @@ def test_mcl_run_with_full_discretisation_refinement(tmp_path):
 
 
 def test_unknown_refinement_method_is_named(tmp_path):
-    from pipeline.errors import ConfigError
-    from pipeline.runfile import load_runfile
+    from mcl.errors import ConfigError
+    from mcl.runfile import load_runfile
 
     run = setup_run(tmp_path, cubic=0.3)
     run.write_text(run.read_text() + "refinement: {method: magic}\n")

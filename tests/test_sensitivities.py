@@ -2,7 +2,7 @@
 import numpy as np
 
 from helpers import compiled, multisine, rel_err, series
-from pipeline.api import simulate
+from mcl.api import simulate
 
 OPTS = {"rtol": 1e-12, "atol": 1e-14}  # finite differences need it: their noise is rtol / h
 

@@ -4,11 +4,11 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import LIB, compiled, rel_err, series
-from pipeline.api import compile_model, registry, simulate
-from pipeline.errors import ConfigError
-from pipeline.graph import build_graph
-from pipeline.swap import swap_component
-from pipeline.templates import Monomial, NeuralTemplate, PolynomialTemplate
+from mcl.api import compile_model, registry, simulate
+from mcl.errors import ConfigError
+from mcl.graph import build_graph
+from mcl.swap import swap_component
+from mcl.templates import Monomial, NeuralTemplate, PolynomialTemplate
 
 TIGHT = {"rtol": 1e-10, "atol": 1e-12}
 
@@ -157,8 +157,8 @@ def test_term_parsing(term, ok):
 
 
 def test_third_party_template_through_the_hook(tmp_path):
-    from pipeline import hookimpl
-    from pipeline.plugins import Registry
+    from mcl import hookimpl
+    from mcl.registry import Registry
 
     class TanhLaw(PolynomialTemplate):
         name = "tanh-law"

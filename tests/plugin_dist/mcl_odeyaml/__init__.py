@@ -14,9 +14,9 @@ import casadi as ca
 import numpy as np
 import yaml
 
-from pipeline import hookimpl
-from pipeline.compile import Compiler
-from pipeline.errors import ModelicaError
+from mcl import hookimpl
+from mcl.compile import Compiler
+from mcl.errors import ModelicaError
 
 _FUNCS = {n: getattr(ca, n) for n in ("sin", "cos", "exp", "log", "sqrt", "tanh", "fabs")}
 
@@ -29,9 +29,9 @@ class OdeYamlCompiler(Compiler):
         return len(sources) == 1 and Path(sources[0]).suffix in (".yaml", ".yml")
 
     def compile(self, sources, model, options=None):
-        from pipeline.dae import Dae
-        from pipeline.model import CompiledModel
-        from pipeline.structure import build_ode
+        from mcl.dae import Dae
+        from mcl.model import CompiledModel
+        from mcl.structure import build_ode
 
         spec = yaml.safe_load(Path(sources[0]).read_text()).get(model)
         if spec is None:

@@ -19,29 +19,19 @@ finishes, so an interrupted run resumes) and renamed to ``<output>`` at the end.
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from pathlib import Path
 
 import numpy as np
 
-from .data import TimeSeries, read_csv
-from .errors import ConfigError
-from .executor import TaskFailed
-from .swap import class_name_for
+from ..data import TimeSeries, read_csv
+from ..progress import log
+from ..errors import ConfigError
+from ..executor import TaskFailed
+from ..stats import aic, bic, noise_estimate, rms
+from ..swap import class_name_for
 
 LEARNED_PACKAGE = "Learned"
-
-
-def noise_estimate(y: np.ndarray) -> float:
-    """sigma of white measurement noise: robust scale of second differences / sqrt(6)."""
-    d2 = np.diff(np.asarray(y, float), 2, axis=0).ravel()
-    mad = np.median(np.abs(d2 - np.median(d2)))
-    return float(1.4826 * mad / np.sqrt(6.0))
-
-
-def rms(a) -> float:
-    return float(np.sqrt(np.mean(np.square(a))))
 
 
 def probe(model, result, inputs: TimeSeries, params: dict, names: list[str]) -> np.ndarray:
@@ -69,17 +59,9 @@ def nominal_start(template, v, i, t) -> np.ndarray:
     return np.concatenate([[1.0], w_rest])
 
 
-def bic(rss: float, n: int, k: int) -> float:
-    return float(n * np.log(max(rss, 1e-300) / n) + k * np.log(n))
-
-
-def aic(rss: float, n: int, k: int) -> float:
-    return float(n * np.log(max(rss, 1e-300) / n) + 2 * k)
-
-
 def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str):
     """LM fit of the template parameters, then backward elimination of terms (w1 anchors the scale)."""
-    from .fit import FitProblem, LevenbergMarquardt
+    from ..fit import FitProblem, LevenbergMarquardt
 
     score_of = bic if criterion == "bic" else aic
     n_obs = len(data.time) * len([o for o in model.output_names if o in data.names])
@@ -134,10 +116,10 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
 
 
 def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: str, template):
-    """Paper 004's refinement (:func:`pipeline.refine.refine`), scored like :func:`fit_and_prune`:
+    """Paper 004's refinement (:func:`mcl.refine.refine`), scored like :func:`fit_and_prune`:
     RSS and BIC/AIC of a simulation of the refined law on the training data."""
-    from .api import simulate
-    from .refine import refine
+    from ..api import simulate
+    from ..refine import refine
 
     w, active, path = refine(model, data, names, w0, criterion, terms=getattr(template, "terms", None))
     outs = [o for o in model.output_names if o in data.names]
@@ -153,8 +135,8 @@ def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: s
 
 def _candidate_model(ctx, item):
     """(template, w0, swapped model description, compiled model) of one candidate."""
-    from .api import compile_model, registry
-    from .swap import swap_component
+    from ..api import compile_model, registry
+    from ..swap import swap_component
 
     graph, train, _, nominal_probe, _, _, workdir, _ = ctx
     comp_name, tpl_index, tpl_spec = item
@@ -173,7 +155,7 @@ def _screen_task(ctx, item):
     predicted RSS after one Gauss-Newton step = RSS - g^T (S^T S)^+ g with g = S^T r.
     Cheap, and ranks the candidates well enough to fit only the promising ones fully.
     """
-    from .api import simulate
+    from ..api import simulate
 
     train = ctx[1]
     comp_name, _, tpl_spec = item
@@ -193,7 +175,7 @@ def _screen_task(ctx, item):
 
 def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
-    from .api import simulate
+    from ..api import simulate
 
     graph, train, validate, _, budget, criterion, _, method = ctx
     comp_name, _, tpl_spec = item
@@ -234,24 +216,23 @@ def strength(delta: float) -> str:
             "positive" if delta > 2 else "weak")
 
 
-def run_discovery(spec, force: bool = False, progress=print) -> dict:
-    """Execute a validated :class:`pipeline.runfile.RunSpec`; returns the report dict."""
-    from .api import compile_model, registry, simulate
-    from .graph import build_graph
+def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, force: bool = False,
+                  fingerprint: dict | None = None) -> dict:
+    """Execute a validated :class:`mcl.runfile.RunSpec` on ``train`` (and ``validate``) data;
+    returns the report dict. :class:`mcl.Discovery` is the public face of this function."""
+    from ..api import compile_model, registry, simulate
+    from ..graph import build_graph
+    from .rundir import RunDirectory
 
-    out = spec.output
-    if (out / "report.json").exists() and not force:
-        raise ConfigError(f"run directory {out} holds a finished run; choose another output or use --force")
-    part = out.with_name(out.name + ".partial")
+    rundir = RunDirectory(spec.output, force=force)
+    part = rundir.partial
     (part / "candidates").mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     reg = registry()
-    nominal = compile_model(spec.sources, spec.model_name)
-    graph = build_graph(spec.sources, spec.model_name)
-    train = read_csv(spec.train)
-    validate = read_csv(spec.validate) if spec.validate else None
+    nominal = compile_model(spec.sources, spec.model_name, libraries=spec.libraries)
+    graph = build_graph(spec.sources, spec.model_name, libraries=spec.libraries)
     outputs = [o for o in nominal.output_names if o in train.names]
-    progress(f"[1/5] nominal model {spec.model_name}: simulating the training data")
+    log.info("[1/5] nominal model %s: simulating the training data", spec.model_name)
     sim0 = simulate(nominal, train)
     if not sim0.ok:
         raise ConfigError(f"the nominal model does not simulate the training data: {sim0.reason}")
@@ -264,9 +245,10 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
     report = {"model": spec.model_name, "outputs": outputs,
               "misfit": {"significant": significant, "train_rms": train_rms0, "noise_estimate": sigma,
                          "per_output_rms": {o: rms(resid[:, k]) for k, o in enumerate(outputs)}},
-              "cause": None, "candidates": [], "gain": None}
-    progress(f"      residual RMS {train_rms0:.4g} vs noise {sigma:.4g}: "
-             f"{'significant' if significant else 'not significant'}")
+              "cause": None, "candidates": [], "gain": None,
+              "software": software_versions(), "inputs": fingerprint or {}}
+    log.info("      residual RMS %.4g vs noise %.4g: %s", train_rms0, sigma,
+             "significant" if significant else "not significant")
     val0 = None
     if validate is not None:
         sv = simulate(nominal, validate)
@@ -286,27 +268,26 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
         if screen_file.exists():
             screening = json.loads(screen_file.read_text())
         else:
-            progress(f"[2/5] screening {len(items)} candidate(s): one linearised step each")
+            log.info("[2/5] screening %d candidate(s): one linearised step each", len(items))
             with reg.executor(spec.executor) as ex:
                 res = ex.map(_screen_task, items, context=ctx_of(graph, train, validate, nominal_probe, spec, part),
                              timeout=3600, label="screening")
             screening = [r if not isinstance(r, TaskFailed) else
                          {"component": it[0], "template": it[2], "predicted_rss": None, "reason": r.reason}
                          for it, r in zip(items, res)]
-            screen_file.write_text(json.dumps(screening, indent=1))
+            rundir.write_json("screening.json", screening)
         order = sorted(range(len(items)), key=lambda k: (screening[k]["predicted_rss"] is None,
                                                          screening[k]["predicted_rss"] or 0.0))
         items = [items[k] for k in order[: spec.screen]]
         todo = [it for it in items if not (part / "candidates" / f"{it[0]}_{it[1]}.json").exists()]
-        progress(f"      fitting the {len(items)} most promising ({len(items) - len(todo)} already done)")
+        log.info("      fitting the %d most promising (%d already done)", len(items), len(items) - len(todo))
         ctx = ctx_of(graph, train, validate, nominal_probe, spec, part)
+
         def checkpoint(k, r):  # each candidate is saved as it finishes: a rerun skips it
             it = todo[k]
             if isinstance(r, TaskFailed):
                 r = {"component": it[0], "template": it[2], "failed": r.reason, "score": None}
-            tmp = part / "candidates" / f".{it[0]}_{it[1]}.json"
-            tmp.write_text(json.dumps(r, indent=1))
-            tmp.replace(part / "candidates" / f"{it[0]}_{it[1]}.json")
+            rundir.write_json(f"candidates/{it[0]}_{it[1]}.json", r)
 
         with reg.executor(spec.executor) as ex:
             ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates", on_result=checkpoint)
@@ -320,39 +301,50 @@ def run_discovery(spec, force: bool = False, progress=print) -> dict:
         report["nominal_score"] = nominal_score
         ranked = [c for c in ranked if c["score"] < nominal_score]
         if not ranked:
-            progress("      no candidate explains the data better than the nominal model")
+            log.info("      no candidate explains the data better than the nominal model")
         if ranked:
             best = ranked[0]
             delta = min([c["score"] for c in ranked[1:]] + [nominal_score]) - best["score"]
             report["cause"], extended_y = _explain(best, delta, graph, spec, part, train, validate,
-                                                   outputs, reg, progress, nominal_probe)
+                                                   outputs, reg, nominal_probe)
             report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),
                               "validation_rms_before": val0, "validation_rms_after": best.get("validation_rms")}
     if report["gain"] is None:
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
                           "validation_rms_before": val0, "validation_rms_after": val0}
     report["seconds"] = time.perf_counter() - t_start
-    progress("[5/5] report")
-    from .report import write_report
+    log.info("[5/5] report")
+    from ..report import write_report
 
     write_report(part, report, train, outputs, y0, extended_y, **spec.report)
-    if out.exists():
-        shutil.rmtree(out)
-    part.rename(out)
-    progress(f"wrote {out}/report.html and report.json")
+    rundir.finish()
+    log.info("wrote %s/report.html and report.json", spec.output)
     return report
 
 
-def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, progress, nominal_probe):
+def software_versions() -> dict:
+    """Versions of mcl and of what computes its numbers (recorded in report.json)."""
+    from importlib import metadata
+
+    out = {}
+    for dist in ("mcl", "casadi", "fmpy", "numpy", "scipy", "pymoca", "rumoca"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nominal_probe):
     """The winner as a law, the extended model (Modelica + FMU) and its simulated outputs."""
-    from .api import compile_model, simulate
-    from .fmu.export import build_fmu
-    from .swap import swap_component
+    from ..api import compile_model, simulate
+    from ..fmu.export import build_fmu
+    from ..swap import swap_component
 
     template = reg.template(best["template"])
     w = np.asarray(best["w"]) * np.asarray(best["active"])
     comp = graph.components[best["component"]]
-    progress(f"[3/5] cause: {comp.name} ({comp.cls}): {template.equation(w)}")
+    log.info("[3/5] cause: %s (%s): %s", comp.name, comp.cls, template.equation(w))
     lo, hi = best.get("v_range") or [-1.0, 1.0]
     xs = np.linspace(lo, hi, 41)
     curve = [[float(x), float(f)] for x, f in zip(xs, template.flow_of(w, xs))]
@@ -366,8 +358,8 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, prog
               + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else ""))
     ext_dir = part / "extended"
     tm = swap_component(graph, comp.name, template, ext_dir, w=w, package=LEARNED_PACKAGE)
-    progress("[4/5] extended model: compiling to an FMU")
-    ext = compile_model(tm.sources, tm.model_name)
+    log.info("[4/5] extended model: compiling to an FMU")
+    ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
     fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")
     res = simulate(ext, train)
     y_ext = res.outputs[:, [ext.output_names.index(o) for o in outputs]] if res.ok else None
@@ -388,20 +380,20 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, prog
 
 def _second(spec, template, w, component: str, part: Path) -> dict:
     """The learned law placed into another configuration (``second:`` in the run file)."""
-    from .api import compile_model, simulate
-    from .graph import build_graph
-    from .swap import swap_component
+    from ..api import compile_model, simulate
+    from ..graph import build_graph
+    from ..swap import swap_component
 
     sec = spec.second
-    base = spec.path.parent
+    base = spec.path.parent if spec.path else Path.cwd()
     sources = [base / s for s in sec["model"]["sources"]]
     name = sec["model"]["name"]
     target = sec.get("component", component)
     data = read_csv(base / sec["data"])
-    nominal = compile_model(sources, name)
-    graph = build_graph(sources, name)
+    nominal = compile_model(sources, name, libraries=spec.libraries)
+    graph = build_graph(sources, name, libraries=spec.libraries)
     tm = swap_component(graph, target, template, part / "second", w=w, package="LearnedSecond")
-    learned = compile_model(tm.sources, tm.model_name)
+    learned = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
     outs = [o for o in nominal.output_names if o in data.names]
     meas = data.select(outs).values
     before, after = simulate(nominal, data), simulate(learned, data)

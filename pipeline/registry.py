@@ -16,18 +16,18 @@ from importlib import metadata
 import pluggy
 
 from . import hookspecs
-from .errors import PluginError
+from .errors import ConfigError, PluginError
 
 ENTRY_POINT_GROUP = "mcl"
 DEFAULT_PLUGINS = (
-    "plugins.casadi_compiler",
-    "plugins.openmodelica",
-    "plugins.engines",
-    "plugins.model_files",
-    "plugins.templates",
-    "plugins.feasibility",
-    "plugins.executors",
-    "plugins.prioritisers",
+    "mcl.plugins.casadi_compiler",
+    "mcl.plugins.openmodelica",
+    "mcl.plugins.engines",
+    "mcl.plugins.model_files",
+    "mcl.plugins.templates",
+    "mcl.plugins.feasibility",
+    "mcl.plugins.executors",
+    "mcl.plugins.prioritisers",
 )
 ENV_DISABLE = "MCL_DISABLE_EXTERNAL_PLUGINS"
 ENV_ALLOW = "MCL_PLUGINS"
@@ -81,6 +81,13 @@ def plugin_manager(external: bool = True, extra=()) -> tuple[pluggy.PluginManage
     return pm, infos
 
 
+def did_you_mean(word, choices) -> str:
+    import difflib
+
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""
+
+
 def _named(results, kind: str) -> dict[str, type]:
     out: dict[str, type] = {}
     for group in results:
@@ -105,6 +112,10 @@ class Registry:
         self.feasibility_models = _named(self.pm.hook.mcl_feasibility_models(), "feasibility model")
         self.executors = _named(self.pm.hook.mcl_executors(), "executor")
         self.prioritisers = _named(self.pm.hook.mcl_prioritisers(), "prioritiser")
+        self.option_schemas: dict[str, dict[str, dict]] = {}
+        for contribution in reversed(self.pm.hook.mcl_option_schemas()):  # later plugins win
+            for section, kinds in (contribution or {}).items():
+                self.option_schemas.setdefault(section, {}).update(kinds)
 
     @property
     def hook(self):
@@ -143,12 +154,32 @@ class Registry:
                               f"(installed: {', '.join(self.feasibility_models)})")
         return self.feasibility_models[name](**spec)
 
-    def executor(self, spec=None):
+    def check_options(self, section: str, kind: str, options: dict) -> None:
+        """``options`` of plugin ``kind`` against the schema its plugin gave (if any)."""
+        import jsonschema
+
+        schema = self.option_schemas.get(section, {}).get(kind)
+        if schema is None:
+            return
+        errors = sorted(jsonschema.Draft202012Validator(schema).iter_errors(options), key=str)
+        if errors:
+            e = errors[0]
+            key = ".".join(map(str, e.absolute_path)) or "options"
+            raise ConfigError(f"{section} '{kind}': {key}: {e.message}")
+
+    def executor_class(self, spec=None) -> tuple[type, dict]:
+        """The executor class a spec names and its checked options (nothing started yet)."""
         spec = {"kind": spec} if isinstance(spec, str) or spec is None else dict(spec)
         kind = spec.pop("kind", None) or "local"
         if kind not in self.executors:
-            raise PluginError(f"no executor named '{kind}' (installed: {', '.join(self.executors)})")
-        return self.executors[kind](**spec)
+            raise ConfigError(f"no executor named '{kind}'{did_you_mean(kind, self.executors)} "
+                              f"(installed: {', '.join(self.executors)})")
+        self.check_options("executor", kind, spec)
+        return self.executors[kind], spec
+
+    def executor(self, spec=None):
+        cls, options = self.executor_class(spec)
+        return cls(**options)
 
     def load_model_file(self, path):
         model = self.hook.mcl_load_model(path=str(path))

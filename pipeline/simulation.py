@@ -61,6 +61,10 @@ class SimulationResult:
     def as_series(self) -> TimeSeries:
         return TimeSeries(self.time, self.outputs, list(self.output_names), f"<{self.engine}>")
 
+    def to_frame(self):
+        """The outputs as a pandas DataFrame indexed by ``time``."""
+        return self.as_series().to_frame()
+
     @classmethod
     def failed(cls, reason, time, output_names, engine, seconds=0.0):
         t = np.asarray(time, dtype=float)

@@ -1,0 +1,161 @@
+"""Discovery: what a model gets wrong, which component, which law, what gain.
+
+:class:`Discovery` is the public face, in the scikit-learn manner: options in the constructor,
+``fit(train, validate)`` on data, results in attributes ending in ``_``. ``mcl run run.yaml``
+builds the same object from the run file (:meth:`Discovery.from_runfile`), so both routes run
+one implementation (:func:`mcl.discovery.run.run_discovery`).
+"""
+from __future__ import annotations
+
+import html
+import shutil
+import tempfile
+from pathlib import Path
+
+from ..data import as_timeseries
+from ..errors import ConfigError
+from ..progress import console
+from ..runfile import DEFAULT_TEMPLATES, RunSpec
+
+__all__ = ["Discovery"]
+
+
+class Discovery:
+    """Find the component of ``model`` that the data contradict and learn its law.
+
+    Parameters mirror the run file: ``model`` (class name), ``sources`` (.mo files or package
+    directories; may be empty for a class on the library path), ``unknown`` ("auto" or a
+    component name), ``templates``, ``libraries``, ``max_simulations``, ``screen``,
+    ``criterion`` ("bic"/"aic"), ``refinement`` ("simulation"/"full-discretisation"),
+    ``executor`` (a kind or ``{kind: ..., options}``), ``second`` (another configuration),
+    ``output`` (run directory; a temporary one by default), ``force``, ``verbose``.
+
+    After :meth:`fit`: ``misfit_``, ``cause_`` (None when no cause convinces), ``law_``,
+    ``gain_``, ``candidates_``, ``report_`` (all of report.json) and ``run_dir_``.
+    """
+
+    def __init__(self, model: str, sources=(), unknown: str = "auto", templates=None, libraries=(),
+                 max_simulations: int = 60, screen: int = 3, criterion: str = "bic",
+                 refinement: str = "simulation", executor="local", second: dict | None = None,
+                 report: dict | None = None, output=None, force: bool = False, verbose: bool = True):
+        self.model, self.sources, self.unknown = model, sources, unknown
+        self.templates, self.libraries = templates, libraries
+        self.max_simulations, self.screen, self.criterion = max_simulations, screen, criterion
+        self.refinement, self.executor, self.second = refinement, executor, second
+        self.report_options, self.output, self.force, self.verbose = report, output, force, verbose
+        self._spec: RunSpec | None = None
+
+    @classmethod
+    def from_spec(cls, spec: RunSpec, force: bool = False, verbose: bool = True) -> "Discovery":
+        self = cls(spec.model_name, spec.sources, spec.unknown, spec.templates, spec.libraries,
+                   spec.max_simulations, spec.screen, spec.criterion, spec.refinement_method,
+                   spec.executor, spec.second, spec.report, spec.output, force, verbose)
+        self._spec = spec
+        return self
+
+    @classmethod
+    def from_runfile(cls, path, force: bool = False, verbose: bool = True) -> "Discovery":
+        """The discovery a run file describes (checked completely first: schema, files, data)."""
+        from ..runfile import load_runfile
+
+        return cls.from_spec(load_runfile(path), force, verbose)
+
+    def spec(self) -> RunSpec:
+        """The run as a :class:`RunSpec` (what the run file would say)."""
+        if self._spec is not None:
+            return self._spec
+        as_paths = (lambda xs: [Path(x) for x in ([xs] if isinstance(xs, (str, Path)) else xs or ())])
+        executor = {"kind": self.executor} if isinstance(self.executor, str) else dict(self.executor)
+        output = Path(self.output) if self.output else Path(tempfile.mkdtemp(prefix="mcl-run-")) / "run"
+        return RunSpec(path=None, sources=as_paths(self.sources), model_name=self.model, train=None,
+                       validate=None, unknown=self.unknown, output=output,
+                       templates=list(self.templates or DEFAULT_TEMPLATES),
+                       max_simulations=self.max_simulations, screen=self.screen, criterion=self.criterion,
+                       refinement_method=self.refinement, executor=executor, second=self.second,
+                       report=dict(self.report_options or {}), libraries=as_paths(self.libraries))
+
+    def fit(self, train, validate=None) -> "Discovery":
+        """Run the discovery on ``train`` (and held-out ``validate``) data: a pandas DataFrame,
+        a NumPy structured array, a mapping of columns, a :class:`mcl.data.TimeSeries` or a CSV."""
+        from .run import run_discovery
+
+        spec = self.spec()
+        self._check(spec)
+        train_ts = as_timeseries(train, "train")
+        validate_ts = None if validate is None else as_timeseries(validate, "validate")
+        fingerprint = spec.fingerprint() if spec.path else {
+            "train": train_ts.fingerprint(), **({"validate": validate_ts.fingerprint()} if validate_ts else {})}
+        with console(self.verbose):
+            report = run_discovery(spec, train_ts, validate_ts, force=self.force, fingerprint=fingerprint)
+        self._set_results(report, spec.output)
+        return self
+
+    def _check(self, spec: RunSpec) -> None:
+        """The options an API user gives, checked like a run file's (kinds, templates)."""
+        from ..api import registry
+        from ..runfile import CRITERIA, METHODS
+
+        reg = registry()
+        if spec.criterion not in CRITERIA:
+            raise ConfigError(f"criterion '{spec.criterion}': choose one of {', '.join(CRITERIA)}")
+        if spec.refinement_method not in METHODS:
+            raise ConfigError(f"refinement '{spec.refinement_method}': choose one of {', '.join(METHODS)}")
+        reg.executor_class(spec.executor)
+        for t in spec.templates:
+            reg.template(t)
+
+    def _set_results(self, report: dict, run_dir: Path) -> None:
+        self.report_, self.run_dir_ = report, Path(run_dir)
+        self.misfit_, self.cause_, self.gain_ = report["misfit"], report["cause"], report["gain"]
+        self.law_ = (report["cause"] or {}).get("law")
+        self.candidates_ = report["candidates"]
+
+    def _fitted(self) -> None:
+        if not hasattr(self, "report_"):
+            raise ConfigError("this Discovery is not fitted yet: call fit(train) first")
+
+    def export(self, directory, name: str = "MCLLearned") -> Path:
+        """The learned component as a Modelica library ``directory/name`` (and its FMU)."""
+        from .export import export_library
+
+        self._fitted()
+        return export_library(self.run_dir_, directory, name)
+
+    def report(self, directory) -> Path:
+        """report.html and report.json copied into ``directory``; returns the HTML file."""
+        self._fitted()
+        out = Path(directory)
+        out.mkdir(parents=True, exist_ok=True)
+        for f in ("report.html", "report.json"):
+            if (self.run_dir_ / f).is_file():
+                shutil.copyfile(self.run_dir_ / f, out / f)
+        return out / "report.html"
+
+    def summary(self) -> list[str]:
+        """The result in words, a line each."""
+        if not hasattr(self, "report_"):
+            return [f"Discovery of {self.model} (not fitted)"]
+        m, cause, g = self.misfit_, self.cause_, self.gain_
+        lines = [f"misfit: {'significant' if m['significant'] else 'not significant'} "
+                 f"(training RMS {m['train_rms']:.4g}, noise {m['noise_estimate']:.4g})"]
+        if cause:
+            val = ("" if g["validation_rms_before"] is None else
+                   f"; validation RMS {g['validation_rms_before']:.4g} -> {g['validation_rms_after']:.4g}")
+            lines += [f"cause: {cause['effect']} [{cause['evidence']['strength']}]",
+                      f"gain: training RMS {g['train_rms_before']:.4g} -> {g['train_rms_after']:.4g}{val}"]
+        else:
+            lines.append("cause: none (the model explains the data to the noise level)"
+                         if not m["significant"] else
+                         "cause: none found (no candidate explains the data better than the model)")
+        return lines
+
+    def __str__(self) -> str:
+        return "\n".join(self.summary())
+
+    def __repr__(self) -> str:
+        state = "fitted" if hasattr(self, "report_") else "not fitted"
+        return f"Discovery(model={self.model!r}, unknown={self.unknown!r}) [{state}]"
+
+    def _repr_html_(self) -> str:
+        items = "".join(f"<li>{html.escape(line)}</li>" for line in self.summary())
+        return f"<div><b>Discovery of {html.escape(self.model)}</b><ul>{items}</ul></div>"

@@ -1,0 +1,115 @@
+"""The public Python API: the `mcl` namespace, Discovery on in-memory data, quiet runs."""
+import json
+import logging
+
+import numpy as np
+import pytest
+
+import mcl
+from mcl import Discovery, compile_model, discover, simulate
+from mcl.data import as_timeseries, read_csv
+from mcl.errors import ConfigError, DataError
+
+from test_discover import setup_run
+
+
+def test_public_names_are_the_functions():
+    import mcl.simulation  # importing the module must not shadow the function
+
+    assert callable(simulate) and simulate.__module__ == "mcl.api"
+    assert mcl.simulate is simulate and mcl.compile_model is compile_model and callable(discover)
+    assert mcl.Discovery is Discovery
+    from mcl.plugins import executors, templates  # noqa: F401  built-ins inside the namespace
+
+    assert (mcl.modelica.MCL_LIBRARY / "package.mo").is_file()
+    assert mcl.__version__ == mcl.library.mcl_version()
+
+
+def test_mcl_library_carries_the_distribution_version():
+    text = (mcl.modelica.MCL_LIBRARY / "package.mo").read_text()
+    assert f'version="{mcl.__version__}"' in text
+
+
+def test_mcl_classes_compile_without_sources():
+    model = compile_model([], "MCL.Examples.CauerFilter")
+    assert model.output_names and len(model.ode.x_names) >= 3
+
+
+def test_data_frames_structured_arrays_and_back():
+    pd = pytest.importorskip("pandas")
+    t = np.linspace(0, 1, 5)
+    frame = pd.DataFrame({"time": t, "u": np.sin(t), "y": np.cos(t)})
+    ts = as_timeseries(frame)
+    assert ts.names == ["u", "y"] and np.allclose(ts.column("y"), np.cos(t))
+    rec = np.zeros(5, dtype=[("time", float), ("u", float)])
+    rec["time"], rec["u"] = t, 2 * t
+    assert np.allclose(as_timeseries(rec).column("u"), 2 * t)
+    assert np.allclose(as_timeseries(ts.to_frame()).values, ts.values)   # the index is time
+    with pytest.raises(DataError, match="no 'time' column"):
+        as_timeseries({"u": t})
+    with pytest.raises(DataError, match="non-finite"):
+        as_timeseries(pd.DataFrame({"time": t, "u": [0, 1, np.nan, 3, 4]}))
+
+
+def test_simulation_result_to_frame():
+    model = compile_model([], "MCL.Examples.CauerFilter")
+    t = np.linspace(0, 2, 21)
+    inputs = {"time": t, **{u: np.sin(t) for u in model.input_names}}
+    frame = simulate(model, as_timeseries(inputs)).to_frame()
+    assert list(frame.columns) == model.output_names and frame.index.name == "time" and len(frame) == 21
+
+
+@pytest.mark.slow
+def test_api_on_a_data_frame_equals_the_run_file(tmp_path, capsys):
+    run = setup_run(tmp_path, cubic=0.3)
+    assert mcl.cli.main(["--quiet", "run", str(run)]) == 0
+    printed = capsys.readouterr()
+    assert printed.err == "" and printed.out.startswith("misfit: significant")
+    yaml_report = json.loads((tmp_path / "out/rc/report.json").read_text())
+
+    train = read_csv(tmp_path / "train.csv").to_frame().reset_index()
+    validate = read_csv(tmp_path / "validate.csv").to_frame()
+    d = Discovery("Circuit.RC", sources=[tmp_path / "Circuit.mo"], verbose=False)
+    assert d.fit(train, validate) is d
+    assert d.cause_["component"] == "Rx" and d.law_["equation"] == yaml_report["cause"]["law"]["equation"]
+    assert d.gain_ == pytest.approx(yaml_report["gain"])
+    assert d.misfit_["train_rms"] == pytest.approx(yaml_report["misfit"]["train_rms"])
+    assert d.misfit_["noise_estimate"] == pytest.approx(yaml_report["misfit"]["noise_estimate"])
+    assert [c["score"] for c in d.candidates_] == pytest.approx([c["score"] for c in yaml_report["candidates"]])
+    assert d.report_["inputs"]["train"] != yaml_report["inputs"]["train"]   # array hash vs file hash
+    assert "cause: Rx follows" in str(d) and "<li>" in d._repr_html_()
+    assert d.run_dir_.name == "run" and (d.run_dir_ / "report.json").is_file()
+
+    lib = d.export(tmp_path / "lib", name="Parts")
+    text = (lib / "package.mo").read_text()
+    assert f'uses(MCL(version="{mcl.__version__}"))' in text and "Rx_polynomial" in text
+    assert d.report(tmp_path / "rep").is_file()
+    soft = yaml_report["software"]
+    assert {"mcl", "casadi", "fmpy", "numpy", "scipy"} <= set(soft)
+    assert set(yaml_report["inputs"]) == {"run_file", "train", "validate"}
+
+
+def test_api_options_are_checked_like_a_run_file(tmp_path):
+    with pytest.raises(ConfigError, match="did you mean 'dask'"):
+        Discovery("MCL.Examples.CauerFilter", executor="dsak").fit({"time": [0, 1], "u": [0, 0]})
+    with pytest.raises(ConfigError, match="workers"):
+        Discovery("MCL.Examples.CauerFilter", executor={"kind": "local", "workers": 0}).fit(
+            {"time": [0, 1], "u": [0, 0]})
+    with pytest.raises(ConfigError, match="not fitted"):
+        Discovery("MCL.Examples.CauerFilter").export(tmp_path)
+
+
+def test_library_code_prints_nothing(capsys, caplog):
+    """Everything said goes through logging (logger 'mcl') and the progress bars on stderr."""
+    from mcl.progress import Progress, quiet
+    from mcl.sparsify import PruneStep, log_step
+
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        log_step(PruneStep(removed=None, estimate=None, cost=1.0, criterion=1.0, accepted=True, active=["a"]))
+        with quiet():
+            bar = Progress("batch", 2)
+            bar.update()
+            bar.update()
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""
+    assert "1 terms, cost 1" in caplog.text and "batch: 2/2" not in caplog.text

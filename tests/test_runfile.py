@@ -1,0 +1,79 @@
+"""Run files: a schema, every problem with file:line:key, found before anything is compiled."""
+import pytest
+
+from mcl import hookimpl
+from mcl.cli import main
+from mcl.errors import ConfigError
+from mcl.executor import SerialExecutor
+from mcl.registry import Registry
+from mcl.runfile import parse_runfile
+
+# The model does not even parse: a run-file mistake must be reported before any compile.
+BROKEN_MODEL = "model Plant\n  Real x\nequation\n  der(x) = -x;\nend Plant;\n"
+BASE = "model: {sources: [Plant.mo], name: Plant}\ndata: {train: train.csv}\noutput: out\n"
+
+
+def write(tmp_path, text):
+    (tmp_path / "Plant.mo").write_text(BROKEN_MODEL)
+    (tmp_path / "train.csv").write_text("time,y\n0,1\n1,2\n")
+    (tmp_path / "run.yaml").write_text(text)
+    return tmp_path / "run.yaml"
+
+
+@pytest.mark.parametrize("extra, line, expected", [
+    ("executor: {kind: dsak}\n", 4, "executor.kind: 'dsak' is not one of local, serial, dask (did you mean 'dask'?)"),
+    ("executor: {kind: local, address: x}\n", 4, "executor.address: unknown key"),
+    ("executor: {kind: local, workers: -3}\n", 4, "executor.workers: -3 is less than 1"),
+    ("refinement: {criterion: bci}\n", 4, "refinement.criterion: 'bci' is not one of bic, aic (did you mean 'bic'?)"),
+    ("fitting: {max_simulatons: 10}\n", 4, "fitting.max_simulatons: unknown key (did you mean 'max_simulations'?)"),
+    ("templates:\n  - {name: polynomial, rhs: [v, 'v^-1']}\n", 5, "templates.0: template term 'v^-1'"),
+    ("templates:\n  - {name: polynomial, rsh: [v]}\n", 5, "templates.0.rsh: unknown key (did you mean 'rhs'?)"),
+    ("templates:\n  - {name: nope}\n", 5, "templates.0.name: 'nope' is not one of"),
+    ("report: {title: [1, 2]}\n", 4, "report.title: must be string"),
+    ("second: {model: {sources: [Plant.mo]}, data: train.csv}\n", 4, "second.model.name: missing"),
+    ("colour: red\n", 4, "colour: unknown key"),
+])
+def test_each_mistake_names_file_line_and_key_before_compiling(tmp_path, capsys, extra, line, expected):
+    run = write(tmp_path, BASE + extra)
+    assert main(["run", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert f"run.yaml:{line}: {expected}" in err, err
+    assert "Traceback" not in err and "syntax error" not in err
+
+
+def test_yaml_that_does_not_parse_names_its_line(tmp_path, capsys):
+    run = write(tmp_path, BASE + "executor: {kind: local\n")
+    assert main(["run", str(run)]) == 2
+    assert "run.yaml:5: not valid YAML" in capsys.readouterr().err
+
+
+class InlineExecutor(SerialExecutor):
+    name = "inline"
+
+    def __init__(self, chunk: int = 1):
+        self.chunk = chunk
+
+
+class InlinePlugin:
+    @hookimpl
+    def mcl_executors(self):
+        return [InlineExecutor]
+
+    @hookimpl
+    def mcl_option_schemas(self):
+        return {"executor": {"inline": {"type": "object", "additionalProperties": False,
+                                        "properties": {"chunk": {"type": "integer", "minimum": 1}}}}}
+
+
+def test_a_third_party_plugin_s_option_schema_is_enforced(tmp_path):
+    reg = Registry(external=False, extra=[InlinePlugin()])
+    run = write(tmp_path, BASE + "executor: {kind: inline, chunk: 0, speed: 3}\n")
+    with pytest.raises(ConfigError) as err:
+        parse_runfile(run, reg)
+    text = str(err.value)
+    assert "run.yaml:4: executor.chunk: 0 is less than 1" in text
+    assert "run.yaml:4: executor.speed: unknown key" in text
+    run.write_text(BASE + "executor: {kind: inline, chunk: 4}\n")
+    spec, _ = parse_runfile(run, reg)
+    assert spec.executor == {"kind": "inline", "chunk": 4}
+    assert reg.executor(spec.executor).chunk == 4
