@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import shutil
 import sys
 import traceback
@@ -21,8 +22,10 @@ def _parse_params(pairs) -> dict[str, float]:
             if not sep or not name.strip():
                 raise ValueError
             out[name.strip()] = float(value)
+            if not math.isfinite(out[name.strip()]):
+                raise ValueError
         except ValueError:
-            raise ConfigError(f"--param '{pair}': expected NAME=NUMBER") from None
+            raise ConfigError(f"--param '{pair}': expected NAME=NUMBER (a finite number)") from None
     return out
 
 
@@ -68,10 +71,13 @@ def cmd_simulate(args) -> int:
     from .api import simulate
     from .data import read_csv, write_csv
 
-    model = _model_from_args(args)
+    params = _parse_params(args.param)
+    if Path(args.output).is_dir():
+        raise ConfigError("the result file to write is an existing directory", where=args.output)
     inputs = read_csv(args.input)
+    model = _model_from_args(args)
     options = {"rtol": args.rtol, "time_limit": args.time_limit}
-    result = simulate(model, inputs, _parse_params(args.param), options=options, engine=args.engine)
+    result = simulate(model, inputs, params, options=options, engine=args.engine)
     if not result.ok:
         print(f"mcl: simulation failed: {result.reason}", file=sys.stderr)
         return EXIT_FAILED
@@ -295,6 +301,21 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("mcl: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as exc:   # the machine, not the user: disk full, read-only, permission
+        if args.verbose:
+            traceback.print_exc()
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"mcl: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return EXIT_FAILED
+    except RecursionError:
+        print("mcl: error: the input is nested too deeply to process", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:  # noqa: BLE001 - a bug: one line, the traceback with --verbose
+        if args.verbose:
+            traceback.print_exc()
+        print(f"mcl: internal error (please report it; --verbose shows where): "
+              f"{type(exc).__name__}: {exc}"[:500], file=sys.stderr)
+        return EXIT_FAILED
     finally:
         log.removeHandler(handler)
 

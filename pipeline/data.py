@@ -112,8 +112,16 @@ def read_csv(path) -> TimeSeries:
     path = Path(path)
     if not path.is_file():
         raise DataError("no such data file", where=str(path))
-    with path.open(newline="", encoding="utf-8-sig") as fh:
-        rows = list(csv.reader(fh))
+    try:
+        with path.open(newline="", encoding="utf-8-sig") as fh:
+            rows = list(csv.reader(fh))
+    except UnicodeDecodeError as exc:
+        raise DataError(f"not UTF-8 text ({exc.reason} at byte {exc.start}); save the CSV as UTF-8",
+                        where=str(path)) from None
+    except csv.Error as exc:
+        raise DataError(f"not a readable CSV file: {exc}", where=str(path)) from None
+    if any("\0" in cell for row in rows[:50] for cell in row):
+        raise DataError("not a text CSV file (it holds NUL bytes)", where=str(path))
     rows = [r for r in rows if r and any(c.strip() for c in r)]
     if not rows:
         raise DataError("empty file", where=str(path))
@@ -123,6 +131,9 @@ def read_csv(path) -> TimeSeries:
     dup = {h for h in header if header.count(h) > 1}
     if dup:
         raise DataError(f"duplicate column name(s) {', '.join(sorted(dup))}", where=f"{path}:1")
+    if len(rows) < 3:
+        raise DataError(f"a header row and at least two samples are needed ({len(rows) - 1} sample(s))",
+                        where=str(path))
     data = np.empty((len(rows) - 1, len(header)))
     for i, row in enumerate(rows[1:], start=2):
         if len(row) != len(header):

@@ -82,6 +82,9 @@ def _run_isolated(job: dict, time_limit: float):
 def _child(job: dict, conn) -> None:
     import os
 
+    from .executor import die_with_parent
+
+    die_with_parent()
     null = os.open(os.devnull, os.O_WRONLY)  # FMPy and the FMU print; their words go in `reason`
     os.dup2(null, 1)
     os.dup2(null, 2)
@@ -99,23 +102,30 @@ def _child(job: dict, conn) -> None:
 
 
 def _simulate(job: dict, messages: list[str]) -> np.ndarray:
+    import tempfile
+
     from fmpy import read_model_description
+
+    from .fmu.archive import safe_extract
 
     def logger(_env, _name, status, _category, message):
         if status >= 2:  # discard, error, fatal
             messages.append(message.decode("utf-8", "replace"))
 
-    md = read_model_description(job["path"], validate=False)
-    if md.fmiVersion == "2.0" and md.modelExchange is not None and not md.numberOfEventIndicators:
-        return _simulate_me2(job, md, logger)
-    return _simulate_fmpy(job, logger)
+    with tempfile.TemporaryDirectory(prefix="mcl-fmu-run-") as tmp:   # removed after use
+        unzipdir = safe_extract(job["path"], tmp)
+        md = read_model_description(unzipdir, validate=False)
+        job = {**job, "path": unzipdir}
+        if md.fmiVersion == "2.0" and md.modelExchange is not None and not md.numberOfEventIndicators:
+            return _simulate_me2(job, md, logger)
+        return _simulate_fmpy(job, logger)
 
 
 def _simulate_me2(job: dict, md, logger) -> np.ndarray:
     """Integrate an event-free FMI 2.0 ME FMU with LSODA, inputs interpolated exactly."""
     from ctypes import POINTER, c_double
 
-    from fmpy import extract, instantiate_fmu
+    from fmpy import instantiate_fmu
     from scipy.integrate import solve_ivp
 
     vr = {v.name: v.valueReference for v in md.modelVariables}
@@ -123,7 +133,7 @@ def _simulate_me2(job: dict, md, logger) -> np.ndarray:
     u_vr = [vr[n] for n in job["u_names"]]
     y_vr = [vr[n] for n in job["outputs"]]
     nx = md.numberOfContinuousStates
-    fmu = instantiate_fmu(extract(job["path"]), md, "ModelExchange", logger=logger)
+    fmu = instantiate_fmu(job["path"], md, "ModelExchange", logger=logger)
 
     def u_at(t):
         return [float(np.interp(t, u_t, u_v[:, j])) for j in range(len(u_vr))]

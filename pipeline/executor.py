@@ -84,6 +84,8 @@ class LocalExecutor(Executor):
     name = "local"
 
     def __init__(self, workers: int | None = None):
+        if workers is not None and (not isinstance(workers, int) or workers < 1):
+            raise ConfigError(f"executor 'local': workers must be a whole number >= 1, not {workers!r}")
         self.workers = workers or max(1, os.cpu_count() or 2)
         self.mp = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
 
@@ -127,7 +129,22 @@ class LocalExecutor(Executor):
         return [results[k] for k in range(len(items))]
 
 
+def die_with_parent() -> None:
+    """In a forked worker: be killed when the parent dies (Linux PR_SET_PDEATHSIG), so a killed
+    ``mcl run`` leaves no workers behind."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
 def _child(fn, context, item, conn) -> None:
+    die_with_parent()
     try:
         result = fn(context, item)
     except Exception as exc:  # noqa: BLE001 - a failed task is a result
@@ -157,7 +174,10 @@ class DaskExecutor(Executor):
             raise ConfigError("the dask executor needs 'dask[distributed]' "
                               "(pip install 'mcl[dask]')") from None
         if address:
-            self.cluster, self.client = None, Client(address)
+            try:
+                self.cluster, self.client = None, Client(address, timeout="10s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise ConfigError(f"executor 'dask': no scheduler answers at {address} ({exc})") from None
             self.workers = max(1, len(self.client.scheduler_info().get("workers", {})))
         else:
             self.workers = workers or 2

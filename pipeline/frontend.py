@@ -6,8 +6,10 @@ would translate wrongly (see ../shared/DESIGN.md, section 1) instead of compilin
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import re
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -160,6 +162,8 @@ def check_supported(flat_class, sources: Sources) -> None:
                 refuse("der() of an expression (write der(x) of a variable)", r"\bder\s*\(\s*[^)]*[*/+-]")
             if e.operator in ("pre", "edge", "change", "sample", "initial", "terminal"):
                 refuse(f"event operator {e.operator}()", rf"\b{e.operator}\s*\(")
+            if str(e.operator) in ("delay", "spatialDistribution", "cardinality"):
+                refuse(f"{e.operator}() (not translated into the ODE)", rf"\b{e.operator}\s*\(")
             for o in e.operands:
                 walk_expr(o)
         elif isinstance(e, ast.IfExpression):
@@ -231,8 +235,24 @@ def _restore_top_level_inputs(model, cls) -> None:
 def load(paths, name: str, libraries=()):
     """Sources (files or package directories) + class name -> (pymoca model, Sources)."""
     sources = collect_sources(paths, name, libraries)
-    tree = parse(sources)
-    return generate(tree, name, sources), sources
+    with deep_recursion():   # long sums in equations are deep trees for pymoca and CasADi
+        try:
+            tree = parse(sources)
+            return generate(tree, name, sources), sources
+        except RecursionError:
+            raise ModelicaError(f"an expression in {name} is nested too deeply to translate",
+                                where=sources.locate_class(name)) from None
+
+
+@contextlib.contextmanager
+def deep_recursion(limit: int = 20000):
+    """A higher Python recursion limit for a block (the C stack of the main thread allows it)."""
+    before = sys.getrecursionlimit()
+    sys.setrecursionlimit(max(before, limit))
+    try:
+        yield
+    finally:
+        sys.setrecursionlimit(before)
 
 
 def located(error: ModelicaError, sources: Sources, name: str) -> ModelicaError:

@@ -14,7 +14,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .errors import DataError, MclError
+from .errors import ConfigError, DataError, MclError
 from .structure import Ode
 
 _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe")
@@ -53,6 +53,8 @@ class CompiledModel:
     def save(self, directory) -> Path:
         """Write the functions (CasADi serialisation) and names to ``directory``."""
         d = Path(directory)
+        if d.exists() and (not d.is_dir() or (any(d.iterdir()) and not (d / "model.json").is_file())):
+            raise ConfigError("exists and is not a saved mcl model: choose another output", where=str(d))
         d.mkdir(parents=True, exist_ok=True)
         for f in _FUNCTIONS:
             getattr(self.ode, f).save(str(d / f"{f}.casadi"))
@@ -94,6 +96,9 @@ class FmuModel:
         path = Path(path)
         if not path.is_file():
             raise DataError("no such FMU", where=str(path))
+        from .fmu.archive import check_archive
+
+        check_archive(path)
         try:
             md = read_model_description(str(path), validate=False)
         except Exception as exc:

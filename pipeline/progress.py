@@ -73,9 +73,11 @@ class Progress:
         self.label, self.total, self.workers = label, total, max(1, int(workers))
         self.done = self.failed = 0
         self.start = time.perf_counter()
+        tty = getattr(sys.stderr, "isatty", lambda: False)()
         self.bar = tqdm(total=total, desc=label, file=sys.stderr, leave=False, dynamic_ncols=True,
                         disable=not (enabled and _enabled and total > 0),
-                        bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed} {postfix}")
+                        mininterval=0.1 if tty else 30.0,   # a log file gets a line now and then
+                        bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed}{postfix}")
 
     def eta(self) -> float:
         """Seconds left: mean task time x rounds left at ``workers`` tasks per round."""

@@ -101,7 +101,9 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         labels = [f"{c['component']} ({c['template'].get('name', '?') if isinstance(c['template'], dict) else c['template']})"
                   for c in cands]
         scores = [c["score"] - cands[0]["score"] for c in cands]
-        ax.barh(labels[::-1], scores[::-1], color=["tab:green"] + ["tab:gray"] * (len(cands) - 1))
+        colours = ["tab:green"] + ["tab:gray"] * (len(cands) - 1)   # the winner first, drawn at the top
+        ax.barh(labels[::-1], scores[::-1], color=colours[::-1])
+        ax.plot([0], [len(cands) - 1], "o", color="tab:green")      # the winner's bar has length 0
         ax.set_xlabel("BIC above the best candidate (lower is better)")
         figs.append(("Candidate ranking", _png(fig)))
     m = report["misfit"]
@@ -113,7 +115,9 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         ("evidence", f"{cause['evidence']['strength']} (ΔBIC {cause['evidence']['delta_bic_to_next']:.3g})"
          if cause else "-"),
         ("training RMS after", g["train_rms_after"]), ("validation RMS before", g["validation_rms_before"]),
-        ("validation RMS after", g["validation_rms_after"])))
+        ("validation RMS after", g["validation_rms_after"]),
+        ("not evaluated", "; ".join(f"{f['component']} ({f['stage']}: {f['reason']})"
+                                    for f in report.get("failed", [])) or "-")))
     imgs = "".join(f"<h2>{html.escape(t)}</h2><img src='data:image/png;base64,{b}'/>" for t, b in figs)
     heading = html.escape(title or report["model"])
     page = (f"<!doctype html><html><head><meta charset='utf-8'><title>mcl: {heading}</title>"

@@ -147,6 +147,10 @@ class Discovery:
             lines.append("cause: none (the model explains the data to the noise level)"
                          if not m["significant"] else
                          "cause: none found (no candidate explains the data better than the model)")
+        failed = self.report_.get("failed") or []
+        if failed:
+            lines.append(f"warning: {len(failed)} candidate(s) could not be evaluated: " + "; ".join(
+                f"{f['component']} ({f['stage']}: {f['reason']})"[:160] for f in failed))
         return lines
 
     def __str__(self) -> str:

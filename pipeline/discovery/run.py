@@ -169,7 +169,7 @@ def _screen_task(ctx, item):
     S = res.sensitivities[:, idx, :].reshape(-1, len(tm.parameter_names) - 1)
     g = S.T @ r
     gain = float(g @ np.linalg.pinv(S.T @ S) @ g)
-    return {"component": comp_name, "template": tpl_spec, "rss0": float(r @ r),
+    return {"component": comp_name, "template": tpl_spec, "rss0": float(r @ r), "n_params": len(tm.parameter_names),
             "predicted_rss": float(max(r @ r - gain, 0.0))}
 
 
@@ -208,6 +208,45 @@ def _candidate_task(ctx, item):
 def ctx_of(graph, train, validate, nominal_probe, spec, part):
     return (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"),
             spec.refinement_method)
+
+
+def _done(path: Path) -> bool:
+    """A candidate already fitted (a failed one is tried again on resume)."""
+    if not path.exists():
+        return False
+    try:
+        return "failed" not in json.loads(path.read_text())
+    except ValueError:
+        return False
+
+
+def _template_name(spec) -> str:
+    return spec if isinstance(spec, str) else spec.get("name", "?")
+
+
+def _failures(screening: list, cands: list) -> list[dict]:
+    """Every candidate that could not be evaluated, with the stage and the reason."""
+    out = [{"component": s["component"], "template": s["template"], "stage": "screening",
+            "reason": s.get("reason", "failed")} for s in screening if s.get("predicted_rss") is None]
+    out += [{"component": c["component"], "template": c["template"], "stage": "fitting",
+             "reason": c["failed"]} for c in cands if c.get("failed")]
+    return out
+
+
+def _weigh_unevaluated(evidence: dict, best: dict, cands: list, screening: list, spec, n_obs: int) -> None:
+    """A contender that failed in fitting can only be excluded by its screening prediction:
+    its predicted score (one linearised step) must lose by the criterion's 'decisive' margin;
+    otherwise the cause is at most 'undecided'."""
+    score_of = bic if spec.criterion == "bic" else aic
+    open_ = []
+    for c in (c for c in cands if c.get("failed")):
+        pred = next((s for s in screening if s["component"] == c["component"] and s["template"] == c["template"]), {})
+        k = pred.get("n_params", 3)
+        if pred.get("predicted_rss") is None or score_of(pred["predicted_rss"], n_obs, k - 1) - best["score"] <= 10:
+            open_.append(c["component"])
+    if open_:
+        evidence["unevaluated"] = open_
+        evidence["strength"] = f"undecided: {', '.join(open_)} could not be evaluated"
 
 
 def strength(delta: float) -> str:
@@ -279,7 +318,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         order = sorted(range(len(items)), key=lambda k: (screening[k]["predicted_rss"] is None,
                                                          screening[k]["predicted_rss"] or 0.0))
         items = [items[k] for k in order[: spec.screen]]
-        todo = [it for it in items if not (part / "candidates" / f"{it[0]}_{it[1]}.json").exists()]
+        todo = [it for it in items if not _done(part / "candidates" / f"{it[0]}_{it[1]}.json")]
         log.info("      fitting the %d most promising (%d already done)", len(items), len(items) - len(todo))
         ctx = ctx_of(graph, train, validate, nominal_probe, spec, part)
 
@@ -295,6 +334,10 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         ranked = sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
         report["candidates"] = ranked + [c for c in cands if c.get("score") is None]
         report["screening"] = screening
+        report["failed"] = _failures(screening, cands)
+        for f in report["failed"]:
+            log.warning("      %s with %s could not be evaluated (%s): %s", f["component"],
+                        _template_name(f["template"]), f["stage"], f["reason"])
         # the nominal model is a contender too: a cause must explain the data better than it
         n_obs = y_meas.size
         nominal_score = (bic if spec.criterion == "bic" else aic)(float(np.sum(resid**2)), n_obs, 0)
@@ -307,6 +350,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
             delta = min([c["score"] for c in ranked[1:]] + [nominal_score]) - best["score"]
             report["cause"], extended_y = _explain(best, delta, graph, spec, part, train, validate,
                                                    outputs, reg, nominal_probe)
+            _weigh_unevaluated(report["cause"]["evidence"], best, cands, screening, spec, n_obs)
             report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),
                               "validation_rms_before": val0, "validation_rms_after": best.get("validation_rms")}
     if report["gain"] is None:

@@ -6,6 +6,7 @@ CasADi generates C for the model's functions; a short hand-written FMI 2 wrapper
 """
 from __future__ import annotations
 
+import os
 import re
 import shutil
 import subprocess
@@ -17,7 +18,7 @@ from xml.sax.saxutils import quoteattr
 
 import casadi as ca
 
-from ..errors import CompileError
+from ..errors import CompileError, ConfigError
 from ..model import CompiledModel
 
 _HERE = Path(__file__).parent
@@ -151,8 +152,10 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True) -> Path:
             raise CompileError(f"gcc failed: {proc.stderr.strip().splitlines()[-1] if proc.stderr else ''}")
         sources = sorted(p.name for p in build.iterdir() if p.suffix in (".c", ".h"))
         xml = model_description(model, ident, guid, [s for s in sources if s.endswith(".c")])
+        if out_path.is_dir():
+            raise ConfigError("the FMU to write is an existing directory", where=str(out_path))
         out_path.parent.mkdir(parents=True, exist_ok=True)
-        tmp_fmu = out_path.with_name(f".{out_path.name}.tmp")
+        tmp_fmu = build / "model.fmu"    # packed in the build directory: nothing half-written is left
         with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", xml)
             z.write(so, f"binaries/linux64/{ident}.so")
@@ -161,9 +164,13 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True) -> Path:
         if validate:
             problems = validate_fmu(tmp_fmu)
             if problems:
-                tmp_fmu.unlink(missing_ok=True)
                 raise CompileError(f"FMPy validation of the generated FMU failed: {problems[0]}")
-        tmp_fmu.replace(out_path)
+        staged = out_path.with_name(f".{out_path.name}.{os.getpid()}.tmp")
+        try:
+            shutil.copyfile(tmp_fmu, staged)
+            staged.replace(out_path)
+        finally:
+            staged.unlink(missing_ok=True)
     return out_path
 
 
