@@ -20,6 +20,16 @@ def _png(fig) -> str:
     return base64.b64encode(buf.getvalue()).decode()
 
 
+def _write_atomic(path: Path, text: str) -> None:
+    """A full disk leaves the old file (or none), never half of the new one."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    try:
+        tmp.write_text(text)
+        tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
 def _clean(obj):
     """JSON-safe: numpy scalars to Python, non-finite floats to null."""
     if isinstance(obj, dict):
@@ -43,7 +53,7 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
     import matplotlib.pyplot as plt
 
     directory = Path(directory)
-    (directory / "report.json").write_text(json.dumps(_clean(report), indent=1))
+    _write_atomic(directory / "report.json", json.dumps(_clean(report), indent=1))
     if not plots:
         return
     figs = []
@@ -124,4 +134,4 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}td{padding:4px 12px}"
             "img{max-width:100%}</style></head><body>"
             f"<h1>{heading}</h1><table>{rows}</table>{imgs}</body></html>")
-    (directory / "report.html").write_text(page)
+    _write_atomic(directory / "report.html", page)

@@ -321,13 +321,23 @@ def check_data(spec: RunSpec, lines: dict) -> None:
             continue
         for why in model_column_problems(model, ts, spec.model_name, p.name):
             problems.add(f"data.{key}", why)
-    if spec.unknown != "auto":
-        from .graph import build_graph
+    from .graph import build_graph
 
+    if spec.unknown != "auto":
         comps = build_graph(spec.sources, spec.model_name, libraries=spec.libraries).components
         if spec.unknown not in comps:
             problems.add("unknown", f"no component '{spec.unknown}' in {spec.model_name}"
                                     f"{did_you_mean(spec.unknown, comps)}")
+    if spec.second:
+        sec, base = spec.second, spec.path.parent
+        try:
+            graph = build_graph([base / s for s in _strings(sec["model"].get("sources"))],
+                                sec["model"]["name"], libraries=spec.libraries)
+            target = sec.get("component", spec.unknown)
+            if target != "auto" and target not in graph.components:
+                problems.add("second.component", f"no component '{target}' in {sec['model']['name']}")
+        except MclError as exc:
+            problems.add("second.model.name", str(exc))
     problems.raise_if_any()
 
 

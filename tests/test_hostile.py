@@ -221,3 +221,13 @@ def test_a_second_run_on_the_same_output_is_told_so(tmp_path):
         RunDirectory(tmp_path / "out")
     first.finish()
     assert (tmp_path / "out" / ".mcl-run").is_file()
+
+
+def test_a_second_configuration_that_does_not_exist_is_found_up_front(tmp_path, capsys):
+    run = setup_run(tmp_path, cubic=0.0)
+    run.write_text(run.read_text() + f"second:\n  model: {{sources: [Circuit.mo, {LIB}], name: Circuit.Nope}}\n"
+                                     "  data: train.csv\n")
+    assert main(["run", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert "run.yaml:10: second.model.name:" in err and "Circuit.Nope" in err
+    assert not (tmp_path / "out").exists()
