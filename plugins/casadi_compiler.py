@@ -1,4 +1,8 @@
-"""The embedded default compiler: pymoca front end -> CasADi DAE -> index reduction -> ODE."""
+"""The embedded default compiler: a Modelica front end -> CasADi DAE -> index reduction -> ODE.
+
+``casadi`` uses the rumoca front end (real Modelica, the Modelica Standard Library included);
+``pymoca`` keeps the older pymoca front end for comparison (chosen by name only).
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,23 +13,47 @@ from mcl.compile import Compiler
 
 class CasadiCompiler(Compiler):
     name = "casadi"
-    description = "pymoca + CasADi: index reduction, causalisation; in-process model and FMI 2.0 FMU"
+    description = "rumoca front end + CasADi: index reduction, causalisation; in-process model and FMI 2.0 FMU"
+
+    def available(self):
+        try:
+            import rumoca  # noqa: F401
+        except ImportError:
+            return False, "rumoca is not installed (pip install rumoca)"
+        return True, ""
+
+    def compile(self, sources: list[Path], model: str, options: dict | None = None):
+        from mcl import rumoca_frontend, structure
+        from mcl.model import CompiledModel
+
+        ir, located = rumoca_frontend.load_ir(sources, model, (options or {}).get("libraries", ()))
+        dae = rumoca_frontend.to_dae(ir, located, model)
+        ode = structure.build_ode(dae, model)
+        files = sorted({path for path, _ in located.files.values()})
+        info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
+                "files_read": len(files), "units": dae.units, "descriptions": dae.descriptions}
+        return CompiledModel(model, ode, info)
+
+
+class PymocaCompiler(Compiler):
+    name = "pymoca"
+    description = "pymoca front end + CasADi (the earlier front end; no MSL)"
+    automatic = False
 
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
         from mcl import dae, frontend, structure
-        from mcl.model import CompiledModel
-
         from mcl.errors import ModelicaError
+        from mcl.model import CompiledModel
 
         pymoca_model, srcs = frontend.load(sources, model, (options or {}).get("libraries", ()))
         try:
             ode = structure.build_ode(dae.from_pymoca(pymoca_model, model), model)
         except ModelicaError as exc:
             raise frontend.located(exc, srcs, model) from None
-        info = {"compiler": self.name, "sources": [str(f) for f in srcs.files]}
+        info = {"compiler": self.name, "frontend": "pymoca", "sources": [str(f) for f in srcs.files]}
         return CompiledModel(model, ode, info)
 
 
 @hookimpl
 def mcl_compilers():
-    return [CasadiCompiler]
+    return [CasadiCompiler, PymocaCompiler]

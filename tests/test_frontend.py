@@ -23,7 +23,7 @@ def test_syntax_error_names_file_line_and_column(tmp_path):
     f = write(tmp_path, "  model M\n    Real x\n  equation\n    der(x) = -x;\n  end M;\n")
     with pytest.raises(ModelicaError) as err:
         compile_model([f], "P.M")
-    assert err.value.where.startswith(f"{f.resolve()}:{line_of(f, 'equation')}:")
+    assert err.value.where.startswith(f"{f.resolve()}:{line_of(f, 'Real x')}:")   # the unfinished line
     assert "syntax error" in str(err.value)
 
 
@@ -53,15 +53,26 @@ def test_unbalanced_model_is_refused(tmp_path):
      "      reinit(x, 1);\n    end when;\n  end M;\n", "when-equation", "when x"),
     ("  model M\n    parameter Real c = 2;\n    Real x(start=1);\n  equation\n"
      "    der(c*x) = -x;\n  end M;\n", r"der\(\) of an expression", "der(c*x)"),
-    ("  connector RealInput = input Real;\n  model M\n    RealInput u;\n    Real x;\n  equation\n"
-     "    der(x) = -x + u;\n  end M;\n", "RealInput", "connector RealInput"),
-    ("  model M\n    Real x;\n  algorithm\n    x := 1;\n  end M;\n", "algorithm", "algorithm"),
+    ("  model M\n    output Real y;\n    Real x(start=0);\n  equation\n    der(x) = -x;\n"
+     "    y = delay(x, 0.5);\n  end M;\n", r"delay\(\)", "delay("),
 ])
 def test_unsupported_constructs_are_refused_not_miscompiled(tmp_path, body, construct, needle):
     f = write(tmp_path, body)
     with pytest.raises(UnsupportedConstruct, match=construct) as err:
         compile_model([f], "P.M")
     assert err.value.where == f"{f.resolve()}:{line_of(f, needle)}"
+
+
+def test_real_input_connectors_and_algorithms_compile(tmp_path):
+    """What the pymoca front end refused, rumoca translates: connector inputs, algorithm sections."""
+    f = write(tmp_path, "  connector RealInput = input Real;\n  model M\n    RealInput u;\n    output Real y;\n"
+                        "    Real x(start=0, fixed=true);\n    Real z;\n  equation\n    der(x) = -x + u;\n"
+                        "  algorithm\n    z := 2 * x;\n  equation\n    y = z;\n  end M;\n")
+    model = compile_model([f], "P.M")
+    assert model.input_names == ["u"]
+    t = np.linspace(0, 3, 301)
+    res = simulate(model, series(t, u=np.ones_like(t)), options={"rtol": 1e-10, "atol": 1e-12})
+    assert np.allclose(res.output("y"), 2 * (1 - np.exp(-t)), atol=1e-8)
 
 
 def test_input_of_a_derived_type_keeps_its_causality(tmp_path):

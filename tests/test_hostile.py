@@ -77,7 +77,7 @@ def test_read_only_output_is_a_machine_failure(tmp_path, capsys):
 
 
 def test_unsupported_delay_is_a_clear_error_not_a_crash(tmp_path, capsys):
-    (tmp_path / "D.mo").write_text("model D\n  output Real y;\nequation\n  y = delay(time, 1);\nend D;\n")
+    (tmp_path / "D.mo").write_text("model D\n  output Real y;\nequation\n  y = delay(time, 1.0);\nend D;\n")
     assert main(["compile", str(tmp_path / "D.mo"), "--model", "D", "-o", str(tmp_path / "d.fmu")]) == 2
     assert "D.mo:4: unsupported Modelica construct: delay()" in capsys.readouterr().err
 

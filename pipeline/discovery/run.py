@@ -26,7 +26,7 @@ import numpy as np
 
 from ..data import TimeSeries, read_csv
 from ..progress import log
-from ..errors import ConfigError
+from ..errors import ConfigError, MclError, ModelicaError
 from ..executor import TaskFailed
 from ..stats import aic, bic, noise_estimate, rms
 from ..swap import class_name_for
@@ -134,18 +134,38 @@ def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: s
 
 
 def _candidate_model(ctx, item):
-    """(template, w0, swapped model description, compiled model) of one candidate."""
+    """(template, w0, swapped model description, compiled model) of one candidate, compiled by
+    the parent before the batch (a forked worker must not run the Rust front end: its threads
+    do not survive a fork); a candidate that did not compile raises its error here."""
+    built = ctx[8][(item[0], item[1])]
+    if isinstance(built, Exception):
+        raise built
+    return built
+
+
+def build_candidates(graph, train, nominal_probe, items, workdir, libraries=()) -> dict:
+    """Every candidate of ``items`` compiled (the template in place of its component); one that
+    does not compile (its system refers to variables the template lacks) keeps its error."""
+    out = {}
+    for it in items:
+        try:
+            out[(it[0], it[1])] = build_candidate(graph, train, nominal_probe, it, workdir, libraries)
+        except MclError as exc:
+            out[(it[0], it[1])] = ModelicaError(f"the candidate does not compile: {exc.message}")
+    return out
+
+
+def build_candidate(graph, train, nominal_probe, item, workdir, libraries=()):
     from ..api import compile_model, registry
     from ..swap import swap_component
 
-    graph, train, _, nominal_probe, _, _, workdir, _ = ctx
     comp_name, tpl_index, tpl_spec = item
     template = registry().template(tpl_spec)
     v, i = nominal_probe[comp_name]
     w0 = nominal_start(template, v, i, train.time)
     tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
                         w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
-    return template, w0, tm, compile_model(tm.sources, tm.model_name)
+    return template, w0, tm, compile_model(tm.sources, tm.model_name, libraries=libraries)
 
 
 def _screen_task(ctx, item):
@@ -177,7 +197,7 @@ def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
     from ..api import simulate
 
-    graph, train, validate, _, budget, criterion, _, method = ctx
+    graph, train, validate, _, budget, criterion, _, method, _ = ctx
     comp_name, _, tpl_spec = item
     template, w0, tm, model = _candidate_model(ctx, item)
     comp = graph.components[comp_name]
@@ -205,9 +225,9 @@ def _candidate_task(ctx, item):
     return out
 
 
-def ctx_of(graph, train, validate, nominal_probe, spec, part):
+def ctx_of(graph, train, validate, nominal_probe, spec, part, models):
     return (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"),
-            spec.refinement_method)
+            spec.refinement_method, models)
 
 
 def _done(path: Path) -> bool:
@@ -304,12 +324,15 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
             nominal_probe[c.name] = (pv[:, 0] - pv[:, 1], pv[:, 2])
         items = [(c.name, k, t) for c in comps for k, t in enumerate(spec.templates)]
         screen_file = part / "screening.json"
+        models = {}
         if screen_file.exists():
             screening = json.loads(screen_file.read_text())
         else:
             log.info("[2/5] screening %d candidate(s): one linearised step each", len(items))
+            models = build_candidates(graph, train, nominal_probe, items, part / "work", spec.libraries)
             with reg.executor(spec.executor) as ex:
-                res = ex.map(_screen_task, items, context=ctx_of(graph, train, validate, nominal_probe, spec, part),
+                res = ex.map(_screen_task, items, context=ctx_of(graph, train, validate, nominal_probe, spec,
+                                                                  part, models),
                              timeout=3600, label="screening")
             screening = [r if not isinstance(r, TaskFailed) else
                          {"component": it[0], "template": it[2], "predicted_rss": None, "reason": r.reason}
@@ -320,7 +343,9 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         items = [items[k] for k in order[: spec.screen]]
         todo = [it for it in items if not _done(part / "candidates" / f"{it[0]}_{it[1]}.json")]
         log.info("      fitting the %d most promising (%d already done)", len(items), len(items) - len(todo))
-        ctx = ctx_of(graph, train, validate, nominal_probe, spec, part)
+        models.update(build_candidates(graph, train, nominal_probe, [it for it in todo if it[:2] not in models],
+                                       part / "work", spec.libraries))
+        ctx = ctx_of(graph, train, validate, nominal_probe, spec, part, models)
 
         def checkpoint(k, r):  # each candidate is saved as it finishes: a rerun skips it
             it = todo[k]
