@@ -85,7 +85,8 @@ def cmd_simulate(args) -> int:
     if args.plot:
         from .plots import plot_simulation
 
-        plot_simulation(result, inputs.select(model.input_names), args.plot, title=model.name)
+        plot_simulation(result, inputs.select(model.input_names), args.plot, title=model.name,
+                        units=getattr(model, "info", {}).get("units"))
         print(f"plotted inputs and outputs -> {args.plot}")
     print(f"simulated {len(result.time)} samples of {', '.join(result.output_names)} with the "
           f"{result.engine} engine in {result.seconds:.3g} s -> {args.output}")

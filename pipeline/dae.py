@@ -46,6 +46,7 @@ class Dae:
     exprs: dict[str, ca.SX] = field(default_factory=dict)
     units: dict[str, str] = field(default_factory=dict)
     descriptions: dict[str, str] = field(default_factory=dict)
+    time_events: list[float] = field(default_factory=list)   # instants where the equations jump
 
 
 def _scalar_names(var) -> list[str]:
@@ -176,3 +177,64 @@ def _aliases(model):
             if name != canonical:
                 target, sign = rel.canonical_signed(name)
                 yield name, (target, float(sign))
+
+
+def eliminate_aliases(dae: Dae, passes: int = 20) -> Dae:
+    """Remove the trivial equations a flat model is full of (``a = b``, ``a = -b``, ``a = c*b + d``
+    with constant c, ``a = parameter``): the algebraic variable they define is replaced by its
+    expression everywhere. Index reduction and causalisation then see the real structure (a
+    connector's potential is a state's alias, not a second state), and simulation gets cheaper.
+    States are never removed; every eliminated name stays readable through ``exprs``."""
+    residual, z, z_names, z_start = dae.residual, dae.z, list(dae.z_names), dae.z_start
+    init_residual, exprs = dae.init_residual, dict(dae.exprs)
+    for _ in range(passes):
+        w = ca.vertcat(dae.x, z)
+        nx = dae.x.numel()
+        if residual.numel() == 0 or z.numel() == 0:
+            break
+        jac = ca.jacobian(residual, w)
+        sp = jac.sparsity()
+        cols_of = {}
+        for r, c in zip(sp.get_triplet()[0], sp.get_triplet()[1]):
+            cols_of.setdefault(r, []).append(c)
+        eliminated, keep_rows, taken = {}, [], set()
+        for r in range(residual.numel()):
+            cols = cols_of.get(r, [])
+            row = residual[r]
+            if (not 1 <= len(cols) <= 2 or ca.depends_on(row, dae.dx)
+                    or ca.depends_on(row, dae.t) or ca.depends_on(row, dae.u) or taken & set(cols)):
+                keep_rows.append(r)
+                continue
+            coef = [jac[r, c] for c in cols]
+            if any(ca.depends_on(k, w) for k in coef):
+                keep_rows.append(r)        # not linear in the unknowns
+                continue
+            alg = [c for c in cols if c >= nx]
+            if not alg:
+                keep_rows.append(r)        # between states: index reduction's business
+                continue
+            e = alg[-1]                    # the algebraic variable to eliminate
+            k_e = coef[cols.index(e)]
+            if k_e.is_zero():
+                keep_rows.append(r)
+                continue
+            rest = ca.substitute(row, w[e], ca.SX(0))   # row = k_e * w_e + rest (linear in w_e)
+            eliminated[e - nx] = -rest / k_e
+            taken |= set(cols)
+        if not eliminated:
+            break
+        drop = sorted(eliminated)
+        keep = [j for j in range(z.numel()) if j not in eliminated]
+        old = ca.vertcat(*[z[j] for j in drop])
+        new = ca.vertcat(*[eliminated[j] for j in drop])   # names no variable of this pass ("taken")
+        residual = ca.substitute(residual[keep_rows], old, new) if keep_rows else ca.SX(0, 1)
+        init_residual = ca.substitute(init_residual, old, new)
+        exprs = {n: ca.substitute(v, old, new) if ca.depends_on(v, old) else v for n, v in exprs.items()}
+        z_start = z_start[keep] if keep else ca.SX(0, 1)
+        z = ca.vertcat(*[z[j] for j in keep]) if keep else ca.SX(0, 1)
+        z_names = [z_names[j] for j in keep]
+    return Dae(x=dae.x, dx=dae.dx, z=z, u=dae.u, p=dae.p, t=dae.t, residual=residual,
+               init_residual=init_residual, x_names=dae.x_names, z_names=z_names, u_names=dae.u_names,
+               p_names=dae.p_names, p_values=dae.p_values, x_start=dae.x_start, x_fixed=dae.x_fixed,
+               z_start=z_start, u_start=dae.u_start, outputs=dae.outputs, exprs=exprs, units=dae.units,
+               descriptions=dae.descriptions, time_events=dae.time_events)

@@ -93,13 +93,20 @@ class _Plan:
         dae = {"x": xa, "p": P, "t": T, "ode": fa}
         iopts = {"reltol": opts.rtol, "abstol": opts.atol, "max_num_steps": opts.max_steps,
                  "disable_internal_warnings": True}
-        chunks = np.array_split(np.arange(1, len(t_out)), min(N_CHUNKS, len(t_out) - 1))
+        # the integration grid: the output times and the model's time events, a restart at each
+        events = [te for te in ode.time_events if t_out[0] < te < t_out[-1]]
+        self.t_int = np.union1d(t_out, events)
+        self.out_idx = np.searchsorted(self.t_int, t_out)
+        starts = [int(np.searchsorted(self.t_int, te)) for te in events]
+        pieces = np.split(np.arange(1, len(self.t_int)), [s for s in starts])
+        chunks = [c for piece in pieces if len(piece)
+                  for c in np.array_split(piece, min(N_CHUNKS, len(piece)))]
         if nx == 0:  # purely algebraic model: nothing to integrate, outputs evaluated below
             chunks = []
         self.chunks = []
         for k, idx in enumerate(chunks):
-            t0 = t_out[idx[0] - 1]
-            integ = ca.integrator(f"I{k}", "cvodes", dae, t0, t_out[idx].tolist(), iopts)
+            t0 = self.t_int[idx[0] - 1]
+            integ = ca.integrator(f"I{k}", "cvodes", dae, t0, self.t_int[idx].tolist(), iopts)
             self.chunks.append((idx, integ))
         N = len(t_out)
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
@@ -136,19 +143,21 @@ class _Plan:
             return fail(f"initialisation failed: {_last_line(exc)}")
         if not np.all(np.isfinite(xa)):
             return fail("initialisation gave non-finite values")
-        traj = np.full((len(xa), N), np.nan)
+        t_int = self.t_int
+        traj = np.full((len(xa), len(t_int)), np.nan)
         traj[:, 0] = xa
         for idx, integ in self.chunks:
             if clock.expired:
-                return fail(f"time limit of {opts.time_limit:g} s exceeded at t = {t_out[idx[0] - 1]:g}")
+                return fail(f"time limit of {opts.time_limit:g} s exceeded at t = {t_int[idx[0] - 1]:g}")
             try:
                 xf = np.array(integ(x0=traj[:, idx[0] - 1], p=p)["xf"])
             except RuntimeError as exc:
-                return fail(f"solver error before t = {t_out[idx[-1]]:g}: {_last_line(exc)}")
+                return fail(f"solver error before t = {t_int[idx[-1]]:g}: {_last_line(exc)}")
             traj[:, idx] = xf
             if not np.all(np.isfinite(xf)):
                 bad = idx[np.argmax(~np.all(np.isfinite(xf), axis=0))]
-                return fail(f"non-finite state at t = {t_out[bad]:g}")
+                return fail(f"non-finite state at t = {t_int[bad]:g}")
+        traj = traj[:, self.out_idx]
         X = traj[: self.nx]
         P = np.repeat(p[:, None], N, axis=1)
         try:

@@ -151,7 +151,7 @@ def _simulate_me2(job: dict, md, logger) -> np.ndarray:
         if u_vr:
             fmu.setReal(u_vr, u_at(t_out[0]))
         fmu.exitInitializationMode()
-        fmu.newDiscreteStates()
+        info = fmu.newDiscreteStates()
         fmu.enterContinuousTimeMode()
         fmu.getContinuousStates(ptr(x), nx)
 
@@ -167,14 +167,26 @@ def _simulate_me2(job: dict, md, logger) -> np.ndarray:
             fmu.getDerivatives(ptr(dx), nx)
             return dx.copy()
 
-        if nx:
-            sol = solve_ivp(rhs, (t_out[0], t_out[-1]), x.copy(), method="LSODA", t_eval=t_out,
-                            rtol=job["rtol"], atol=job["rtol"] * 1e-2)
-            if sol.status != 0 or sol.y.shape[1] != len(t_out):
+        states = np.zeros((len(t_out), nx))
+        states[0] = x
+        t_cur, state, k = float(t_out[0]), x.copy(), 1
+        while nx and k < len(t_out):
+            # integrate up to the next time event the FMU announces, then restart after it
+            t_next = float(info[5]) if info[4] and t_cur < info[5] < t_out[-1] else float(t_out[-1])
+            last = k + int(np.searchsorted(t_out[k:], t_next, side="right"))
+            sol = solve_ivp(rhs, (t_cur, t_next), state, method="LSODA", t_eval=t_out[k:last],
+                            rtol=job["rtol"], atol=job["rtol"] * 1e-2, dense_output=True)
+            if sol.status != 0:
                 raise RuntimeError(f"end time not reached: {sol.message}")
-            states = sol.y.T
-        else:
-            states = np.zeros((len(t_out), 0))
+            states[k:last] = sol.y.T
+            state, t_cur, k = sol.sol(t_next), t_next, last
+            if t_next < t_out[-1]:
+                set_point(t_next, state)
+                fmu.enterEventMode()
+                info = fmu.newDiscreteStates()
+                fmu.enterContinuousTimeMode()
+                fmu.getContinuousStates(ptr(x), nx)
+                state = x.copy()
         y = np.empty((len(t_out), len(y_vr)))
         for k, t in enumerate(t_out):
             set_point(t, states[k])

@@ -62,7 +62,7 @@ class CompiledModel:
         meta = dict(name=self.name, info=self.info, x_names=o.x_names, u_names=o.u_names,
                     p_names=o.p_names, y_names=o.y_names, p_values=o.p_values.tolist(),
                     u_start=o.u_start.tolist(), probe_names=o.probe_names, index=o.index,
-                    nonlinear_blocks=o.nonlinear_blocks)
+                    nonlinear_blocks=o.nonlinear_blocks, time_events=list(o.time_events))
         (d / "model.json").write_text(json.dumps(meta, indent=1))
         return d
 
@@ -74,7 +74,8 @@ class CompiledModel:
         ode = Ode(x_names=meta["x_names"], u_names=meta["u_names"], p_names=meta["p_names"],
                   y_names=meta["y_names"], p_values=np.array(meta["p_values"]),
                   u_start=np.array(meta["u_start"]), probe_names=meta["probe_names"],
-                  index=meta["index"], nonlinear_blocks=meta["nonlinear_blocks"], **funcs)
+                  index=meta["index"], nonlinear_blocks=meta["nonlinear_blocks"],
+                  time_events=tuple(meta.get("time_events", ())), **funcs)
         return cls(meta["name"], ode, meta.get("info", {}))
 
 

@@ -7,7 +7,14 @@ from .data import TimeSeries
 from .simulation import SimulationResult
 
 
-def plot_simulation(result: SimulationResult, inputs: TimeSeries, path, title: str = "") -> Path:
+def axis_label(name: str, units: dict | None) -> str:
+    """``name [unit]`` where the model declares a unit."""
+    unit = (units or {}).get(name)
+    return f"{name} [{unit}]" if unit else name
+
+
+def plot_simulation(result: SimulationResult, inputs: TimeSeries, path, title: str = "",
+                    units: dict | None = None) -> Path:
     """Inputs on top, every output below, on one time axis; written atomically as PNG."""
     import matplotlib
 
@@ -20,9 +27,9 @@ def plot_simulation(result: SimulationResult, inputs: TimeSeries, path, title: s
     rows += [(result.time, result.output(k), k, "tab:blue") for k in result.output_names]
     for ax, (t, v, label, color) in zip(axes[:, 0], rows):
         ax.plot(t, v, color=color, lw=1.2)
-        ax.set_ylabel(label)
+        ax.set_ylabel(axis_label(label, units))
         ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("time")
+    axes[-1, 0].set_xlabel("time [s]")
     status = "" if result.ok else f" — FAILED: {result.reason}"
     fig.suptitle((title or "simulation") + f" ({result.engine} engine){status}")
     fig.tight_layout()

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .plots import axis_label
+
 
 def _png(fig) -> str:
     buf = io.BytesIO()
@@ -65,7 +67,7 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         ax.plot(train.time, y_nominal[:, k], color="tab:red", label="nominal model")
         if y_extended is not None:
             ax.plot(train.time, y_extended[:, k], color="tab:green", label="extended model")
-        ax.set_ylabel(o)
+        ax.set_ylabel(axis_label(o, report.get("units")))
         ax.legend(fontsize=8)
         ax = axes[k, 1]
         ax.plot(train.time, y_meas[:, k] - y_nominal[:, k], color="tab:red", lw=0.8, label="nominal residual")

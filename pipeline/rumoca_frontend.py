@@ -9,6 +9,7 @@ construct the IR holds that we do not translate is refused with its name and fil
 """
 from __future__ import annotations
 
+import itertools
 import logging
 import re
 from dataclasses import dataclass
@@ -22,6 +23,10 @@ from .errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
 
+def _int(a) -> int:
+    return int(round(float(ca.evalf(a))))
+
+
 _UNARY = {"negate": lambda a: -a, "plus": lambda a: a, "not": ca.logic_not}
 _BINARY = {
     "add": ca.plus, "subtract": ca.minus, "multiply": ca.times, "divide": ca.rdivide, "power": ca.power,
@@ -32,7 +37,16 @@ _FUNCTIONS = {
     "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin, "acos": ca.acos, "atan": ca.atan,
     "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh, "tanh": ca.tanh, "exp": ca.exp, "log": ca.log,
     "log10": ca.log10, "sqrt": ca.sqrt, "abs": ca.fabs, "sign": ca.sign, "floor": ca.floor,
-    "ceil": ca.ceil, "min": ca.fmin, "max": ca.fmax, "noEvent": lambda a: a, "smooth": lambda _o, a: a,
+    "ceil": ca.ceil, "min": lambda a, *b: ca.fmin(a, b[0]) if b else ca.mmin(a),
+    "max": lambda a, *b: ca.fmax(a, b[0]) if b else ca.mmax(a), "sum": ca.sum1, "size": lambda a, *_k: ca.SX(a.numel()),
+    # concatenation; arrays are held flattened, so joining vectors (or 1x1 matrices) is vertcat
+    "ones": lambda *n: ca.SX.ones(int(np.prod([_int(k) for k in n])), 1),
+    "zeros": lambda *n: ca.SX.zeros(int(np.prod([_int(k) for k in n])), 1),
+    "fill": lambda v, *n: ca.repmat(v, int(np.prod([_int(k) for k in n])), 1),
+    "scalar": lambda a: a[0], "vector": ca.vec,
+    "promoted_cat1": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
+    "promoted_cat2": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
+    "product": lambda a: ca.prod(a) if hasattr(ca, "prod") else ca.exp(ca.sum1(ca.log(a))), "noEvent": lambda a: a, "smooth": lambda _o, a: a,
     "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.trunc(a / b) if hasattr(ca, "trunc") else ca.floor(a / b),
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
@@ -298,11 +312,14 @@ class _Translator:
         self.st, self.located, self.model = storage, located, model
         expr = storage["expressions"]
         self.nodes, self.operand_list = expr["nodes"], expr["operands"]
-        self.offsets, pos = [], 0
+        self.subscripts = expr.get("subscripts", [])
+        self.offsets, self.sub_offsets, pos, spos = [], [], 0, 0
         for n in self.nodes:
             self.offsets.append(pos)
+            self.sub_offsets.append(spos)
             body = n[next(iter(n))] if isinstance(n, dict) else None
             pos += body.get("operand_count", 0) if isinstance(body, dict) else 0
+            spos += body.get("subscript_count", 0) if isinstance(body, dict) else 0
         self.functions = storage.get("functions", [])
         self.cache: dict[int, ca.SX] = {}
         self.coord = None   # set by the caller: (kind, index) -> SX
@@ -331,7 +348,12 @@ class _Translator:
                 out = self.coord("time", 0)
             else:
                 (ck, idx), = body.items()
-                if ck == "function_parameter":
+                if ck == "binder":
+                    try:
+                        out = ca.SX(bound["binders"][(idx["domain"], idx["ordinal"])])
+                    except (TypeError, KeyError):
+                        self.refuse("a for-loop index outside its loop")
+                elif ck == "function_parameter":
                     ordinal = idx["ordinal"] if isinstance(idx, dict) else idx
                     if bound is None or ordinal not in bound["params"]:
                         self.refuse("a function parameter outside a function call")
@@ -357,6 +379,10 @@ class _Translator:
             out = self.call_builtin(body["builtin"], [self.sx(o, bound) for o in self.operands(k)])
         elif kind == "call":
             out = self.call_function(body, [self.sx(o, bound) for o in self.operands(k)])
+        elif kind == "array":
+            out = ca.vertcat(*[ca.vec(self.sx(o, bound)) for o in self.operands(k)])
+        elif kind == "index":
+            out = self.element(k, body, bound)
         elif kind == "function_value":
             try:
                 out = bound["values"][body["value"]][body["definition_ordinal"]]
@@ -367,6 +393,23 @@ class _Translator:
         if bound is None:
             self.cache[k] = out
         return out
+
+    def element(self, k: int, body: dict, bound):
+        """``a[i]`` (1-based, constant subscripts) of a vector (arrays are held flattened)."""
+        base = self.sx(body["base"], bound)
+        subs = self.subscripts[self.sub_offsets[k]: self.sub_offsets[k] + body["subscript_count"]]
+        if len(subs) != 1:
+            self.refuse("an array of more than one dimension subscripted")
+        kind, node = next(iter(subs[0]["kind"].items()))
+        if kind != "index":
+            self.refuse(f"a '{kind}' subscript (slices are not translated)")
+        i = self.sx(node, bound)
+        if not i.is_constant():
+            self.refuse("a subscript that is not a constant")
+        j = int(round(float(ca.evalf(i)))) - 1
+        if not 0 <= j < base.numel():
+            self.refuse(f"subscript {j + 1} outside an array of {base.numel()}")
+        return base[j]
 
     def call_builtin(self, name: str, args):
         short = name.split(".")[-1]
@@ -382,7 +425,7 @@ class _Translator:
         ext = f.get("external")
         if body.get("derivative") is not None or body.get("output", 0) != 0:
             self.refuse(f"function {f['name']} (derivative or second output)")
-        bound = {"params": dict(enumerate(args)), "values": {}}
+        bound = {"params": dict(enumerate(args)), "values": {}, "binders": {}}
         if ext and ext.get("language") == "builtin":
             actual = [self.sx(a["input"], bound) for a in ext.get("arguments", []) if "input" in a]
             return self.call_builtin(ext.get("symbol", f["name"]), actual)
@@ -413,23 +456,38 @@ def _scalar(value) -> float | None:
     return None if value is None else float(value)
 
 
+def _scalar_names(name: str, dims: list[int]) -> list[str]:
+    """``x`` -> [x]; ``x`` of dims [2, 3] -> [x[1,1], x[1,2], ..., x[2,3]] (row-major)."""
+    if not dims:
+        return [name]
+    return [f"{name}[{','.join(str(k + 1) for k in idx)}]" for idx in np.ndindex(*dims)]
+
+
 def to_dae(ir: dict, located: Located, model: str) -> Dae:
-    """The DAE-stage IR as a scalar :class:`Dae` (balance checked, parameters resolved)."""
+    """The DAE-stage IR as a scalar :class:`Dae` (arrays split into scalars, balance checked,
+    parameters resolved to the free ones)."""
     st = ir["storage"]
     variables = st["variables"]
     _refuse_events(st, located, model)
-    for v in variables:
-        if st["value_types"][v["value_type"]]["dimensions"]:
-            raise UnsupportedConstruct(f"unsupported in {model}: array variable {v['name']} left in the DAE",
-                                       where=located.span(v.get("declaration", {}).get("span")))
+    dims = [list(st["value_types"][v["value_type"]]["dimensions"] or []) for v in variables]
+    size = [int(np.prod(d)) if d else 1 for d in dims]
     tr = _Translator(st, located, model)
     role = [v["role"] for v in variables]
     attrs = [v["attributes"] for v in variables]
     # parameters computed during initialisation (fixed = false, no binding) become constant states
     init_params = {i for i, v in enumerate(variables) if role[i] == "parameter" and attrs[i]["binding"] is None
-                   and attrs[i].get("fixed") == [False]}
+                   and attrs[i].get("fixed") in ([False], False)}
+    # discrete values defined at all times by one expression (a Boolean of parameters, a
+    # constant flag) are that expression; ones changed at events need events
+    always = {}
+    for owner in st.get("discrete_value_owners", []):
+        branches = owner.get("branches", [])
+        if len(branches) == 1 and branches[0].get("activation") == "always" and len(owner["targets"]) == 1:
+            always[owner["targets"][0]] = branches[0]["values"][0]["value"]
     index = {"x": [], "z": [], "u": [], "p": [], "c": []}
     for i, r in enumerate(role):
+        if r == "discrete_value" and i in always:
+            continue
         if r == "state" or i in init_params:
             index["x"].append(i)
         elif r in ("algebraic", "output"):
@@ -444,14 +502,17 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
             raise UnsupportedConstruct(f"unsupported in {model}: {r} variable {variables[i]['name']} "
                                        "(discrete-time variables need events)",
                                        where=located.span(variables[i].get("declaration", {}).get("span")))
-    names = {k: [variables[i]["name"] for i in idx] for k, idx in index.items()}
-    x, dx, z = (ca.SX.sym(s, len(index[k])) for s, k in (("x", "x"), ("dx", "x"), ("z", "z")))
-    u, p_all, t = ca.SX.sym("u", len(index["u"])), ca.SX.sym("p_all", len(index["p"])), ca.SX.sym("t")
-    slot = {}
+    names = {k: [n for i in idx for n in _scalar_names(variables[i]["name"], dims[i])] for k, idx in index.items()}
+    x, dx, z = (ca.SX.sym(s, len(names[k])) for s, k in (("x", "x"), ("dx", "x"), ("z", "z")))
+    u, p_all, t = ca.SX.sym("u", len(names["u"])), ca.SX.sym("p_all", len(names["p"])), ca.SX.sym("t")
+    slot, der = {}, {}
     for k, vec in (("x", x), ("z", z), ("u", u), ("p", p_all)):
-        for j, i in enumerate(index[k]):
-            slot[i] = vec[j]
-    der = {i: dx[j] for j, i in enumerate(index["x"])}
+        pos = 0
+        for i in index[k]:
+            slot[i] = vec[pos:pos + size[i]]
+            if k == "x":
+                der[i] = dx[pos:pos + size[i]]
+            pos += size[i]
 
     def coord(kind, i):
         if kind == "time":
@@ -463,6 +524,8 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
             return der[i]
         if i in slot:
             return slot[i]
+        if i in always:
+            return tr.sx(always[i])
         if role[i] == "constant":
             return tr.sx(attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"])
         raise UnsupportedConstruct(f"unsupported in {model}: variable {variables[i]['name']} ({kind})")
@@ -470,29 +533,30 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
     tr.coord = coord
     eqs = [_residual(op, tr, model) for op in st["continuous_equation_operations"]]
     eqs += [der[i] for i in sorted(init_params)]       # d/dt of an initialisation parameter is 0
-    residual = ca.vertcat(*eqs) if eqs else ca.SX(0, 1)
+    residual = ca.vertcat(*[ca.vec(e) for e in eqs]) if eqs else ca.SX(0, 1)
     n_unknown = x.numel() + z.numel()
     if residual.numel() != n_unknown:
         raise ModelicaError(f"model {model} is unbalanced: {residual.numel()} equations for {n_unknown} "
                             f"unknowns ({x.numel()} states, {z.numel()} algebraic variables)")
-    init = [_residual(op, tr, model) for op in st["initialization_equation_operations"]]
+    init = [ca.vec(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
     init_residual = ca.vertcat(*init) if init else ca.SX(0, 1)
 
-    # parameters: a binding that depends on other parameters makes a dependent one
-    values, free = [], []
-    for j, i in enumerate(index["p"]):
-        node = attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"]
-        e = tr.sx(node) if node is not None else ca.SX(0.0)
-        values.append(e)
-        if not ca.depends_on(e, p_all) and e.is_constant():
-            free.append(j)
+    def value_of(i, key_order=("binding", "start")):
+        node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)
+        e = tr.sx(node) if node is not None else ca.SX.zeros(size[i], 1)
+        e = ca.vec(e)
+        return ca.repmat(e, size[i], 1) if e.numel() == 1 and size[i] > 1 else e
+
+    # parameters: an element whose binding depends on other parameters is a dependent one
+    values = ca.vertcat(*[value_of(i) for i in index["p"]]) if index["p"] else ca.SX(0, 1)
+    free = [j for j in range(values.numel()) if not ca.depends_on(values[j], p_all) and values[j].is_constant()]
     p = ca.SX.sym("p", len(free))
     p_names = [names["p"][j] for j in free]
     p_values = np.array([float(ca.evalf(values[j])) for j in free])
     resolved = ca.SX(p_all)
     for k, j in enumerate(free):
         resolved[j] = p[k]
-    dependent = [j for j in range(len(values)) if j not in free]
+    dependent = [j for j in range(values.numel()) if j not in free]
     for _ in range(len(dependent) + 1):
         if not dependent:
             break
@@ -509,15 +573,14 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
     def bind(e):
         return ca.substitute(e, p_all, resolved)
 
-    def start_of(i):
-        node = attrs[i]["start"]
-        return tr.sx(node) if node is not None else ca.SX(0.0)
+    def starts(k):
+        return bind(ca.vertcat(*[value_of(i, ("start",)) for i in index[k]])) if index[k] else ca.SX(0, 1)
 
-    x_start = bind(ca.vertcat(*[start_of(i) for i in index["x"]])) if index["x"] else ca.SX(0, 1)
-    z_start = bind(ca.vertcat(*[start_of(i) for i in index["z"]])) if index["z"] else ca.SX(0, 1)
-    x_fixed = np.array([attrs[i].get("fixed") == [True] and i not in init_params for i in index["x"]], bool)
-    u_start = np.array([float(ca.evalf(bind(start_of(i)))) if not ca.depends_on(start_of(i), p_all) else 0.0
-                        for i in index["u"]])
+    x_fixed = np.array([attrs[i].get("fixed") in ([True], True) and i not in init_params
+                        for i in index["x"] for _ in range(size[i])], bool)
+    u_start = starts("u")
+    u_start = np.array([float(ca.evalf(e)) if not ca.depends_on(e, p) else 0.0
+                        for e in ca.vertsplit(u_start)]) if u_start.numel() else np.zeros(0)
     exprs: dict[str, ca.SX] = {}
     for k, vec in (("x", x), ("z", z), ("u", u)):
         for j, n in enumerate(names[k]):
@@ -525,23 +588,53 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
     for j, n in enumerate(names["p"]):
         exprs[n] = resolved[j]
     for i in index["c"]:
-        exprs[variables[i]["name"]] = coord("constant", i)
-    outputs = [v["name"] for v in variables if v["attributes"].get("causality") == "output"
-               and "." not in v["name"]]
+        for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(ca.vec(coord("constant", i)))):
+            exprs[n] = e
+    top = [i for i, v in enumerate(variables) if attrs[i].get("causality") == "output" and "." not in v["name"]]
+    outputs = [n for i in top for n in _scalar_names(variables[i]["name"], dims[i])]
     units = {v["name"]: v["attributes"]["unit"] for v in variables if v["attributes"].get("unit")}
     descriptions = {v["name"]: v["attributes"]["description"] for v in variables
                     if v["attributes"].get("description")}
     return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=bind(residual), init_residual=bind(init_residual),
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
-               p_values=p_values, x_start=x_start, x_fixed=x_fixed, z_start=z_start, u_start=u_start,
-               outputs=outputs, exprs=exprs, units=units, descriptions=descriptions)
+               p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
+               outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
+               time_events=_time_events(st))
+
+
+def _time_events(st: dict) -> list[float]:
+    """Instants at which a condition on time switches (``time > startTime`` of a step source):
+    the integrator is restarted there instead of stepping over the jump."""
+    out = []
+    for ev in st.get("time_events", []):
+        inst = ev.get("instant") if isinstance(ev, dict) else None
+        if isinstance(inst, dict) and "num" in inst and inst.get("den"):
+            out.append(inst["num"] / inst["den"])
+    return sorted(set(out))
 
 
 def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
+    """One equation's residual; a for-equation (``structured``) gives one row per index value."""
     kind = next(iter(op))
-    if kind != "residual":
+    if kind == "residual":
+        return ca.vec(tr.sx(op[kind]["residual"]))
+    if kind != "structured":
         raise UnsupportedConstruct(f"unsupported in {model}: equation of kind '{kind}'")
-    return tr.sx(op[kind]["residual"])
+    eq = op[kind]
+    if eq["scalar_view"] == "RowMajorProjection":      # an array equation: its elements
+        return ca.vertcat(*[ca.vec(tr.sx(b)) for b in eq["bodies"]])
+    binders = []
+    d = eq["domain"]
+    while d is not None:
+        dom = tr.st["domains"][d]
+        binders = [(d, b["id"], range(b["lower"], b["upper"] + (1 if b["step"] > 0 else -1), b["step"]))
+                   for b in dom["domain"]["binders"]] + binders
+        d = dom.get("parent")
+    rows = []
+    for values in itertools.product(*[r for _, _, r in binders]):
+        bound = {"params": {}, "values": {}, "binders": {(dd, i): v for (dd, i, _), v in zip(binders, values)}}
+        rows += [ca.vec(tr.sx(b, bound)) for b in eq["bodies"]]
+    return ca.vertcat(*rows) if rows else ca.SX(0, 1)
 
 
 def _refuse_events(st: dict, located: Located, model: str) -> None:

@@ -50,11 +50,18 @@ class Ode:
     probe_names: list[str]
     index: int
     nonlinear_blocks: int
+    time_events: tuple = ()      # the solvers restart at these instants
 
 
 def reduce_index(dae: Dae):
     """Index reduction (step 1); returns the semi-explicit DAE and the map back to ``dae``."""
     up = ca.vertcat(dae.u, dae.p)
+    if dae.x.numel() == 0:     # purely algebraic: nothing to reduce (and CasADi crashes on it)
+        xs = ca.SX(0, 1)
+        semi = dict(x=xs, z=dae.z, p=up, t=dae.t, ode=ca.SX(0, 1), alg=dae.residual)
+        state_to_orig = ca.Function("state_to_orig", [xs, dae.z], [ca.SX(0, 1), dae.z],
+                                    ["xf", "zf"], ["x_impl", "z"])
+        return semi, state_to_orig, ca.SX(0, 1), 0
     impl = dict(x_impl=dae.x, dx_impl=dae.dx, z=dae.z, alg=dae.residual, t=dae.t, p=up)
     try:
         red, stats = ca.dae_reduce_index(impl, {})
@@ -180,7 +187,9 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     probe = mk("probe", [probe_all])
 
     x_names = semi_state_names(xs, dae)
-    init = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names)
+    # der() of the original states, for initial equations such as der(x) = 0 (steady state)
+    dXI = ca.mtimes(ca.Function("dxi", [xs, zs, up, t], [ca.jacobian(x_impl, xs)])(X, Z, UP, T), xdot)
+    init = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI)
     # SX evaluates faster than the MX call graph, where there is no Newton or QR solve in it
     ode, out, alg_res, drift, probe, init = map(_expanded, (ode, out, alg_res, drift, probe, init))
     return Ode(
@@ -188,6 +197,7 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
         ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
+        time_events=tuple(dae.time_events),
     )
 
 
@@ -210,16 +220,12 @@ def semi_state_names(xs: ca.SX, dae: Dae) -> list[str]:
     return [lookup.get(str(s), str(s)) for s in ca.vertsplit(xs)]
 
 
-def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names):
-    """(u, p, t) -> consistent x0: invariants + initial equations + chosen start values."""
+def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
+    """(u, p, t) -> consistent x0: invariants + initial equations (der() of a state is its
+    right-hand side) + chosen start values."""
     nx = xs.numel()
-    dx_orig = ca.MX(0, 1)  # initial equations with der() are rare; map them when present
     init_res = ca.Function("ires", [dae.x, dae.dx, dae.z, dae.u, dae.p, dae.t], [dae.init_residual])
-    if dae.init_residual.numel():
-        if ca.depends_on(dae.init_residual, dae.dx):
-            raise UnsupportedConstruct("initial equations with der() are not supported yet")
-        dx_orig = ca.MX.zeros(dae.dx.numel())
-    hard = ca.vertcat(inv, init_res(XI, dx_orig, ZI, U, P, T))
+    hard = ca.vertcat(inv, init_res(XI, dXI, ZI, U, P, T)) if dae.init_residual.numel() else inv
     semi_start = ca.Function("sst", [dae.p], [ca.vertcat(*[
         _start_of(s, dae) for s in ca.vertsplit(xs)])])(P)
 

@@ -23,16 +23,29 @@ class CasadiCompiler(Compiler):
         return True, ""
 
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
-        from mcl import rumoca_frontend, structure
+        from mcl import compile_cache, rumoca_frontend, structure
+        from mcl.dae import eliminate_aliases
         from mcl.model import CompiledModel
 
-        ir, located = rumoca_frontend.load_ir(sources, model, (options or {}).get("libraries", ()))
-        dae = rumoca_frontend.to_dae(ir, located, model)
-        ode = structure.build_ode(dae, model)
+        libraries = (options or {}).get("libraries", ())
+        docs, _ = rumoca_frontend.documents(sources)
+        roots = rumoca_frontend.library_roots(libraries, {n for _, names in docs.values() for n in names})
+        key = compile_cache.key_of(model=model, docs=sorted(h for h, _ in docs.values()),
+                                   libraries=compile_cache.library_fingerprint(roots), compiler=self.name)
+        cached = compile_cache.load(key)
+        if cached is not None:
+            return cached
+        with compile_cache.Stopwatch() as clock:
+            ir, located = rumoca_frontend.load_ir(sources, model, libraries)
+            dae = eliminate_aliases(rumoca_frontend.to_dae(ir, located, model))
+            ode = structure.build_ode(dae, model)
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
-                "files_read": len(files), "units": dae.units, "descriptions": dae.descriptions}
-        return CompiledModel(model, ode, info)
+                "files_read": len(files), "units": dae.units, "descriptions": dae.descriptions,
+                "compile_seconds": clock.seconds}
+        compiled = CompiledModel(model, ode, info)
+        compile_cache.store(key, compiled, clock.seconds)
+        return compiled
 
 
 class PymocaCompiler(Compiler):

@@ -305,6 +305,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
               "misfit": {"significant": significant, "train_rms": train_rms0, "noise_estimate": sigma,
                          "per_output_rms": {o: rms(resid[:, k]) for k, o in enumerate(outputs)}},
               "cause": None, "candidates": [], "gain": None,
+              "units": {n: u for n, u in nominal.info.get("units", {}).items() if n in outputs},
               "software": software_versions(), "inputs": fingerprint or {}}
     log.info("      residual RMS %.4g vs noise %.4g: %s", train_rms0, sigma,
              "significant" if significant else "not significant")

@@ -17,6 +17,7 @@ from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import casadi as ca
+import numpy as np
 
 from ..errors import CompileError, ConfigError
 from ..model import CompiledModel
@@ -73,7 +74,8 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     values = dict(NP=len(o.p_names), NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
                   NV=len(probe_vars), HAS_LOOP=int(o.nonlinear_blocks > 0),
                   RES_TOL=repr(residual_tol), GUID=guid, PREFIX=prefix,
-                  P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start))
+                  P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start),
+                  N_EVENTS=len(o.time_events), EVENTS=_fmt(np.asarray(o.time_events, float)))
     source = re.sub(r"@(\w+)@", lambda m: str(values[m.group(1)]), template)
     (build / "fmi2_model.c").write_text(source)
     for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
@@ -85,8 +87,15 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
     """modelDescription.xml: parameters tunable, inputs, outputs, states, derivatives, probes."""
     o = model.ode
     rows, outputs, derivs, initial = [], [], [], []
+    units, descriptions = model.info.get("units", {}), model.info.get("descriptions", {})
+    used_units = set()
 
     def var(name, attrs, real="<Real/>", desc=""):
+        desc = desc or descriptions.get(name, "")
+        unit = units.get(name)
+        if unit and "derivative=" not in real:
+            used_units.add(unit)
+            real = real.replace("/>", f" unit={quoteattr(unit)}/>")
         d = f" description={quoteattr(desc)}" if desc else ""
         rows.append(f'    <ScalarVariable name={quoteattr(name)} valueReference="{len(rows)}"{d} {attrs}>'
                     f"\n      {real}\n    </ScalarVariable>")
@@ -112,6 +121,8 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
         return f"    <{tag}>\n{body}\n    </{tag}>\n"
 
     files = "\n".join(f'      <File name="{s}"/>' for s in sources)
+    unit_defs = ("  <UnitDefinitions>\n" + "\n".join(f"    <Unit name={quoteattr(u)}/>" for u in sorted(used_units))
+                 + "\n  </UnitDefinitions>\n") if used_units else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName={quoteattr(model.name)} guid="{guid}"
   generationTool="mcl" variableNamingConvention="structured" numberOfEventIndicators="0">
@@ -120,7 +131,7 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
 {files}
     </SourceFiles>
   </ModelExchange>
-  <LogCategories>
+{unit_defs}  <LogCategories>
     <Category name="logStatusError"/>
     <Category name="logAll"/>
   </LogCategories>

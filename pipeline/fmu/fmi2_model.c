@@ -33,6 +33,9 @@ typedef int (*casadi_fun)(const casadi_real**, casadi_real**, casadi_int*, casad
 
 static const double P_DEFAULT[NP + 1] = {@P_DEFAULT@};
 static const double U_START[NU + 1] = {@U_START@};
+/* instants where the equations jump (time events): the importer stops and restarts there */
+static const double EVENTS[@N_EVENTS@ + 1] = {@EVENTS@};
+#define N_EVENTS @N_EVENTS@
 
 typedef struct {
     fmi2CallbackFunctions cb;
@@ -240,13 +243,21 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2EnterEventMode(fmi2Component c) { (void)c; return fmi2OK; }
 
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo* info) {
-    (void)c;
+    Model* m = (Model*)c;
+    int k;
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
     info->valuesOfContinuousStatesChanged = fmi2False;
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0;
+    for (k = 0; k < N_EVENTS; k++) {
+        if (EVENTS[k] > m->t * (1 + 1e-12) + 1e-12) {
+            info->nextEventTimeDefined = fmi2True;
+            info->nextEventTime = EVENTS[k];
+            break;
+        }
+    }
     return fmi2OK;
 }
 

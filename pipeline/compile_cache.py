@@ -1,0 +1,117 @@
+"""Compile once: compiled models kept on disk, keyed by everything that decides the result.
+
+The key is the model name, the content of the user's documents, a fingerprint of every library
+file the front end may read (path, size, modification time), the options and the versions of
+mcl, rumoca and CasADi. A hit loads the saved CasADi functions instead of parsing, flattening
+and analysing again (an MSL model: seconds -> a fraction of a second). Only compiles that took
+long enough to be worth it are kept, and the oldest entries are dropped beyond ``MAX_ENTRIES``.
+``MCL_NO_COMPILE_CACHE=1`` turns it off; ``MCL_CACHE_DIR`` moves it.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+MIN_SECONDS = 0.5          # quicker compiles are not worth a disk entry
+FORMAT = 2                 # bump when what a compiled model holds changes (time events: 2)
+MAX_ENTRIES = 200
+
+
+def cache_dir() -> Path:
+    return Path(os.environ.get("MCL_CACHE_DIR") or Path.home() / ".cache" / "mcl") / "compile"
+
+
+def enabled() -> bool:
+    return os.environ.get("MCL_NO_COMPILE_CACHE", "").strip().lower() not in ("1", "true", "yes")
+
+
+def library_fingerprint(paths) -> str:
+    """Path, size and modification time of every Modelica file under ``paths``."""
+    h = hashlib.sha256()
+    for root in sorted(str(Path(p).resolve()) for p in paths):
+        h.update(root.encode())
+        for dirpath, dirnames, filenames in os.walk(root, followlinks=True):
+            dirnames.sort()
+            for f in sorted(filenames):
+                if f.endswith(".mo"):
+                    st = os.stat(os.path.join(dirpath, f))
+                    h.update(f"{dirpath}/{f}:{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()
+
+
+def versions() -> dict:
+    from importlib import metadata
+
+    out = {}
+    for dist in ("mcl", "rumoca", "casadi"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            out[dist] = None
+    return out
+
+
+def key_of(**parts) -> str:
+    return hashlib.sha256(json.dumps({**parts, "versions": versions(), "format": FORMAT}, sort_keys=True, default=str)
+                          .encode()).hexdigest()[:32]
+
+
+def load(key: str):
+    """The cached model for ``key``, or None."""
+    from .model import CompiledModel
+
+    entry = cache_dir() / key
+    if not enabled() or not (entry / "model.json").is_file():
+        return None
+    try:
+        model = CompiledModel.load(entry)
+    except Exception as exc:  # noqa: BLE001 - a damaged entry is a miss, never a failure
+        log.debug("compile cache entry %s unreadable: %s", key, exc)
+        return None
+    os.utime(entry)     # recently used
+    model.info = {**model.info, "cached": True}
+    return model
+
+
+def store(key: str, model, seconds: float) -> None:
+    """Keep ``model`` under ``key`` when its compile took ``seconds`` >= MIN_SECONDS."""
+    if not enabled() or seconds < MIN_SECONDS:
+        return
+    base = cache_dir()
+    try:
+        base.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=base, prefix=".new-"))
+        model.save(tmp / "m")
+        try:
+            (tmp / "m").rename(base / key)
+        except OSError:        # another process stored it first
+            pass
+        shutil.rmtree(tmp, ignore_errors=True)
+        _prune(base)
+    except OSError as exc:      # a full or read-only disk costs speed, never the compile
+        log.debug("compile cache not written: %s", exc)
+
+
+def _prune(base: Path) -> None:
+    entries = sorted((p for p in base.iterdir() if p.is_dir() and not p.name.startswith(".")),
+                     key=lambda p: p.stat().st_mtime)
+    for old in entries[:-MAX_ENTRIES]:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+class Stopwatch:
+    def __enter__(self):
+        self.start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        self.seconds = time.perf_counter() - self.start
+        return False
