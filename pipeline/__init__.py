@@ -17,7 +17,7 @@ from .discovery import Discovery
 from .discovery.export import export_library
 from .errors import MclError
 from .hookspecs import hookimpl
-from .library import mcl_version
+from .compile.library import mcl_version
 from .simulation import SimulationOptions, SimulationResult
 
 __version__ = mcl_version()

@@ -51,7 +51,7 @@ def cmd_compile(args) -> int:
               f"(index {o.index}), {o.nonlinear_blocks} algebraic loop(s), {len(o.u_names)} input(s), "
               f"{len(o.y_names)} output(s), {len(o.p_names)} free parameter(s)")
         if out.suffix.lower() == ".fmu":
-            from .fmu.export import build_fmu
+            from .compile.fmu.export import build_fmu
 
             build_fmu(model, out, validate=not args.no_validate)
             print(f"wrote {out} (FMI 2.0 Model Exchange{'' if args.no_validate else ', validated by FMPy'})")
@@ -192,7 +192,7 @@ def cmd_plugins(args) -> int:
 
 
 def _version() -> str:
-    from .library import mcl_version
+    from .compile.library import mcl_version
 
     return mcl_version()
 

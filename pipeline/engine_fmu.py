@@ -106,7 +106,7 @@ def _simulate(job: dict, messages: list[str]) -> np.ndarray:
 
     from fmpy import read_model_description
 
-    from .fmu.archive import safe_extract
+    from .compile.fmu.archive import safe_extract
 
     def logger(_env, _name, status, _category, message):
         if status >= 2:  # discard, error, fatal

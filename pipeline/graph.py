@@ -14,7 +14,7 @@ import networkx as nx
 
 from . import modelica_text as mt
 from .errors import ModelicaError
-from .frontend import collect_sources, find_class, parse
+from .compile.pymoca_frontend import collect_sources, find_class, parse
 
 BUILTIN = {"Real", "Integer", "Boolean", "String"}
 

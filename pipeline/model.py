@@ -15,14 +15,14 @@ import casadi as ca
 import numpy as np
 
 from .errors import ConfigError, DataError, MclError
-from .structure import Ode
+from .compile.structure import Ode
 
 _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe")
 
 
 @dataclass
 class CompiledModel:
-    """A model compiled to CasADi functions (see :class:`mcl.structure.Ode`)."""
+    """A model compiled to CasADi functions (see :class:`mcl.compile.structure.Ode`)."""
 
     name: str
     ode: Ode
@@ -97,7 +97,7 @@ class FmuModel:
         path = Path(path)
         if not path.is_file():
             raise DataError("no such FMU", where=str(path))
-        from .fmu.archive import check_archive
+        from .compile.fmu.archive import check_archive
 
         check_archive(path)
         try:

@@ -23,8 +23,8 @@ class CasadiCompiler(Compiler):
         return True, ""
 
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
-        from mcl import compile_cache, rumoca_frontend, structure
-        from mcl.dae import eliminate_aliases
+        from mcl.compile import cache as compile_cache, rumoca_frontend, structure
+        from mcl.compile.dae import eliminate_aliases
         from mcl.model import CompiledModel
 
         libraries = (options or {}).get("libraries", ())
@@ -54,7 +54,7 @@ class PymocaCompiler(Compiler):
     automatic = False
 
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
-        from mcl import dae, frontend, structure
+        from mcl.compile import dae, pymoca_frontend as frontend, structure
         from mcl.errors import ModelicaError
         from mcl.model import CompiledModel
 

@@ -39,7 +39,7 @@ class OpenModelicaCompiler(Compiler):
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
         from OMPython import ModelicaSystemOMC
 
-        from mcl.frontend import collect_sources
+        from mcl.compile.pymoca_frontend import collect_sources
         from mcl.model import FmuModel
 
         files = collect_sources(sources, model, (options or {}).get("libraries", ())).files

@@ -22,7 +22,7 @@ def test_public_names_are_the_functions():
     from mcl.plugins import executors, templates  # noqa: F401  built-ins inside the namespace
 
     assert (mcl.modelica.MCL_LIBRARY / "package.mo").is_file()
-    assert mcl.__version__ == mcl.library.mcl_version()
+    assert mcl.__version__ == mcl.compile.library.mcl_version()
 
 
 def test_mcl_library_carries_the_distribution_version():

@@ -8,7 +8,7 @@ import pytest
 from helpers import LIB, multisine
 from mcl.cli import main
 from mcl.data import read_csv
-from mcl.fmu.export import validate_fmu
+from mcl.compile.fmu.export import validate_fmu
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ import pytest
 
 from helpers import multisine, series
 from mcl.api import simulate
-from mcl.fmu.export import build_fmu
+from mcl.compile.fmu.export import build_fmu
 from mcl.model import FmuModel
 
 T = np.linspace(0, 30, 301)

@@ -7,7 +7,7 @@ from fmpy import read_model_description
 
 from helpers import compiled, multisine, rel_err, series
 from mcl.api import simulate
-from mcl.fmu.export import build_fmu, validate_fmu
+from mcl.compile.fmu.export import build_fmu, validate_fmu
 from mcl.model import FmuModel
 
 EXAMPLES = {

@@ -16,7 +16,7 @@ from mcl import hookimpl
 from mcl.cli import main
 from mcl.errors import DataError
 from mcl.executor import LocalExecutor, TaskFailed
-from mcl.fmu.archive import check_archive
+from mcl.compile.fmu.archive import check_archive
 from mcl.registry import Registry
 
 from test_discover import setup_run

@@ -37,7 +37,7 @@ def test_the_wheel_holds_only_the_mcl_namespace(installed):
     modules += [f"mcl/plugins/{p.name}" for p in (ROOT / "plugins").glob("*.py")]
     modules += [f"mcl/modelica/MCL/{p.name}" for p in (ROOT / "modelica" / "MCL").iterdir()]
     assert not set(modules) - set(names), "modules or library files missing from the wheel"
-    assert "mcl/fmu/fmi2_model.c" in names
+    assert "mcl/compile/fmu/fmi2_model.c" in names
 
 
 @pytest.mark.slow

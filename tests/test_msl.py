@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from mcl.cli import main
-from mcl.fmu.export import validate_fmu
+from mcl.compile.fmu.export import validate_fmu
 
 MSL = Path(__file__).resolve().parents[2] / "shared" / "msl"
 pytestmark = [pytest.mark.slow,

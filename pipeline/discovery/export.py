@@ -23,7 +23,7 @@ def export_library(run_dir, output, name: str = "MCLLearned") -> Path:
     """Write ``output/name/package.mo`` (the learned class) and the extended model's FMU;
     returns the package directory. Reads only files inside ``run_dir``, writes only inside
     ``output``."""
-    from ..library import mcl_version
+    from ..compile.library import mcl_version
 
     run = Path(run_dir)
     if not IDENT.match(name):

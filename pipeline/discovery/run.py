@@ -408,7 +408,7 @@ def software_versions() -> dict:
 def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nominal_probe):
     """The winner as a law, the extended model (Modelica + FMU) and its simulated outputs."""
     from ..api import compile_model, simulate
-    from ..fmu.export import build_fmu
+    from ..compile.fmu.export import build_fmu
     from ..swap import swap_component
 
     template = reg.template(best["template"])

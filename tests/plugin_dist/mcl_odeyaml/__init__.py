@@ -29,9 +29,9 @@ class OdeYamlCompiler(Compiler):
         return len(sources) == 1 and Path(sources[0]).suffix in (".yaml", ".yml")
 
     def compile(self, sources, model, options=None):
-        from mcl.dae import Dae
+        from mcl.compile.dae import Dae
         from mcl.model import CompiledModel
-        from mcl.structure import build_ode
+        from mcl.compile.structure import build_ode
 
         spec = yaml.safe_load(Path(sources[0]).read_text()).get(model)
         if spec is None:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import casadi as ca
 import numpy as np
 
-from .errors import ModelicaError
+from ..errors import ModelicaError
 
 
 @dataclass

@@ -10,7 +10,7 @@ import stat
 import zipfile
 from pathlib import Path, PurePosixPath
 
-from ..errors import DataError
+from ...errors import DataError
 
 MAX_TOTAL_BYTES = 1 << 30      # 1 GiB uncompressed
 MAX_ENTRIES = 20000

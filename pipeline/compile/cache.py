@@ -66,7 +66,7 @@ def key_of(**parts) -> str:
 
 def load(key: str):
     """The cached model for ``key``, or None."""
-    from .model import CompiledModel
+    from ..model import CompiledModel
 
     entry = cache_dir() / key
     if not enabled() or not (entry / "model.json").is_file():

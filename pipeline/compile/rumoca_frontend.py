@@ -19,7 +19,7 @@ import casadi as ca
 import numpy as np
 
 from .dae import Dae
-from .errors import ModelicaError, UnsupportedConstruct
+from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
 
@@ -144,7 +144,7 @@ def documents(paths) -> tuple[dict[Path, tuple[str, set]], list[Path]]:
     file of top-level classes) with their content hash and class names, and every file."""
     import hashlib
 
-    from .frontend import _expand, _top_level_names
+    from .pymoca_frontend import _expand, _top_level_names
 
     given = [Path(p) for p in paths]
     for p in given:

@@ -19,8 +19,8 @@ from xml.sax.saxutils import quoteattr
 import casadi as ca
 import numpy as np
 
-from ..errors import CompileError, ConfigError
-from ..model import CompiledModel
+from ...errors import CompileError, ConfigError
+from ...model import CompiledModel
 
 _HERE = Path(__file__).parent
 FUNCTIONS = ("ode", "out", "alg_res", "init", "probe")

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.linalg
 
 from .dae import Dae
-from .errors import ModelicaError, UnsupportedConstruct
+from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
 

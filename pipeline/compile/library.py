@@ -12,7 +12,7 @@ import os
 import re
 from pathlib import Path
 
-from .modelica import MCL_LIBRARY
+from ..modelica import MCL_LIBRARY
 
 ENV = "MODELICAPATH"
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .compat import patch_casadi_for_pymoca
-from .errors import ModelicaError, UnsupportedConstruct
+from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
 
@@ -47,7 +47,7 @@ def _strip_comment(line: str) -> str:
 
 def collect_sources(paths, model: str | None = None, libraries=()) -> Sources:
     """Expand ``.mo`` files and package directories into a de-duplicated file list, with the
-    libraries they refer to taken from the library path (:mod:`mcl.library`).
+    libraries they refer to taken from the library path (:mod:`mcl.compile.library`).
 
     ``paths`` may be empty when ``model`` names a class of a library on the path
     (``MCL.Examples.CauerFilter``).
