@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .compat import patch_casadi_for_pymoca
+from .sources import checked, expand, top_level_names
 from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
@@ -54,46 +55,17 @@ def collect_sources(paths, model: str | None = None, libraries=()) -> Sources:
     """
     from .library import library_path, needed
 
-    given = [Path(p) for p in paths]
-    for p in given:
-        if not p.exists():
-            raise ModelicaError("no such file or directory", where=str(p))
-        if p.is_file() and p.suffix != ".mo":
-            raise ModelicaError("not a Modelica source (.mo) file", where=str(p))
-    files = _expand(given)
+    given = checked(paths)
+    files = expand(given)
     text = {f: f.read_text(encoding="utf-8", errors="replace") for f in files}
-    extra = needed(text.values(), _top_level_names(given, text), model, library_path(libraries))
-    for f in _expand([e for e in extra if e.resolve() not in {g.resolve() for g in given}]):
+    extra = needed(text.values(), top_level_names(given, text), model, library_path(libraries))
+    for f in expand([e for e in extra if e.resolve() not in {g.resolve() for g in given}]):
         text.setdefault(f, f.read_text(encoding="utf-8", errors="replace"))
     unique = list(text)
     if not unique:
         raise ModelicaError(f"no Modelica sources given, and no library on the path defines {model}"
                             if model else "no Modelica sources given")
     return Sources(unique, text)
-
-
-def _expand(paths) -> list[Path]:
-    """Files of ``paths`` (package directories expanded), resolved, without repeats."""
-    files: list[Path] = []
-    for p in paths:
-        if p.is_dir():
-            found = sorted(p.rglob("*.mo"))
-            if not found:
-                raise ModelicaError("directory holds no .mo files", where=str(p))
-            files.extend(found)
-        else:
-            files.append(p)
-    return list(dict.fromkeys(f.resolve() for f in files))
-
-
-def _top_level_names(paths, text: dict) -> set[str]:
-    """Top-level classes the given sources define (a package directory, or a file's classes)."""
-    names = {p.name.split(" ")[0] for p in paths if p.is_dir() and (p / "package.mo").is_file()}
-    for f, t in text.items():
-        if not re.search(r"^\s*within\s+\w", t, re.M):
-            names |= set(re.findall(r"^(?:\s*(?:partial|encapsulated|final)\s+)*\s*(?:model|package|block|"
-                                    r"connector|record|class|function|type)\s+(\w+)", t, re.M))
-    return names
 
 
 def parse(sources: Sources):

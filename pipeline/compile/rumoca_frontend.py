@@ -144,15 +144,9 @@ def documents(paths) -> tuple[dict[Path, tuple[str, set]], list[Path]]:
     file of top-level classes) with their content hash and class names, and every file."""
     import hashlib
 
-    from .pymoca_frontend import _expand, _top_level_names
+    from .sources import checked, expand, top_level_names
 
-    given = [Path(p) for p in paths]
-    for p in given:
-        if not p.exists():
-            raise ModelicaError("no such file or directory", where=str(p))
-        if p.is_file() and p.suffix != ".mo":
-            raise ModelicaError("not a Modelica source (.mo) file", where=str(p))
-    files = _expand(given)
+    files = expand(checked(paths))
     docs: dict[Path, tuple[str, set]] = {}
     for f in files:
         root = f.parent if f.name == "package.mo" else None
@@ -166,7 +160,7 @@ def documents(paths) -> tuple[dict[Path, tuple[str, set]], list[Path]]:
             top = d / "package.mo"
             names = {d.name.split(" ")[0]}
         else:
-            top, names = f, _top_level_names([f], {f: text})
+            top, names = f, top_level_names([f], {f: text})
         if top not in docs:
             h = hashlib.sha256()
             for part in sorted(top.parent.rglob("*.mo")) if top.name == "package.mo" else [top]:

@@ -1,0 +1,42 @@
+"""Modelica sources as the user gives them: files and package directories, checked and expanded."""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from ..errors import ModelicaError
+
+
+def checked(paths) -> list[Path]:
+    """``paths`` as Paths; a missing one or a file that is not ``.mo`` is a one-line error."""
+    given = [Path(p) for p in paths]
+    for p in given:
+        if not p.exists():
+            raise ModelicaError("no such file or directory", where=str(p))
+        if p.is_file() and p.suffix != ".mo":
+            raise ModelicaError("not a Modelica source (.mo) file", where=str(p))
+    return given
+
+
+def expand(paths) -> list[Path]:
+    """Files of ``paths`` (package directories expanded), resolved, without repeats."""
+    files: list[Path] = []
+    for p in paths:
+        if p.is_dir():
+            found = sorted(p.rglob("*.mo"))
+            if not found:
+                raise ModelicaError("directory holds no .mo files", where=str(p))
+            files.extend(found)
+        else:
+            files.append(p)
+    return list(dict.fromkeys(f.resolve() for f in files))
+
+
+def top_level_names(paths, text: dict) -> set[str]:
+    """Top-level classes the given sources define (a package directory, or a file's classes)."""
+    names = {p.name.split(" ")[0] for p in paths if p.is_dir() and (p / "package.mo").is_file()}
+    for f, t in text.items():
+        if not re.search(r"^\s*within\s+\w", t, re.M):
+            names |= set(re.findall(r"^(?:\s*(?:partial|encapsulated|final)\s+)*\s*(?:model|package|block|"
+                                    r"connector|record|class|function|type)\s+(\w+)", t, re.M))
+    return names
