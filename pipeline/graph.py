@@ -7,6 +7,7 @@ Modelica, with one component replaced or a new one connected, and compiled again
 from __future__ import annotations
 
 import copy
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -15,6 +16,7 @@ import networkx as nx
 from . import modelica_text as mt
 from .errors import ModelicaError
 from .compile.pymoca_frontend import collect_sources, find_class, parse
+from .compile.sources import checked, expand
 
 BUILTIN = {"Real", "Integer", "Boolean", "String"}
 
@@ -45,8 +47,11 @@ class Component:
 
     @property
     def two_connector(self) -> bool:
+        """Two connectors of one kind (the same potential and flow variables: MSL's PositivePin
+        and NegativePin are two classes of one kind), one potential and one flow each."""
         a = self.connectors
-        return len(a) == 2 and a[0].simple and a[1].simple and a[0].cls == a[1].cls
+        return (len(a) == 2 and a[0].simple and a[1].simple and a[0].potential == a[1].potential
+                and a[0].flow == a[1].flow)
 
     @property
     def domain(self) -> str:
@@ -218,9 +223,39 @@ def _connector(name, sym, owner) -> Connector | None:
     return Connector(name, cls.full_name, potential, flow)
 
 
+#: a library with more files than this (the MSL) is read class by class, not parsed whole
+LARGE_LIBRARY = 300
+
+
+def _library_component(name: str, sym, info, lib) -> Component | None:
+    """A component whose class lives in a large library, from that class's declarations; a
+    conditional connector (``heatPort if useHeatPort``) counts only when its modifier turns it on."""
+    decl = mt.declaration(sym, info.name)
+    connectors, params, inputs = [], {}, []
+    for prefixes, cls, _type, member, conditional in lib.members(info):
+        if "parameter" in prefixes:
+            params[member] = ""
+        # signal connectors (RealInput of a source, RealOutput of a sensor) make it a block, not a
+        # physical element whose law could be wrong: kept out of the candidates like inputs
+        if prefixes & {"input", "output"} or (cls is not None and re.match(r"(input|output)\b", cls.short or "")):
+            inputs.append(member)
+        if cls is None or cls.kind != "connector" or cls.short is not None:
+            continue
+        if conditional and not re.search(r"\buse\w*\s*=\s*true\b", decl):
+            continue
+        pot, flow = lib.connector_variables(cls)
+        connectors.append(Connector(member, cls.name, pot, flow))
+    return Component(name, info.name, connectors, decl, params, inputs)
+
+
 def build_graph(sources, model: str, libraries=()) -> SystemGraph:
-    """Parse ``sources`` (and the libraries they use) and build the connection graph of ``model``."""
-    srcs = collect_sources(sources, model, libraries)
+    """Parse ``sources`` (and the libraries they use) and build the connection graph of ``model``;
+    classes of a large library (the MSL) are read one by one (:mod:`mcl.compile.classes`)."""
+    from .compile.classes import LibraryClasses
+
+    skipped: dict = {}
+    srcs = collect_sources(sources, model, libraries, max_library_files=LARGE_LIBRARY, skipped=skipped)
+    lib = LibraryClasses(skipped)
     tree = parse(srcs)
     cls = find_class(tree, model)
     symbols, equations = _members(cls)
@@ -229,6 +264,13 @@ def build_graph(sources, model: str, libraries=()) -> SystemGraph:
     for name, (sym, owner) in symbols.items():
         type_name = mt.ref(sym.type)
         target = None if type_name in BUILTIN else _resolve(owner, sym.type)
+        info = lib.resolve(type_name, owner.full_name) if target is None and type_name not in BUILTIN else None
+        if info is not None:
+            if info.kind in ("connector", "type", "record"):
+                declarations.append(mt.declaration(sym, info.name))
+            else:
+                g.add_node(name, component=_library_component(name, sym, info, lib))
+            continue
         if target is None or getattr(target, "type", "") in ("type", "connector"):
             if type_name not in BUILTIN and target is None:
                 raise ModelicaError(f"{model}: type {type_name} of '{name}' not found",
@@ -241,7 +283,8 @@ def build_graph(sources, model: str, libraries=()) -> SystemGraph:
         inputs = [n for n, (s, _) in members.items() if "input" in s.prefixes]
         g.add_node(name, component=Component(name, target.full_name, connectors,
                                              mt.declaration(sym, target.full_name), params, inputs))
-    sg = SystemGraph(model, g, declarations, [], list(srcs.files))
+    # the user's own files: libraries are found again on the library path by whoever compiles
+    sg = SystemGraph(model, g, declarations, [], expand(checked(sources)))
     from pymoca import ast
 
     for eq in equations:

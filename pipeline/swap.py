@@ -25,12 +25,15 @@ class TemplateModel:
 
 def write_package(directory, package: str, classes: list[str]) -> Path:
     """``directory/package.mo`` holding ``classes`` (Modelica text), written atomically."""
+    from .compile.library import uses_annotation
+
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     body = "\n".join(textwrap.indent(c.rstrip() + "\n", "  ") for c in classes)
+    uses = uses_annotation(body)
     path = directory / f"{package}.mo"
     tmp = path.with_suffix(".mo.tmp")
-    tmp.write_text(f"within ;\npackage {package}\n{body}end {package};\n")
+    tmp.write_text(f"within ;\npackage {package}\n{body}" + (f"  {uses};\n" if uses else "") + f"end {package};\n")
     tmp.replace(path)
     return path
 

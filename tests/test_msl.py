@@ -121,3 +121,44 @@ def test_a_user_model_of_msl_parts_takes_its_connectors_as_data_columns(msl_path
     truth = solve_ivp(lambda s, v: [((np.sin(2 * s) + 0.5 - v[0]) / 1.0 - v[0] / 2.0) / 0.5], (0, 5), [0.0],
                       t_eval=t, rtol=1e-11, atol=1e-13).y[0]
     assert np.max(np.abs(res.output("y") - truth)) < 1e-4 * np.ptp(truth)
+
+
+def _user_rc_data(path, seed, cubic):
+    """The circuit's truth: R2 conducts i = v/2 + cubic v^3 (its model says a 2-ohm resistor)."""
+    from scipy.integrate import solve_ivp
+
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 20, 401)
+    w, ph = rng.uniform(0.3, 2.5, 4), rng.uniform(0, 6, 4)
+    u = lambda s: sum(np.sin(wk * s + pk) for wk, pk in zip(w, ph))
+    rhs = lambda s, v: [((u(s) - v[0]) / 1.0 - (0.5 * v[0] + cubic * v[0] ** 3)) / 0.5]
+    y = solve_ivp(rhs, (0, 20), [0.0], t_eval=t, rtol=1e-10, atol=1e-12).y[0]
+    y = y + rng.normal(0, 0.01 * np.std(y), len(y))
+    np.savetxt(path, np.column_stack([t, u(t), y]), delimiter=",", header="time,u,y", comments="")
+
+
+def test_discovery_on_a_user_model_of_msl_parts(msl_path, tmp_path, capsys):
+    """RealInput source, sensor output, a hidden cubic in one MSL resistor: named, learned, put
+    back as a class with the MSL's own connectors, exported with uses(Modelica(...))."""
+    import json
+
+    (tmp_path / "UserRC.mo").write_text(USER_RC)
+    _user_rc_data(tmp_path / "train.csv", 1, 0.3)
+    _user_rc_data(tmp_path / "validate.csv", 2, 0.3)
+    (tmp_path / "run.yaml").write_text("model: {sources: [UserRC.mo], name: UserRC}\n"
+                                       "data: {train: train.csv, validate: validate.csv}\noutput: out\n")
+    assert main(["run", str(tmp_path / "run.yaml")]) == 0, capsys.readouterr().err
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    cause = report["cause"]
+    assert cause["component"] == "R2" and cause["class"] == "Modelica.Electrical.Analog.Basic.Resistor"
+    assert {c["component"] for c in report["candidates"]} == {"R1", "C", "R2"}   # not the source, sensor, ground
+    xs, fs = np.array(cause["law"]["curve"]).T
+    truth = 0.5 * xs + 0.3 * xs**3
+    assert np.max(np.abs(fs - truth)) <= 0.05 * np.max(np.abs(truth))
+    g = report["gain"]
+    assert g["validation_rms_after"] <= 0.2 * g["validation_rms_before"]
+    extended = (tmp_path / "out" / cause["modelica"]).read_text()
+    assert "Modelica.Electrical.Analog.Interfaces.PositivePin p;" in extended
+    assert 'annotation(uses(Modelica(version="4.0.0")))' in extended
+    assert main(["export", str(tmp_path / "out"), "-o", str(tmp_path / "lib"), "--name", "Parts"]) == 0
+    assert 'uses(Modelica(version="4.0.0"))' in (tmp_path / "lib" / "Parts" / "package.mo").read_text()

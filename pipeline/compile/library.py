@@ -85,3 +85,23 @@ def needed(texts, defined: set[str], model: str | None, path) -> list[Path]:
             out.append(libs[name])
             todo.extend(sorted(_uses(libs[name]) - defined - {n for n in libs if libs[n] in out}))
     return out
+
+
+def library_version(library: Path) -> str | None:
+    """The ``version`` a library's top package declares in its annotation."""
+    top = library / "package.mo" if library.is_dir() else library
+    try:
+        head = top.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None
+    m = re.search(r"\bversion\s*=\s*\"([^\"]+)\"", head)
+    return m.group(1) if m else None
+
+
+def uses_annotation(text: str, libraries=()) -> str:
+    """``annotation(uses(Modelica(version="4.0.0"), ...))`` for the libraries ``text`` refers to
+    (empty when it refers to none), with the versions of the copies on the library path."""
+    found = available(library_path(libraries))
+    used = [n for n in sorted(found) if re.search(rf"(?<![\w.]){re.escape(n)}\.\w", text)]
+    parts = [f'{n}(version="{library_version(found[n]) or ""}")' for n in used]
+    return f"annotation(uses({', '.join(parts)}))" if parts else ""

@@ -46,12 +46,15 @@ def _strip_comment(line: str) -> str:
     return line.split("//", 1)[0]
 
 
-def collect_sources(paths, model: str | None = None, libraries=()) -> Sources:
+def collect_sources(paths, model: str | None = None, libraries=(), max_library_files: int | None = None,
+                    skipped: dict | None = None) -> Sources:
     """Expand ``.mo`` files and package directories into a de-duplicated file list, with the
     libraries they refer to taken from the library path (:mod:`mcl.compile.library`).
 
     ``paths`` may be empty when ``model`` names a class of a library on the path
-    (``MCL.Examples.CauerFilter``).
+    (``MCL.Examples.CauerFilter``). A library of more than ``max_library_files`` files (the
+    MSL) is left out and recorded in ``skipped`` (name -> directory) for the caller to read
+    class by class.
     """
     from .library import library_path, needed
 
@@ -59,6 +62,11 @@ def collect_sources(paths, model: str | None = None, libraries=()) -> Sources:
     files = expand(given)
     text = {f: f.read_text(encoding="utf-8", errors="replace") for f in files}
     extra = needed(text.values(), top_level_names(given, text), model, library_path(libraries))
+    if max_library_files is not None:
+        large = [e for e in extra if e.is_dir() and sum(1 for _ in e.rglob("*.mo")) > max_library_files]
+        if skipped is not None:
+            skipped.update({e.name.split(" ")[0]: e for e in large})
+        extra = [e for e in extra if e not in large]
     for f in expand([e for e in extra if e.resolve() not in {g.resolve() for g in given}]):
         text.setdefault(f, f.read_text(encoding="utf-8", errors="replace"))
     unique = list(text)

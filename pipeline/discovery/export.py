@@ -23,7 +23,7 @@ def export_library(run_dir, output, name: str = "MCLLearned") -> Path:
     """Write ``output/name/package.mo`` (the learned class) and the extended model's FMU;
     returns the package directory. Reads only files inside ``run_dir``, writes only inside
     ``output``."""
-    from ..compile.library import mcl_version
+    from ..compile.library import uses_annotation
 
     run = Path(run_dir)
     if not IDENT.match(name):
@@ -50,9 +50,10 @@ def export_library(run_dir, output, name: str = "MCLLearned") -> Path:
     out = Path(output) / name
     out.mkdir(parents=True, exist_ok=True)
     body = "\n".join("  " + line.strip() if line.strip() else "" for line in m.group(0).splitlines())
-    uses = [f'MCL(version="{mcl_version()}")'] if re.search(r"(?<![\w.])MCL\.", body) else []
-    uses += ['Modelica(version="4.0.0")'] if re.search(r"(?<![\w.])Modelica\.", body) else []
-    annotation = f"  annotation(uses({', '.join(uses)}));\n" if uses else ""
+    # the libraries the run compiled with (recorded in its extended package), else the path's
+    recorded = re.search(r"annotation\(uses\((?:[^()]|\([^()]*\))*\)\)", source.read_text())
+    uses = recorded.group(0) if recorded else uses_annotation(body)
+    annotation = f"  {uses};\n" if uses else ""
     tmp = out / "package.mo.tmp"
     tmp.write_text(f'within ;\npackage {name} "Components learned by mcl"\n{body}\n{annotation}end {name};\n')
     tmp.replace(out / "package.mo")

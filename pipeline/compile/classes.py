@@ -1,0 +1,194 @@
+"""Classes of a large library (the Modelica Standard Library) read as text, one at a time.
+
+The component graph needs, for each component of a user's model, its class, what that class
+extends, and its connectors with their potential and flow variables. Parsing a whole library
+for that takes minutes; finding the few class definitions by name (Modelica's package layout:
+``A/B/package.mo``, ``A/B/C.mo``, classes nested in a file) and reading their declarations takes
+milliseconds. Only declarations are read here; equations are the compiler's business.
+"""
+from __future__ import annotations
+
+import functools
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+_KEYWORDS = r"(?:model|block|connector|record|package|class|type|function|operator)"
+_PREFIXES = {"parameter", "constant", "input", "output", "flow", "stream", "discrete", "final", "inner",
+             "outer", "replaceable", "redeclare", "each", "public", "protected", "expandable"}
+
+
+@dataclass
+class ClassInfo:
+    name: str                      # fully qualified
+    kind: str                      # model, connector, ...
+    extends: list[str] = field(default_factory=list)
+    declarations: list[tuple[set, str, str, bool]] = field(default_factory=list)  # prefixes, type, name, conditional
+    short: str | None = None       # `connector RealInput = input Real`: the right-hand side
+
+
+def _strip(text: str) -> str:
+    """Comments, strings and annotations out (they hold ';' and keywords)."""
+    text = re.sub(r"//[^\n]*|/\*.*?\*/", " ", text, flags=re.S)
+    text = re.sub(r'"(?:\\.|[^"\\])*"', " ", text)
+    out, i = [], 0
+    for m in re.finditer(r"\bannotation\s*\(", text):
+        if m.start() < i:
+            continue
+        out.append(text[i:m.start()])
+        depth, j = 1, m.end()
+        while j < len(text) and depth:
+            depth += {"(": 1, ")": -1}.get(text[j], 0)
+            j += 1
+        i = j
+    out.append(text[i:])
+    return "".join(out)
+
+
+def _block(text: str, name: str) -> tuple[str, str] | None:
+    """(kind, body) of class ``name`` defined in ``text`` (the outermost such definition)."""
+    head = re.search(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|"
+                     rf"operator|pure|impure)\s+)*({_KEYWORDS})\s+{re.escape(name)}\b", text)
+    if not head:
+        return None
+    rest = text[head.end():]
+    short = re.match(r"\s*=\s*([^;]*);", rest)
+    if short:
+        return head.group(1), "=" + short.group(1)
+    end = re.search(rf"\bend\s+{re.escape(name)}\s*;", rest)
+    return head.group(1), rest[: end.start()] if end else rest
+
+
+def _without_nested(body: str) -> str:
+    """The body less nested class definitions (their declarations are not members)."""
+    while True:
+        m = re.search(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator)\s+)*"
+                      rf"{_KEYWORDS}\s+(\w+)\b", body)
+        if not m:
+            return body
+        tail = body[m.end():]
+        if re.match(r"\s*=", tail):
+            end = tail.find(";")
+            body = body[:m.start()] + " " + tail[end + 1:]
+            continue
+        end = re.search(rf"\bend\s+{m.group(1)}\s*;", tail)
+        if not end:
+            return body[:m.start()]
+        body = body[:m.start()] + " " + tail[end.end():]
+
+
+def _statements(body: str):
+    """Declaration statements of a class body (up to its first equation/algorithm section)."""
+    body = re.split(r"\b(?:initial\s+)?(?:equation|algorithm)\b", body, maxsplit=1)[0]
+    depth, start = 0, 0
+    for i, ch in enumerate(body):
+        if ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        elif ch == ";" and depth == 0:
+            yield body[start:i].strip()
+            start = i + 1
+
+
+@functools.lru_cache(maxsize=4096)
+def _file_text(path: str) -> str:
+    return _strip(Path(path).read_text(encoding="utf-8", errors="replace"))
+
+
+class LibraryClasses:
+    """Class lookup in libraries ``{top-level name: directory or file}``."""
+
+    def __init__(self, libraries: dict[str, Path]):
+        self.libraries = libraries
+
+    @functools.lru_cache(maxsize=4096)
+    def find(self, qualified: str) -> ClassInfo | None:
+        parts = qualified.split(".")
+        where = self.libraries.get(parts[0])
+        if where is None:
+            return None
+        text, rest = None, parts[1:]
+        if where.is_dir():
+            path = where
+            while rest and (path / rest[0]).is_dir() and (path / rest[0] / "package.mo").is_file():
+                path, rest = path / rest[0], rest[1:]
+            if rest and (path / f"{rest[0]}.mo").is_file():
+                text, rest = _file_text(str(path / f"{rest[0]}.mo")), rest
+            else:
+                text, rest = _file_text(str(path / "package.mo")), [path.name.split(" ")[0], *rest]
+        else:
+            text, rest = _file_text(str(where)), parts
+        kind, body = "package", text
+        for name in rest:
+            found = _block(body, name)
+            if found is None:
+                return None
+            kind, body = found
+        return self._info(qualified, kind, body)
+
+    def _info(self, qualified: str, kind: str, body: str) -> ClassInfo:
+        info = ClassInfo(qualified, kind)
+        if body.startswith("="):
+            info.short = body[1:].strip()
+            return info
+        for st in _statements(_without_nested(body)):
+            words = st.split()
+            if not words or words[0] == "import":
+                continue
+            if words[0] == "extends":
+                info.extends.append(re.match(r"extends\s+([\w.]+)", st).group(1))
+                continue
+            tokens = re.findall(r"[A-Za-z_][\w.]*|[\[\](=]", st)
+            prefixes = set()
+            while tokens and tokens[0] in _PREFIXES:
+                prefixes.add(tokens.pop(0))
+            if len(tokens) < 2 or not re.match(r"[A-Za-z_]", tokens[0]):
+                continue
+            type_name, k = tokens[0], 1
+            if tokens[k] == "[":                       # Real[3] x
+                while k < len(tokens) and tokens[k] != "]":
+                    k += 1
+                k += 1
+            if k >= len(tokens) or not re.match(r"[A-Za-z_]\w*$", tokens[k]):
+                continue
+            conditional = bool(re.search(r"\bif\b", st))
+            info.declarations.append((prefixes, type_name, tokens[k], conditional))
+        return info
+
+    def resolve(self, name: str, scope: str) -> ClassInfo | None:
+        """``name`` as written inside class ``scope``: looked up from the innermost scope out."""
+        parts = scope.split(".")
+        for k in range(len(parts), -1, -1):
+            found = self.find(".".join([*parts[:k], name]))
+            if found is not None:
+                return found
+        return None
+
+    def members(self, info: ClassInfo, seen=None):
+        """Declarations of ``info`` and of what it extends: [(prefixes, ClassInfo|None, type, name, conditional)]."""
+        seen = seen or set()
+        if info.name in seen:
+            return []
+        seen.add(info.name)
+        scope = info.name.rsplit(".", 1)[0]
+        out = []
+        for base in info.extends:
+            b = self.resolve(base, scope) or self.resolve(base, info.name)
+            if b is not None:
+                out += self.members(b, seen)
+        for prefixes, type_name, name, conditional in info.declarations:
+            out.append((prefixes, self.resolve(type_name, info.name) or self.resolve(type_name, scope),
+                        type_name, name, conditional))
+        return out
+
+    def connector_variables(self, info: ClassInfo) -> tuple[list[str], list[str]]:
+        """(potential, flow) variable names of a connector class."""
+        if info.short is not None:
+            return [], []        # `connector RealInput = input Real`: a signal, neither
+        pot, flow = [], []
+        for prefixes, cls, _type, name, _cond in self.members(info):
+            if cls is not None and cls.kind == "connector":
+                continue
+            (flow if "flow" in prefixes else pot).append(name) if "stream" not in prefixes else None
+        return pot, flow
