@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from mcl.cli import main
+from test_discover import rc_data
 from mcl.compile.fmu.export import validate_fmu
 
 MSL = Path(__file__).resolve().parents[2] / "shared" / "msl"
@@ -123,28 +124,15 @@ def test_a_user_model_of_msl_parts_takes_its_connectors_as_data_columns(msl_path
     assert np.max(np.abs(res.output("y") - truth)) < 1e-4 * np.ptp(truth)
 
 
-def _user_rc_data(path, seed, cubic):
-    """The circuit's truth: R2 conducts i = v/2 + cubic v^3 (its model says a 2-ohm resistor)."""
-    from scipy.integrate import solve_ivp
-
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0, 20, 401)
-    w, ph = rng.uniform(0.3, 2.5, 4), rng.uniform(0, 6, 4)
-    u = lambda s: sum(np.sin(wk * s + pk) for wk, pk in zip(w, ph))
-    rhs = lambda s, v: [((u(s) - v[0]) / 1.0 - (0.5 * v[0] + cubic * v[0] ** 3)) / 0.5]
-    y = solve_ivp(rhs, (0, 20), [0.0], t_eval=t, rtol=1e-10, atol=1e-12).y[0]
-    y = y + rng.normal(0, 0.01 * np.std(y), len(y))
-    np.savetxt(path, np.column_stack([t, u(t), y]), delimiter=",", header="time,u,y", comments="")
-
-
 def test_discovery_on_a_user_model_of_msl_parts(msl_path, tmp_path, capsys):
     """RealInput source, sensor output, a hidden cubic in one MSL resistor: named, learned, put
     back as a class with the MSL's own connectors, exported with uses(Modelica(...))."""
     import json
 
     (tmp_path / "UserRC.mo").write_text(USER_RC)
-    _user_rc_data(tmp_path / "train.csv", 1, 0.3)
-    _user_rc_data(tmp_path / "validate.csv", 2, 0.3)
+    # the same circuit as test_discover's RC (R1 = 1, C = 0.5, the load follows i = v/2 + 0.3 v^3)
+    rc_data(tmp_path / "train.csv", 1, 0.3)
+    rc_data(tmp_path / "validate.csv", 2, 0.3)
     (tmp_path / "run.yaml").write_text("model: {sources: [UserRC.mo], name: UserRC}\n"
                                        "data: {train: train.csv, validate: validate.csv}\noutput: out\n")
     assert main(["run", str(tmp_path / "run.yaml")]) == 0, capsys.readouterr().err
