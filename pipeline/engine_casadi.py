@@ -111,10 +111,7 @@ class _Plan:
         N = len(t_out)
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
                           (("x", nx), ("u", len(ode.u_names)), ("p", npar), ("t", 1)))
-        checks = ca.Function("checks", [Xs, Us, Ps, Ts],
-                             [ode.out(Xs, Us, Ps, Ts), ode.alg_res(Xs, Us, Ps, Ts),
-                              ode.drift(Xs, Us, Ps, Ts)])
-        self.checks = checks.map(N)
+        self.checks = ode.checks.map(N)   # outputs and checks with one solve of the loops per point
         if ns:
             Ss = ca.MX.sym("S", nx, ns)
             y = ode.out(Xs, Us, Ps, Ts)

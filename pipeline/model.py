@@ -17,7 +17,7 @@ import numpy as np
 from .errors import ConfigError, DataError, MclError
 from .compile.structure import Ode
 
-_FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe")
+_FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks")
 
 
 @dataclass
@@ -70,7 +70,11 @@ class CompiledModel:
     def load(cls, directory) -> "CompiledModel":
         d = Path(directory)
         meta = json.loads((d / "model.json").read_text())
-        funcs = {f: ca.Function.load(str(d / f"{f}.casadi")) for f in _FUNCTIONS}
+        funcs = {f: ca.Function.load(str(d / f"{f}.casadi")) for f in _FUNCTIONS if (d / f"{f}.casadi").is_file()}
+        if "checks" not in funcs:      # saved by mcl 0.1: compose it
+            from .compile.structure import composed_checks
+
+            funcs["checks"] = composed_checks(funcs["out"], funcs["alg_res"], funcs["drift"])
         ode = Ode(x_names=meta["x_names"], u_names=meta["u_names"], p_names=meta["p_names"],
                   y_names=meta["y_names"], p_values=np.array(meta["p_values"]),
                   u_start=np.array(meta["u_start"]), probe_names=meta["probe_names"],

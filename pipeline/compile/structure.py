@@ -47,6 +47,7 @@ class Ode:
     drift: ca.Function      # -> max |I(x, z(x))|: invariants dropped by index reduction
     init: ca.Function       # (u, p, t) -> x0
     probe: ca.Function      # -> every named variable, in order ``probe_names``
+    checks: ca.Function     # -> (y, alg_res, drift) with one solve of the algebraic loops
     probe_names: list[str]
     index: int
     nonlinear_blocks: int
@@ -185,20 +186,29 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     alg_res = mk("alg_res", [absmax(g)])
     drift = mk("drift", [absmax(inv)])
     probe = mk("probe", [probe_all])
+    y_all = probe_all[y_idx] if y_idx else ca.MX(0, 1)
+    checks = ca.Function("checks", args, [y_all, absmax(g), absmax(inv)], names, ["y", "res", "drift"])
 
     x_names = semi_state_names(xs, dae)
     # der() of the original states, for initial equations such as der(x) = 0 (steady state)
     dXI = ca.mtimes(ca.Function("dxi", [xs, zs, up, t], [ca.jacobian(x_impl, xs)])(X, Z, UP, T), xdot)
     init = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI)
     # SX evaluates faster than the MX call graph, where there is no Newton or QR solve in it
-    ode, out, alg_res, drift, probe, init = map(_expanded, (ode, out, alg_res, drift, probe, init))
+    ode, out, alg_res, drift, probe, init, checks = map(_expanded, (ode, out, alg_res, drift, probe, init, checks))
     return Ode(
         x_names=x_names, u_names=list(dae.u_names), p_names=list(dae.p_names),
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
-        ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe,
+        ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe, checks=checks,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
         time_events=tuple(dae.time_events),
     )
+
+
+def composed_checks(out: ca.Function, alg_res: ca.Function, drift: ca.Function) -> ca.Function:
+    """``checks`` from the three functions (for models saved before it existed)."""
+    args = out.mx_in()
+    return ca.Function("checks", args, [out(*args), alg_res(*args), drift(*args)],
+                       ["x", "u", "p", "t"], ["y", "res", "drift"])
 
 
 def _expanded(f: ca.Function) -> ca.Function:
