@@ -24,9 +24,6 @@ EXAMPLES = {
     "Modelica.Thermal.HeatTransfer.Examples.TwoMasses": 1.0,
     "Modelica.Blocks.Examples.PID_Controller": 4.0,
 }
-#: steady-state initialisation with dummy-derivative states: our initial state differs from
-#: rumoca's (known shortfall, reported in the closing note); compiled, validated, finite
-INIT_DIFFERS = {"Modelica.Blocks.Examples.PID_Controller"}
 
 
 @pytest.fixture(scope="module")
@@ -66,8 +63,6 @@ def test_msl_example_compiles_validates_and_matches_rumoca(msl_path, tmp_path, c
     res = simulate_fmu(str(fmu), stop_time=t_end, output_interval=t_end / 4000, relative_tolerance=1e-8,
                        output=states)
     assert abs(res["time"][-1] - t_end) < 1e-9 and all(np.all(np.isfinite(res[s])) for s in states)
-    if name in INIT_DIFFERS:
-        return
     ref = _rumoca_states(name, t_end, states)
     if ref is None:              # rumoca's runtime cannot evaluate Modelica.Math.sin: finite is all we check
         return

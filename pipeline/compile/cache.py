@@ -21,7 +21,7 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 MIN_SECONDS = 0.5          # quicker compiles are not worth a disk entry
-FORMAT = 3                 # bump when what a compiled model holds changes (time events: 2, checks: 3)
+FORMAT = 4                 # bump when what a compiled model holds changes (events 2, checks 3, fixed algebraics 4)
 MAX_ENTRIES = 200
 
 

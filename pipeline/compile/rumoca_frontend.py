@@ -533,6 +533,9 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
         raise ModelicaError(f"model {model} is unbalanced: {residual.numel()} equations for {n_unknown} "
                             f"unknowns ({x.numel()} states, {z.numel()} algebraic variables)")
     init = [ca.vec(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
+    # an algebraic variable with fixed = true starts at its start value (inertia.a(fixed=true))
+    init += [ca.vec(slot[i]) - ca.vec(tr.sx(attrs[i]["start"])) for i in index["z"]
+             if attrs[i].get("fixed") in ([True], True) and attrs[i]["start"] is not None]
     init_residual = ca.vertcat(*init) if init else ca.SX(0, 1)
 
     def value_of(i, key_order=("binding", "start")):
