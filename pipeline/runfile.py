@@ -218,10 +218,35 @@ def _read_yaml(path: Path):
         raise ConfigError("not valid YAML: nested too deeply", where=str(path)) from None
     except OSError as exc:
         raise ConfigError(f"cannot read: {exc.strerror}", where=str(path)) from None
+    if _expanded_size(node) > MAX_VALUES:
+        raise ConfigError(f"the run file expands to more than {MAX_VALUES} values (anchors and "
+                          "aliases repeated inside each other?)", where=str(path))
     if not isinstance(raw, dict):
         raise ConfigError("the run file must be a mapping of sections (model, data, output, ...)",
                           where=str(path))
     return raw, _lines(node)
+
+
+MAX_VALUES = 100_000
+
+
+def _expanded_size(node) -> int:
+    """How many values the document holds once its aliases are expanded (counted, not built)."""
+    sizes: dict[int, int] = {}
+
+    def size(n) -> int:
+        if id(n) in sizes:
+            return sizes[id(n)]
+        if isinstance(n, yaml.MappingNode):
+            total = 1 + sum(size(k) + size(v) for k, v in n.value)
+        elif isinstance(n, yaml.SequenceNode):
+            total = 1 + sum(size(v) for v in n.value)
+        else:
+            total = 1
+        sizes[id(n)] = min(total, MAX_VALUES + 1)
+        return sizes[id(n)]
+
+    return size(node) if node is not None else 0
 
 
 def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:

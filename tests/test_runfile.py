@@ -77,3 +77,12 @@ def test_a_third_party_plugin_s_option_schema_is_enforced(tmp_path):
     spec, _ = parse_runfile(run, reg)
     assert spec.executor == {"kind": "inline", "chunk": 4}
     assert reg.executor(spec.executor).chunk == 4
+
+
+def test_aliases_that_expand_to_millions_of_values_are_refused(tmp_path, capsys):
+    levels = ['a: &a ["x","x","x","x","x","x","x","x","x"]']
+    for prev, name in zip("abcdef", "bcdefg"):
+        levels.append(f"{name}: &{name} [" + ",".join([f"*{prev}"] * 9) + "]")
+    (tmp_path / "run.yaml").write_text("\n".join(levels) + "\ntemplates: [" + ",".join(["*g"] * 9) + "]\n")
+    assert main(["run", str(tmp_path / "run.yaml")]) == 2
+    assert "expands to more than" in capsys.readouterr().err
