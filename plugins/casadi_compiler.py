@@ -5,6 +5,7 @@
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 from mcl import hookimpl
@@ -28,23 +29,23 @@ class CasadiCompiler(Compiler):
         from mcl.model import CompiledModel
 
         libraries = (options or {}).get("libraries", ())
-        docs, _ = rumoca_frontend.documents(sources)
-        roots = rumoca_frontend.library_roots(libraries, {n for _, names in docs.values() for n in names})
-        key = compile_cache.key_of(model=model, docs=sorted(h for h, _ in docs.values()),
-                                   libraries=compile_cache.library_fingerprint(roots), compiler=self.name)
+        prep = rumoca_frontend.prepare(sources, libraries)
+        key = compile_cache.key_of(model=model, docs=sorted(h for h, _ in prep.docs.values()),
+                                   libraries=compile_cache.library_fingerprint(prep.roots), compiler=self.name)
         cached = compile_cache.load(key)
         if cached is not None:
             return cached
-        with compile_cache.Stopwatch() as clock:
-            ir, located = rumoca_frontend.load_ir(sources, model, libraries)
-            dae = eliminate_aliases(rumoca_frontend.to_dae(ir, located, model))
-            ode = structure.build_ode(dae, model)
+        start = time.perf_counter()
+        ir, located = rumoca_frontend.load_ir(sources, model, libraries, prepared=prep)
+        dae = eliminate_aliases(rumoca_frontend.to_dae(ir, located, model))
+        ode = structure.build_ode(dae, model)
+        seconds = time.perf_counter() - start
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
                 "files_read": len(files), "units": dae.units, "descriptions": dae.descriptions,
-                "compile_seconds": clock.seconds}
+                "compile_seconds": seconds}
         compiled = CompiledModel(model, ode, info)
-        compile_cache.store(key, compiled, clock.seconds)
+        compile_cache.store(key, compiled, seconds)
         return compiled
 
 

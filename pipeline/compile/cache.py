@@ -15,7 +15,6 @@ import logging
 import os
 import shutil
 import tempfile
-import time
 from pathlib import Path
 
 log = logging.getLogger(__name__)
@@ -25,8 +24,13 @@ FORMAT = 4                 # bump when what a compiled model holds changes (even
 MAX_ENTRIES = 200
 
 
+def base_dir() -> Path:
+    """mcl's cache directory (compiled models, the rumoca library root)."""
+    return Path(os.environ.get("MCL_CACHE_DIR") or Path.home() / ".cache" / "mcl")
+
+
 def cache_dir() -> Path:
-    return Path(os.environ.get("MCL_CACHE_DIR") or Path.home() / ".cache" / "mcl") / "compile"
+    return base_dir() / "compile"
 
 
 def enabled() -> bool:
@@ -47,20 +51,11 @@ def library_fingerprint(paths) -> str:
     return h.hexdigest()
 
 
-def versions() -> dict:
-    from importlib import metadata
-
-    out = {}
-    for dist in ("mcl", "rumoca", "casadi"):
-        try:
-            out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            out[dist] = None
-    return out
-
-
 def key_of(**parts) -> str:
-    return hashlib.sha256(json.dumps({**parts, "versions": versions(), "format": FORMAT}, sort_keys=True, default=str)
+    from .library import distribution_versions
+
+    versions = distribution_versions("mcl", "rumoca", "casadi")
+    return hashlib.sha256(json.dumps({**parts, "versions": versions, "format": FORMAT}, sort_keys=True, default=str)
                           .encode()).hexdigest()[:32]
 
 
@@ -105,13 +100,3 @@ def _prune(base: Path) -> None:
                      key=lambda p: p.stat().st_mtime)
     for old in entries[:-MAX_ENTRIES]:
         shutil.rmtree(old, ignore_errors=True)
-
-
-class Stopwatch:
-    def __enter__(self):
-        self.start = time.perf_counter()
-        return self
-
-    def __exit__(self, *exc):
-        self.seconds = time.perf_counter() - self.start
-        return False

@@ -49,6 +49,33 @@ class Dae:
     time_events: list[float] = field(default_factory=list)   # instants where the equations jump
 
 
+def check_balance(residual: ca.SX, nx: int, nz: int, name: str) -> None:
+    """As many equations as unknowns, or a one-line error counting both."""
+    if residual.numel() != nx + nz:
+        raise ModelicaError(f"model {name} is unbalanced: {residual.numel()} equations for {nx + nz} "
+                            f"unknowns ({nx} states, {nz} algebraic variables)")
+
+
+def resolve_parameters(values: ca.SX, p_all: ca.SX, free: list[int], name: str) -> tuple[ca.SX, ca.SX]:
+    """The free parameters' symbols ``p`` and every parameter of ``p_all`` as an expression of
+    them: a dependent parameter's binding (``values``, in ``p_all``) substituted to a fixed point."""
+    p = ca.SX.sym("p", len(free))
+    resolved = ca.SX(p_all)
+    for k, j in enumerate(free):
+        resolved[j] = p[k]
+    dependent = [j for j in range(p_all.numel()) if j not in set(free)]
+    for _ in range(len(dependent) + 1):
+        if not dependent or not ca.depends_on(resolved, p_all):
+            return p, resolved
+        nxt = ca.SX(resolved)
+        for j in dependent:
+            nxt[j] = ca.substitute(values[j], p_all, resolved)
+        resolved = nxt
+    if ca.depends_on(resolved, p_all):
+        raise ModelicaError(f"model {name}: parameter bindings are circular")
+    return p, resolved
+
+
 def _scalar_names(var) -> list[str]:
     name, n = var.symbol.name(), var.symbol.numel()
     return [name] if n == 1 else [f"{name}[{i + 1}]" for i in range(n)]
@@ -97,12 +124,7 @@ def from_pymoca(model, name: str = "model") -> Dae:
         return f(args, t)
 
     residual = to_sx(list(model.equations))
-    n_unknown = len(names["x"]) + len(names["z"])
-    if residual.numel() != n_unknown:
-        raise ModelicaError(
-            f"model {name} is unbalanced: {residual.numel()} equations for {n_unknown} unknowns "
-            f"({len(names['x'])} states, {len(names['z'])} algebraic variables)"
-        )
+    check_balance(residual, len(names["x"]), len(names["z"]), name)
     init_residual = to_sx(list(model.initial_equations))
 
     # Parameters: free ones keep a symbol, dependent ones are resolved to expressions of free ones.
@@ -111,23 +133,9 @@ def from_pymoca(model, name: str = "model") -> Dae:
                                                               if np.isnan(v) else v)
                          for i, v in enumerate(values)])
     free = [i for i, v in enumerate(values) if not isinstance(v, ca.MX)]
-    p = ca.SX.sym("p", len(free))
     p_names = [p_all_names[i] for i in free]
     p_values = np.array([0.0 if np.isnan(values[i]) else values[i] for i in free])
-    resolved = ca.SX(p_all)
-    resolved[free] = p
-    dependent = [i for i in range(len(values)) if i not in free]
-    for _ in range(len(dependent) + 1):
-        if not dependent:
-            break
-        nxt = ca.SX(resolved)
-        nxt[dependent] = ca.substitute(value_exprs[dependent], p_all, resolved)
-        resolved = nxt
-        if not ca.depends_on(resolved, p_all):
-            break
-    else:
-        if dependent and ca.depends_on(resolved, p_all):
-            raise ModelicaError(f"model {name}: parameter bindings are circular")
+    p, resolved = resolve_parameters(value_exprs, p_all, free, name)
 
     def bind(e):
         return ca.substitute(e, p_all, resolved)

@@ -17,14 +17,22 @@ from ..modelica import MCL_LIBRARY
 ENV = "MODELICAPATH"
 
 
-def mcl_version() -> str:
-    """The version of the installed mcl distribution (the MCL library carries the same)."""
+def distribution_versions(*names: str) -> dict[str, str]:
+    """Installed versions of the named distributions (absent ones left out)."""
     from importlib import metadata
 
-    try:
-        return metadata.version("mcl")
-    except metadata.PackageNotFoundError:  # pragma: no cover - running from an uninstalled tree
-        return "0+unknown"
+    out = {}
+    for name in names:
+        try:
+            out[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def mcl_version() -> str:
+    """The version of the installed mcl distribution (the MCL library carries the same)."""
+    return distribution_versions("mcl").get("mcl", "0+unknown")
 
 
 def library_path(libraries=()) -> list[Path]:

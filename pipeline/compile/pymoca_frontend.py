@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .compat import patch_casadi_for_pymoca
-from .sources import checked, expand, top_level_names
+from .sources import checked, expand, first_line, top_level_names
 from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
@@ -34,16 +34,7 @@ class Sources:
 
     def locate(self, pattern: str) -> str | None:
         """``file:line`` of the first line matching the regular expression, or None."""
-        rx = re.compile(pattern)
-        for f in self.files:
-            for n, line in enumerate(self.text[f].splitlines(), 1):
-                if rx.search(_strip_comment(line)):
-                    return f"{f}:{n}"
-        return None
-
-
-def _strip_comment(line: str) -> str:
-    return line.split("//", 1)[0]
+        return first_line(((f, self.text[f]) for f in self.files), pattern)
 
 
 def collect_sources(paths, model: str | None = None, libraries=(), max_library_files: int | None = None,

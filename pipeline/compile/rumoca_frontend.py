@@ -10,7 +10,6 @@ construct the IR holds that we do not translate is refused with its name and fil
 from __future__ import annotations
 
 import itertools
-import logging
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,10 +17,9 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .dae import Dae
+from .dae import Dae, check_balance, resolve_parameters
+from .sources import first_line
 from ..errors import ModelicaError, UnsupportedConstruct
-
-log = logging.getLogger(__name__)
 
 def _int(a) -> int:
     return int(round(float(ca.evalf(a))))
@@ -61,14 +59,8 @@ class Located:
 
     def find(self, pattern: str) -> str | None:
         """``file:line`` of the first line of a user's file (not a library's) matching ``pattern``."""
-        rx = re.compile(pattern)
-        for path, text in self.files.values():
-            if path.startswith(VIRTUAL) or "/Modelica" in path:
-                continue
-            for n, line in enumerate(text.splitlines(), 1):
-                if rx.search(line.split("//")[0]):
-                    return f"{path}:{n}"
-        return None
+        return first_line(((path, text) for path, text in self.files.values()
+                           if not path.startswith(VIRTUAL) and "/Modelica" not in path), pattern)
 
     def span(self, span) -> str | None:
         if not span or span.get("source") not in self.files:
@@ -173,14 +165,14 @@ def library_roots(libraries=(), shadowed=()) -> list[str]:
     """One rumoca root: a directory of links to the libraries on the path, first entry winning,
     less those the sources define themselves (``shadowed``: the user's copy is the one used)."""
     import hashlib
-    import os
     import tempfile
 
+    from .cache import base_dir
     from .library import available, library_path
 
     libs = {n: p.resolve() for n, p in available(library_path(libraries)).items() if n not in shadowed}
     key = hashlib.sha256(repr(sorted((n, str(p)) for n, p in libs.items())).encode()).hexdigest()[:16]
-    base = Path(os.environ.get("MCL_CACHE_DIR") or Path.home() / ".cache" / "mcl") / "roots"
+    base = base_dir() / "roots"
     root = base / key
     if not root.is_dir():
         base.mkdir(parents=True, exist_ok=True)
@@ -196,24 +188,43 @@ def library_roots(libraries=(), shadowed=()) -> list[str]:
     return [str(root)]
 
 
-def load_ir(paths, model: str, libraries=()) -> tuple[dict, Located]:
+@dataclass
+class Prepared:
+    """What a compile reads: the user's documents (hash, class names), every user file, and the
+    rumoca root of the libraries; computed once for the cache key and the compile."""
+
+    docs: dict[Path, tuple[str, set]]
+    files: list[Path]
+    roots: list[str]
+
+    @property
+    def virtual(self) -> dict[str, str]:
+        """The names single files are registered under -> their real paths."""
+        return {virtual_name(p, h): str(p) for p, (h, _) in self.docs.items()}
+
+
+def prepare(paths, libraries=()) -> Prepared:
+    docs, files = documents(paths)
+    return Prepared(docs, files, library_roots(libraries, shadowed={n for _, names in docs.values() for n in names}))
+
+
+def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -> tuple[dict, Located]:
     """rumoca's DAE-stage IR of ``model`` and the text of the files it read."""
     import rumoca
 
-    docs, files = documents(paths)
-    roots = library_roots(libraries, shadowed={n for _, names in docs.values() for n in names})
+    prep = prepared or prepare(paths, libraries)
     top = model.split(".")[0]
-    if not any(top in names for _, names in docs.values()):
+    if not any(top in names for _, names in prep.docs.values()):
         from .library import available, library_path
 
         if top not in available(library_path(libraries)):
             raise ModelicaError(f"class '{model}' not found: no source and no library on the path "
                                 f"defines '{top}'", where=str(paths[0]) if paths else None)
+    real = prep.virtual
     try:
-        ir = _front(roots).compile(docs, model).to_dict("dae")
+        ir = _front(prep.roots).compile(prep.docs, model).to_dict("dae")
     except rumoca.RumocaError as exc:
-        raise _located_error(exc, model, files, {virtual_name(p, h): str(p) for p, (h, _) in docs.items()}) from None
-    real = {virtual_name(p, h): str(p) for p, (h, _) in docs.items()}
+        raise _located_error(exc, model, prep.files, real) from None
     located = Located({f[0]: (real.get(f[1], f[1]), f[2]) for f in ir.get("source_map", {}).get("files", [])})
     return ir, located
 
@@ -230,12 +241,7 @@ _KNOWN = [
 
 
 def _find(files: list[Path], pattern: str) -> str | None:
-    rx = re.compile(pattern)
-    for f in files:
-        for n, line in enumerate(f.read_text(errors="replace").splitlines(), 1):
-            if rx.search(line.split("//")[0]):
-                return f"{f}:{n}"
-    return None
+    return first_line(((f, f.read_text(errors="replace")) for f in files), pattern)
 
 
 def _located_error(exc, model: str, files: list[Path], real: dict | None = None) -> ModelicaError:
@@ -302,8 +308,8 @@ def _missing_class(model: str, files: list[Path]) -> ModelicaError | None:
 class _Translator:
     """The IR's expression DAG as CasADi SX, node by node (children come before parents)."""
 
-    def __init__(self, storage: dict, located: Located, model: str):
-        self.st, self.located, self.model = storage, located, model
+    def __init__(self, storage: dict, model: str):
+        self.st, self.model = storage, model
         expr = storage["expressions"]
         self.nodes, self.operand_list = expr["nodes"], expr["operands"]
         self.subscripts = expr.get("subscripts", [])
@@ -323,7 +329,7 @@ class _Translator:
         n = body.get("operand_count", 0)
         return self.operand_list[self.offsets[k]: self.offsets[k] + n]
 
-    def refuse(self, what: str, k: int | None = None):
+    def refuse(self, what: str):
         raise UnsupportedConstruct(f"unsupported in {self.model}: {what}")
 
     def sx(self, k: int, bound: dict | None = None) -> ca.SX:
@@ -400,7 +406,7 @@ class _Translator:
         i = self.sx(node, bound)
         if not i.is_constant():
             self.refuse("a subscript that is not a constant")
-        j = int(round(float(ca.evalf(i)))) - 1
+        j = _int(i) - 1
         if not 0 <= j < base.numel():
             self.refuse(f"subscript {j + 1} outside an array of {base.numel()}")
         return base[j]
@@ -446,10 +452,6 @@ class _Translator:
         return values[0][-1]
 
 
-def _scalar(value) -> float | None:
-    return None if value is None else float(value)
-
-
 def _scalar_names(name: str, dims: list[int]) -> list[str]:
     """``x`` -> [x]; ``x`` of dims [2, 3] -> [x[1,1], x[1,2], ..., x[2,3]] (row-major)."""
     if not dims:
@@ -465,7 +467,7 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
     _refuse_events(st, located, model)
     dims = [list(st["value_types"][v["value_type"]]["dimensions"] or []) for v in variables]
     size = [int(np.prod(d)) if d else 1 for d in dims]
-    tr = _Translator(st, located, model)
+    tr = _Translator(st, model)
     role = [v["role"] for v in variables]
     attrs = [v["attributes"] for v in variables]
     # parameters computed during initialisation (fixed = false, no binding) become constant states
@@ -528,10 +530,7 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
     eqs = [_residual(op, tr, model) for op in st["continuous_equation_operations"]]
     eqs += [der[i] for i in sorted(init_params)]       # d/dt of an initialisation parameter is 0
     residual = ca.vertcat(*[ca.vec(e) for e in eqs]) if eqs else ca.SX(0, 1)
-    n_unknown = x.numel() + z.numel()
-    if residual.numel() != n_unknown:
-        raise ModelicaError(f"model {model} is unbalanced: {residual.numel()} equations for {n_unknown} "
-                            f"unknowns ({x.numel()} states, {z.numel()} algebraic variables)")
+    check_balance(residual, x.numel(), z.numel(), model)
     init = [ca.vec(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
     # an algebraic variable with fixed = true starts at its start value (inertia.a(fixed=true))
     init += [ca.vec(slot[i]) - ca.vec(tr.sx(attrs[i]["start"])) for i in index["z"]
@@ -547,25 +546,9 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
     # parameters: an element whose binding depends on other parameters is a dependent one
     values = ca.vertcat(*[value_of(i) for i in index["p"]]) if index["p"] else ca.SX(0, 1)
     free = [j for j in range(values.numel()) if not ca.depends_on(values[j], p_all) and values[j].is_constant()]
-    p = ca.SX.sym("p", len(free))
     p_names = [names["p"][j] for j in free]
     p_values = np.array([float(ca.evalf(values[j])) for j in free])
-    resolved = ca.SX(p_all)
-    for k, j in enumerate(free):
-        resolved[j] = p[k]
-    dependent = [j for j in range(values.numel()) if j not in free]
-    for _ in range(len(dependent) + 1):
-        if not dependent:
-            break
-        nxt = ca.SX(resolved)
-        for j in dependent:
-            nxt[j] = ca.substitute(values[j], p_all, resolved)
-        resolved = nxt
-        if not ca.depends_on(resolved, p_all):
-            break
-    else:
-        if ca.depends_on(resolved, p_all):
-            raise ModelicaError(f"model {model}: parameter bindings are circular")
+    p, resolved = resolve_parameters(values, p_all, free, model)
 
     def bind(e):
         return ca.substitute(e, p_all, resolved)

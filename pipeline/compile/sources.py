@@ -40,3 +40,14 @@ def top_level_names(paths, text: dict) -> set[str]:
             names |= set(re.findall(r"^(?:\s*(?:partial|encapsulated|final)\s+)*\s*(?:model|package|block|"
                                     r"connector|record|class|function|type)\s+(\w+)", t, re.M))
     return names
+
+
+def first_line(texts, pattern: str) -> str | None:
+    """``file:line`` of the first line (comments aside) matching ``pattern`` in ``texts``, an
+    iterable of (path, text) pairs."""
+    rx = re.compile(pattern)
+    for path, text in texts:
+        for n, line in enumerate(text.splitlines(), 1):
+            if rx.search(line.split("//", 1)[0]):
+                return f"{path}:{n}"
+    return None

@@ -394,15 +394,9 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
 
 def software_versions() -> dict:
     """Versions of mcl and of what computes its numbers (recorded in report.json)."""
-    from importlib import metadata
+    from ..compile.library import distribution_versions
 
-    out = {}
-    for dist in ("mcl", "casadi", "fmpy", "numpy", "scipy", "pymoca", "rumoca"):
-        try:
-            out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            continue
-    return out
+    return distribution_versions("mcl", "casadi", "fmpy", "numpy", "scipy", "pymoca", "rumoca")
 
 
 def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nominal_probe):
