@@ -113,3 +113,13 @@ def test_fixed_start_values_and_parameter_bound_starts(tmp_path):
 def test_missing_source_path(tmp_path):
     with pytest.raises(ModelicaError, match="no such file"):
         compile_model([tmp_path / "nope.mo"], "P.M")
+
+
+def test_product_and_div_follow_modelica_for_negative_values(tmp_path):
+    """product() of a vector with a negative element (rumoca may expand it itself); div() reaches
+    our built-in table and truncates toward zero (div(-7, 2) = -3, not floor's -4)."""
+    f = write(tmp_path, "  model M\n    parameter Real a[3] = {-2, 3, 0.5};\n    output Real y1;\n"
+                        "    output Real y2;\n  equation\n    y1 = product(a);\n    y2 = div(-7, 2);\n  end M;\n")
+    model = compile_model([f], "P.M")
+    res = simulate(model, series(np.linspace(0, 1, 3)))
+    assert np.allclose(res.output("y1"), -3.0) and np.allclose(res.output("y2"), -3.0)

@@ -9,6 +9,7 @@ construct the IR holds that we do not translate is refused with its name and fil
 """
 from __future__ import annotations
 
+import functools
 import itertools
 import re
 from dataclasses import dataclass
@@ -44,8 +45,8 @@ _FUNCTIONS = {
     "scalar": lambda a: a[0], "vector": ca.vec,
     "promoted_cat1": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
     "promoted_cat2": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
-    "product": lambda a: ca.prod(a) if hasattr(ca, "prod") else ca.exp(ca.sum1(ca.log(a))), "noEvent": lambda a: a, "smooth": lambda _o, a: a,
-    "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.trunc(a / b) if hasattr(ca, "trunc") else ca.floor(a / b),
+    "product": lambda a: functools.reduce(ca.times, ca.vertsplit(ca.vec(a)), ca.SX(1)), "noEvent": lambda a: a, "smooth": lambda _o, a: a,
+    "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.sign(a / b) * ca.floor(ca.fabs(a / b)),   # truncation toward zero
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
 }
@@ -461,7 +462,17 @@ def _scalar_names(name: str, dims: list[int]) -> list[str]:
 
 def to_dae(ir: dict, located: Located, model: str) -> Dae:
     """The DAE-stage IR as a scalar :class:`Dae` (arrays split into scalars, balance checked,
-    parameters resolved to the free ones)."""
+    parameters resolved to the free ones). The IR is another program's schema: a shape we do
+    not know (a missing key, an index outside a table) is a one-line refusal, not a crash."""
+    try:
+        return _to_dae(ir, located, model)
+    except (KeyError, IndexError, TypeError) as exc:
+        raise UnsupportedConstruct(f"cannot translate rumoca's IR of {model} ({type(exc).__name__}: {exc}); "
+                                   "try --compiler pymoca, or report the model",
+                                   where=located.find(rf"\b(model|block|class)\s+{model.split('.')[-1]}\b")) from None
+
+
+def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     st = ir["storage"]
     variables = st["variables"]
     _refuse_events(st, located, model)
