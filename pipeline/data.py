@@ -14,7 +14,11 @@ from .errors import DataError
 
 @dataclass
 class TimeSeries:
-    """Samples of named signals on a strictly increasing time grid; ``values`` is (N, n)."""
+    """Samples of named signals on a strictly increasing time grid; ``values`` is (N, n).
+
+    NaN marks a value that was not measured (a blank cell: a signal logged at a lower rate, or
+    partial measurements as in paper 004); each output is compared where it is measured.
+    """
 
     time: np.ndarray
     values: np.ndarray
@@ -68,12 +72,32 @@ class TimeSeries:
         if step.size:
             raise DataError(f"time is not strictly increasing at data row {step[0] + 2} "
                             f"(t = {self.time[step[0] + 1]:g})", where=self.source)
-        bad = np.argwhere(~np.isfinite(self.values))
+        bad = np.argwhere(np.isinf(self.values))
         if bad.size:
             r, c = bad[0]
-            raise DataError(f"column '{self.names[c]}' has a missing or non-finite value at data row "
+            raise DataError(f"column '{self.names[c]}' has an infinite value at data row "
                             f"{r + 1} (t = {self.time[r]:g})", where=self.source)
+        empty = [n for n, col in zip(self.names, self.values.T) if not np.isfinite(col).any()]
+        if empty:
+            raise DataError(f"column '{empty[0]}' has no measured value", where=self.source)
         return self
+
+    def measured(self) -> np.ndarray:
+        """(N, n) mask of the values that were measured (not blank)."""
+        return np.isfinite(self.values)
+
+    def filled(self) -> "TimeSeries":
+        """Blank values interpolated linearly from the column's measured samples (inputs logged
+        at a lower rate); a column measured fewer than twice cannot be filled."""
+        vals = self.values.copy()
+        for k, name in enumerate(self.names):
+            ok = np.isfinite(vals[:, k])
+            if ok.all():
+                continue
+            if ok.sum() < 2:
+                raise DataError(f"input column '{name}' is measured at fewer than two times", where=self.source)
+            vals[:, k] = np.interp(self.time, self.time[ok], vals[ok, k])
+        return TimeSeries(self.time, vals, list(self.names), self.source)
 
 
 def as_timeseries(data, what: str = "data") -> TimeSeries:
@@ -140,10 +164,13 @@ def read_csv(path) -> TimeSeries:
             raise DataError(f"{len(row)} fields, the header has {len(header)}", where=f"{path}:{i}")
         for j, cell in enumerate(row):
             try:
-                data[i - 2, j] = float(cell) if cell.strip() else np.nan
+                data[i - 2, j] = float(cell) if cell.strip() else np.nan   # blank: not measured
             except ValueError:
                 raise DataError(f"column '{header[j]}': '{cell}' is not a number",
                                 where=f"{path}:{i}") from None
+            if not np.isfinite(data[i - 2, j]) and cell.strip():
+                raise DataError(f"column '{header[j]}': '{cell.strip()}' is not a measured value "
+                                "(leave the cell blank where nothing was measured)", where=f"{path}:{i}")
     return TimeSeries(data[:, 0], data[:, 1:], header[1:], str(path)).validate()
 
 

@@ -127,6 +127,7 @@ class FitProblem:
                             where=data.source)
         self.inputs = data.select(model.input_names) if model.input_names else data
         self.y_meas = data.select(self.outputs).values
+        self.measured = np.isfinite(self.y_meas)      # blank cells: not measured, not fitted
         self.time = data.time
         self.idx = [model.output_names.index(o) for o in self.outputs]
         self.fixed = dict(fixed or {})
@@ -186,7 +187,7 @@ class FitProblem:
         """Output residuals y_m - y (N, ny) and J of eq. (3) of a simulation; (None, None) if failed."""
         if not res.ok:
             return None, None
-        r = self.y_meas - res.outputs[:, self.idx]
+        r = np.where(self.measured, self.y_meas - res.outputs[:, self.idx], 0.0)
         return r, float(np.mean(np.sum(r**2, axis=1)))
 
     def residuals(self, w):
@@ -195,7 +196,7 @@ class FitProblem:
 
     def rms_error(self, w) -> float:
         r = self.residuals(w)
-        return float("nan") if r is None else float(np.sqrt(np.mean(r**2)))
+        return float("nan") if r is None else float(np.sqrt(np.sum(r**2) / max(self.measured.sum(), 1)))
 
 
 class PseudoFeasibility:
@@ -472,9 +473,13 @@ class LevenbergMarquardt:
     """
 
     def __init__(self, max_simulations: int = 150, axis: int | None = 0, damping: float = 1e-3,
-                 tol: float = 1e-10, feasibility=None):
+                 tol: float = 1e-10, feasibility=None, give_up=None):
         self.max_simulations, self.axis, self.damping, self.tol = max_simulations, axis, damping, tol
         self.feasibility = feasibility
+        #: give_up(rss): True stops the fit, given the least residual sum of squares the
+        #: Gauss-Newton model at the current point can reach (discovery: another candidate is
+        #: already far better)
+        self.give_up = give_up
 
     def fit(self, problem: FitProblem, w0) -> FitResult:
         t0 = time.perf_counter()
@@ -488,17 +493,30 @@ class LevenbergMarquardt:
         if current is None:
             raise ConfigError("no start point of the fit simulates (tried around the given one)")
         message = "budget reached"
+        trusted = False
         while problem.recorder.simulations - start < self.max_simulations:
             r, Jac, cost = current
             A = Jac[:, free]
             g = A.T @ r
             H = A.T @ A
+            # give up only where the linear model has proven itself (the last step did at least a
+            # quarter of what it predicted): from a poor start it can be far too pessimistic
+            if self.give_up is not None and trusted and self.give_up(float(r @ r - g @ np.linalg.pinv(H) @ g)):
+                message = "stopped: another candidate is already far better"
+                break
             step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-30), g)
+            # the Gauss-Newton model's predicted decrease: below tol, no step can pay for a
+            # simulation (at the optimum, the solver's own noise would only reject steps)
+            predicted = (r @ r - np.sum((r + A @ step) ** 2)) / max(r @ r, 1e-300)
+            if predicted < self.tol:
+                message = "converged"
+                break
             trial = w.copy()
             trial[free] += step
             new = self._step_data(problem, trial)
             if new is not None and new[2] < cost:
                 rel = (cost - new[2]) / max(cost, 1e-300)
+                trusted = rel >= 0.25 * predicted
                 w, current, lam = trial, new, max(lam / 3, 1e-12)
                 if rel < self.tol or np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(w)):
                     message = "converged"

@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import ConfigError, DataError, MclError
-from .compile.structure import Ode
+from .compile.structure import Ode, expanded
 
 _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks")
 
@@ -49,6 +49,28 @@ class CompiledModel:
                                f"(free parameters: {', '.join(self.ode.p_names)})")
             p[self.ode.p_names.index(k)] = float(v)
         return p
+
+    def with_outputs(self, names) -> "CompiledModel":
+        """The same model with the named variables (any of ``ode.probe_names``: ``M.v``,
+        ``C2.T``) appended to its outputs, so data may measure any variable, declared output
+        or not. Names already outputs, or not variables of the model, are left out."""
+        extra = [n for n in dict.fromkeys(names) if n not in self.ode.y_names and n not in self.ode.u_names
+                 and n in self.ode.probe_names]
+        if not extra:
+            return self
+        import dataclasses
+
+        o = self.ode
+        idx = [o.probe_names.index(n) for n in extra]
+        args = o.out.mx_in()
+        y = ca.vertcat(o.out(*args), o.probe(*args)[idx])
+        y_c, res, drift = o.checks(*args)
+        io = (["x", "u", "p", "t"],)
+        out = expanded(ca.Function("out", args, [y], *io, ["out"]))
+        checks = expanded(ca.Function("checks", args, [ca.vertcat(y_c, o.probe(*args)[idx]), res, drift],
+                                       *io, ["y", "res", "drift"]))
+        ode = dataclasses.replace(o, y_names=[*o.y_names, *extra], out=out, checks=checks)
+        return CompiledModel(self.name, ode, self.info)
 
     def save(self, directory) -> Path:
         """Write the functions (CasADi serialisation) and names to ``directory``."""

@@ -88,8 +88,11 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
             vn, fn = np.array(cause["law"]["nominal"]).T
             ax.plot(vn, fn, ".", color="tab:red", ms=3, label="nominal model (along the training run)")
         ax.plot(xs, fs, color="tab:green", lw=2, label="learned law")
-        ax.set_xlabel(f"across: {cause['law']['across']}")
-        ax.set_ylabel(f"flow: {cause['law']['flow']}")
+        law = cause["law"]
+        x_name = {"across": law["across"], "der(across)": f"der({law['across']})", "flow": law["flow"]}
+        y_name = law["across"] if law.get("variable") == "flow" else law["flow"]
+        ax.set_xlabel(x_name.get(law.get("variable", "across"), law["across"]))
+        ax.set_ylabel(y_name)
         ax.set_title(cause["law"]["equation"], fontsize=9)
         ax.grid(alpha=0.3)
         ax.legend()
@@ -124,7 +127,8 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         ("misfit significant", m["significant"]), ("training RMS (nominal)", f"{m['train_rms']:.4g}"),
         ("noise estimate", f"{m['noise_estimate']:.4g}"),
         ("cause", cause["effect"] if cause else "none found"),
-        ("evidence", f"{cause['evidence']['strength']} (ΔBIC {cause['evidence']['delta_bic_to_next']:.3g})"
+        ("evidence", f"{cause['evidence']['strength']} (Δ{cause['evidence'].get('criterion', 'bic').upper()} "
+                      f"{cause['evidence']['delta_to_next']:.3g})"
          if cause else "-"),
         ("training RMS after", g["train_rms_after"]), ("validation RMS before", g["validation_rms_before"]),
         ("validation RMS after", g["validation_rms_after"]),

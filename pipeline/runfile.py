@@ -32,7 +32,8 @@ import yaml
 from .errors import ConfigError, MclError
 from .registry import did_you_mean
 
-DEFAULT_TEMPLATES = [{"name": "polynomial", "lhs": ["i"], "rhs": ["v", "v^2", "v^3"]}]
+#: no ``templates`` in a run file: discovery picks law families by each component's role
+DEFAULT_TEMPLATES = None
 CRITERIA = ("bic", "aic")
 METHODS = ("simulation", "full-discretisation")
 
@@ -92,7 +93,7 @@ class RunSpec:
     validate: Path | None
     unknown: str
     output: Path
-    templates: list = field(default_factory=lambda: list(DEFAULT_TEMPLATES))
+    templates: list | None = None      # None: law families chosen per component (discovery.families)
     max_simulations: int = 60
     screen: int = 3
     criterion: str = "bic"
@@ -311,7 +312,7 @@ def _check_files(raw: dict, base: Path, problems: _Problems, reg):
                 problems.add("second.data", f"'{second['data']}' does not exist")
             elif not second["data"].lower().endswith(".csv"):
                 problems.add("second.data", f"'{second['data']}' is not a CSV file")
-    templates = raw.get("templates", DEFAULT_TEMPLATES)
+    templates = raw.get("templates") or []
     for k, tpl in enumerate(templates if isinstance(templates, list) else []):
         name = tpl if isinstance(tpl, str) else tpl.get("name") if isinstance(tpl, dict) else None
         if name in reg.templates and not problems.about(f"templates.{k}"):
@@ -367,16 +368,19 @@ def check_data(spec: RunSpec, lines: dict) -> None:
 
 
 def model_column_problems(model, ts, model_name: str, label: str) -> list[str]:
-    """What keeps the time series ``ts`` (called ``label``) from being data for ``model``."""
+    """What keeps the time series ``ts`` (called ``label``) from being data for ``model``: a
+    column must be an input or a variable of the model (declared output or not)."""
     out = []
     missing = [u for u in model.input_names if u not in ts.names]
     if missing:
         out.append(f"{label} lacks the model input column(s) {', '.join(missing)}")
-    extra = [c for c in ts.names if c not in model.input_names and c not in model.output_names]
+    known = set(model.input_names) | set(model.output_names) | set(getattr(getattr(model, "ode", None), "probe_names", ()))
+    extra = [c for c in ts.names if c not in known]
     if extra:
-        out.append(f"column(s) {', '.join(extra)} of {label} are not inputs or outputs of {model_name} "
-                   f"(inputs: {', '.join(model.input_names) or 'none'}; outputs: "
+        hint = did_you_mean(extra[0], sorted(known - set(model.input_names)))
+        out.append(f"column(s) {', '.join(extra)} of {label} are not inputs or variables of {model_name}"
+                   f"{hint} (inputs: {', '.join(model.input_names) or 'none'}; outputs: "
                    f"{', '.join(model.output_names)})")
-    if not [o for o in model.output_names if o in ts.names]:
-        out.append(f"{label} has none of the model outputs ({', '.join(model.output_names)})")
+    if not [c for c in ts.names if c in known and c not in model.input_names]:
+        out.append(f"{label} measures none of the model's variables (outputs: {', '.join(model.output_names)})")
     return out

@@ -90,7 +90,7 @@ def prepare_inputs(model, inputs: TimeSeries) -> TimeSeries:
     """The model's inputs, in its order, from a series that may hold more columns."""
     if not model.input_names:
         return TimeSeries(inputs.time, np.zeros((len(inputs.time), 0)), [], inputs.source)
-    return inputs.select(model.input_names).validate()
+    return inputs.select(model.input_names).validate().filled()
 
 
 class Stopwatch:

@@ -166,7 +166,9 @@ class BackwardElimination:
     def _penalty(self, problem) -> float:
         if self.criterion not in ("aic", "bic"):
             return 0.0
-        return 2.0 if self.criterion == "aic" else float(np.log(max(int(problem.M.sum()), 1)))
+        from .stats import criterion
+
+        return criterion(self.criterion).penalty(int(problem.M.sum()))
 
     def _accept(self, new: float, old: float) -> bool:
         if self.criterion == "threshold":

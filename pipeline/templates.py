@@ -13,6 +13,7 @@ Third parties add templates through the ``mcl_templates`` hook.
 """
 from __future__ import annotations
 
+import ast
 import re
 from dataclasses import dataclass
 
@@ -40,8 +41,7 @@ class Monomial:
         for factor in text.split("*"):
             m = re.fullmatch(r"(der\((v|i)\)|dv|di|v|i)(?:\^(\d+))?", factor)
             if not m:
-                raise ConfigError(f"template term '{text}': '{factor}' is not v, i, dv, di or a power "
-                                  "of them (e.g. v^3, v*i, dv)")
+                return Expression.parse(text)
             name = {"der(v)": "dv", "der(i)": "di"}.get(m.group(1), m.group(1))
             powers[name] = powers.get(name, 0) + int(m.group(3) or 1)
         return cls(tuple(sorted(powers.items(), key=lambda kv: VARIABLES.index(kv[0]))))
@@ -67,8 +67,97 @@ class Monomial:
         return sum(p for _, p in self.powers)
 
 
+_FUNCTIONS = {"tanh": np.tanh, "sinh": np.sinh, "cosh": np.cosh, "exp": np.exp, "abs": np.abs,
+              "sqrt": np.sqrt, "atan": np.arctan, "log": np.log}
+_BINOPS = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide, ast.Pow: np.power}
+
+
+@dataclass(frozen=True)
+class Expression:
+    """A term that is not a monomial: an arithmetic expression of v, i, dv, di, numbers and
+    tanh, sinh, cosh, exp, abs, sqrt, atan, log (e.g. ``tanh(v/0.3)``, ``v*abs(v)``,
+    ``v/sqrt(1 + (v/0.5)^2)``); the same text is valid Modelica."""
+
+    text: str
+    powers: tuple = ()       # not a monomial: degree 0 for refinement's stage order
+
+    @classmethod
+    def parse(cls, text: str) -> "Expression":
+        text = text.replace(" ", "").replace("**", "^").replace("der(v)", "dv").replace("der(i)", "di")
+        try:
+            tree = ast.parse(text.replace("^", "**"), mode="eval")
+        except SyntaxError:
+            tree = None
+        bad = cls._check(tree.body) if tree else "not an expression"
+        if bad:
+            raise ConfigError(f"template term '{text}': {bad} (use v, i, dv, di, numbers, + - * / ^ and "
+                              f"{', '.join(_FUNCTIONS)}, e.g. v^3, v*i, tanh(v/0.3))")
+        return cls(text)
+
+    @classmethod
+    def _check(cls, node) -> str | None:
+        if isinstance(node, ast.Name):
+            return None if node.id in VARIABLES else f"'{node.id}' is not v, i, dv or di"
+        if isinstance(node, ast.Constant):
+            return None if isinstance(node.value, (int, float)) and not isinstance(node.value, bool) else "not a number"
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            return cls._check(node.operand)
+        if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
+            return cls._check(node.left) or cls._check(node.right)
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCTIONS \
+                and len(node.args) == 1 and not node.keywords:
+            return cls._check(node.args[0])
+        return f"'{ast.unparse(node)}' is not allowed"
+
+    def __str__(self) -> str:
+        return self.text
+
+    def modelica(self) -> str:
+        """The text, in parentheses where a coefficient in front would bind wrongly (a sum)."""
+        body = ast.parse(self.text.replace("^", "**"), mode="eval").body
+        loose = isinstance(body, ast.UnaryOp) or (isinstance(body, ast.BinOp) and isinstance(body.op, (ast.Add, ast.Sub)))
+        return f"({self.text})" if loose else self.text
+
+    def value(self, env: dict) -> np.ndarray:
+        def ev(node):
+            if isinstance(node, ast.Name):
+                return np.asarray(env[node.id], dtype=float)
+            if isinstance(node, ast.Constant):
+                return float(node.value)
+            if isinstance(node, ast.UnaryOp):
+                return -ev(node.operand) if isinstance(node.op, ast.USub) else ev(node.operand)
+            if isinstance(node, ast.BinOp):
+                return _BINOPS[type(node.op)](ev(node.left), ev(node.right))
+            return _FUNCTIONS[node.func.id](ev(node.args[0]))
+
+        with np.errstate(all="ignore"):
+            return ev(ast.parse(self.text.replace("^", "**"), mode="eval").body)
+
+    @property
+    def variables(self) -> set[str]:
+        tree = ast.parse(self.text.replace("^", "**"), mode="eval")
+        return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id in VARIABLES}
+
+    @property
+    def degree(self) -> int:
+        return 0
+
+
 class Template:
-    """Base of templates. Constructors store options; learned values live outside (in w)."""
+    """Base of templates: the contract discovery relies on. Constructors store options; learned
+    values live outside (in w).
+
+    A template must give
+    - :meth:`parameter_names` and :meth:`start`; parameter 0 is the **scale** of the law (the
+      weight of its left-hand side: G(w) = 0 and G(k w) = 0 are the same law), kept at its start;
+    - :meth:`law`: the law as a Modelica equation in v, i, dv, di and the parameters;
+    - :meth:`residual` (G on arrays) and, for laws linear in w, ``features`` with G = features @ w;
+    - :meth:`start_from`: w fitted to a law observed along a simulation (the nominal component's),
+      so a candidate's first simulation reproduces the nominal model;
+    - :meth:`equation`: the fitted law, readable, with the component's own variable names;
+    - ``terms`` (optional): the readable terms, one per parameter, for pruning and reports;
+    - :attr:`uses`: which of v, i, dv, di the law needs (dv, di make the class declare them).
+    """
 
     name = ""
     description = ""
@@ -88,6 +177,16 @@ class Template:
     def residual(self, w, env: dict) -> np.ndarray:
         """G(xi; w) evaluated on arrays of v, i (and dv, di): zero where the law holds."""
         raise NotImplementedError
+
+    def start_from(self, env: dict) -> np.ndarray:
+        """w with the scale at 1, fitted to the law observed in ``env`` (arrays v, i, dv, di)."""
+        phi = self.features(env)
+        w_rest, *_ = np.linalg.lstsq(phi[:, 1:], -phi[:, 0], rcond=None)
+        return np.concatenate([[1.0], w_rest])
+
+    def features(self, env: dict) -> np.ndarray:
+        raise NotImplementedError(f"template {self.name} is not linear in its parameters: "
+                                  "it must define start_from")
 
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
         raise NotImplementedError
@@ -118,20 +217,44 @@ class Template:
                 f"  0 = {a.name}.{fa} + {b.name}.{fb};\n  i = {a.name}.{fa};\n{mem_eq}"
                 f"  {self.law()};\nend {class_name};\n")
 
+    @property
+    def law_variable(self) -> str:
+        """The variable the law is a function of, for its curve: ``v`` (static), ``dv`` (a law
+        in the rate, e.g. a damper in the speed) or ``i`` (a law giving v from the flow)."""
+        return "v"
+
+    def curve(self, w, xs: np.ndarray) -> np.ndarray:
+        """The law at ``xs`` of :attr:`law_variable` (the other derivatives 0): the flow, or for
+        a law in i the across value."""
+        xs = np.atleast_1d(np.asarray(xs, dtype=float))
+        if self.law_variable == "dv":
+            return self.flow_of(w, np.zeros_like(xs), dv=xs)
+        if self.law_variable == "i":
+            return _solve(lambda k, v: self.residual(w, {"v": v, "i": xs[k], "dv": 0.0, "di": 0.0}), xs)
+        return self.flow_of(w, xs)
+
     def flow_of(self, w, v: np.ndarray, dv: np.ndarray | None = None) -> np.ndarray:
         """Solve the law for the flow at each across value (memoryless in i), for plots and curves."""
         v = np.atleast_1d(np.asarray(v, dtype=float))
-        out = np.full(v.shape, np.nan)
-        for k, vk in enumerate(v):
-            env = {"v": vk, "dv": 0.0 if dv is None else dv[k], "di": 0.0}
-            g = lambda i: float(np.ravel(self.residual(w, {**env, "i": i}))[0])
-            scale = 1.0 + abs(vk)
-            for span in (1e-3, 1e-1, 1e1, 1e3, 1e5):
-                lo, hi = -span * scale, span * scale
-                if np.sign(g(lo)) != np.sign(g(hi)):
-                    out[k] = brentq(g, lo, hi, xtol=1e-14, rtol=1e-12)
+        return _solve(lambda k, i: self.residual(w, {"v": v[k], "i": i, "dv": 0.0 if dv is None else dv[k],
+                                                     "di": 0.0}), v)
+
+
+def _solve(g, xs: np.ndarray) -> np.ndarray:
+    """For each k, a root y of g(k, y) (bracketed on growing spans; NaN where none is found)."""
+    out = np.full(xs.shape, np.nan)
+    for k, xk in enumerate(xs):
+        f = lambda y: float(np.ravel(g(k, y))[0])
+        scale = 1.0 + abs(xk)
+        for span in (1e-3, 1e-1, 1e1, 1e3, 1e5):
+            lo, hi = -span * scale, span * scale
+            try:
+                if np.sign(f(lo)) != np.sign(f(hi)):
+                    out[k] = brentq(f, lo, hi, xtol=1e-14, rtol=1e-12)
                     break
-        return out
+            except (ValueError, FloatingPointError):
+                break
+    return out
 
 
 class PolynomialTemplate(Template):
@@ -146,7 +269,8 @@ class PolynomialTemplate(Template):
     description = "polynomial constitutive law"
     symmetric_axis = 0
 
-    def __init__(self, lhs=None, rhs=None, degree: int = 3, start=None, prefix: str = "w"):
+    def __init__(self, lhs=None, rhs=None, degree: int = 3, start=None, prefix: str = "w", family: str = ""):
+        self.family = family     # which law family discovery chose it as (static, rate, storage, shape)
         self.lhs = [Monomial.parse(t) for t in (lhs or ["i"])]
         self.rhs = [Monomial.parse(t) for t in (rhs or [f"v^{k}" if k > 1 else "v"
                                                         for k in range(1, degree + 1)])]
@@ -167,11 +291,18 @@ class PolynomialTemplate(Template):
     def parameter_names(self) -> list[str]:
         return [f"{self.prefix}{k + 1}" for k in range(len(self.terms))]
 
+    @property
+    def law_variable(self) -> str:
+        if [str(m) for m in self.lhs] == ["v"]:
+            return "i"
+        rhs = set().union(*(m.variables for m in self.rhs)) if self.rhs else set()
+        return "dv" if "dv" in rhs and "v" not in rhs else "v"
+
     def start(self) -> np.ndarray:
         return self._start.copy()
 
     def _side(self, names, terms) -> str:
-        return " + ".join(f"{n}*{m.modelica()}" if m.powers else n for n, m in zip(names, terms)) or "0"
+        return " + ".join(f"{n}*{m.modelica()}" if str(m) != "1" else n for n, m in zip(names, terms)) or "0"
 
     def law(self) -> str:
         names = self.parameter_names()
@@ -194,8 +325,11 @@ class PolynomialTemplate(Template):
             for c, m in zip(ws, terms):
                 if c == 0:  # a term removed by pruning
                     continue
-                mono = "*".join(rename[n] if p == 1 else f"{rename[n]}^{p}" for n, p in m.powers)
-                parts.append(f"{c:.{digits}g}" + (f"*{mono}" if mono else ""))
+                mono = (re.sub(r"\b(dv|di|v|i)\b", lambda g: rename[g.group(1)], m.modelica())
+                        if isinstance(m, Expression) else
+                        "*".join(rename[n] if p == 1 else f"{rename[n]}^{p}" for n, p in m.powers))
+                coef = f"{c:.{digits}g}"
+                parts.append(mono if coef == "1" and mono else coef + (f"*{mono}" if mono else ""))
             return " + ".join(parts).replace("+ -", "- ") or "0"
 
         w = np.asarray(w, dtype=float)
@@ -209,58 +343,96 @@ class MemoryTemplate(PolynomialTemplate):
     name = "memory"
     description = "constitutive law with memory (time derivatives)"
 
-    def __init__(self, lhs=None, rhs=None, degree: int = 1, start=None, prefix: str = "w"):
+    def __init__(self, lhs=None, rhs=None, degree: int = 1, start=None, prefix: str = "w", family: str = ""):
         rhs = rhs or ["v", "dv"] + [f"v^{k}" for k in range(2, degree + 1)]
-        super().__init__(lhs=lhs, rhs=rhs, start=start, prefix=prefix)
+        super().__init__(lhs=lhs, rhs=rhs, start=start, prefix=prefix, family=family)
 
 
 class NeuralTemplate(Template):
-    """G(v, i; w) = c*i - sum_j a_j tanh(b_j v + d_j i + e_j): a tanh network read as an equation.
+    """G(x, i; w) = c*i - sum_j a_j tanh(b_j x + d_j i + e_j): a tanh network read as an equation.
 
-    ``hidden`` units; parameters c, then (a_j, b_j, d_j, e_j) per unit. Start values break the
-    symmetry between units deterministically (seeded).
+    ``x`` is the across variable ``v`` (default) or its derivative ``dv`` (a damper's law is in
+    the speed). ``coupled`` (default) lets the flow enter the units (d_j i): the law is an
+    equation solved for i; ``coupled: false`` drops d_j and adds a linear term g*x, so the law is
+    explicit in i (cheaper to simulate; discovery uses it to find a law's shape before
+    distilling it). ``hidden`` units; start values break the symmetry between units
+    deterministically (seeded).
     """
 
     name = "neural"
     description = "neural-network constitutive law"
 
-    def __init__(self, hidden: int = 3, start=None, seed: int = 0):
-        self.hidden = int(hidden)
+    def __init__(self, hidden: int = 3, start=None, seed: int = 0, x: str = "v", coupled: bool = True):
+        if x not in ("v", "dv"):
+            raise ConfigError(f"neural template: x must be v or dv, not {x!r}")
+        self.hidden, self.x, self.coupled = int(hidden), x, bool(coupled)
+        self.per_unit = 4 if self.coupled else 3
         rng = np.random.default_rng(seed)
-        n = 1 + 4 * self.hidden
-        default = np.concatenate([[1.0], rng.normal(0, 0.5, 4 * self.hidden)])
+        n = len(self.parameter_names())
+        default = np.concatenate([[1.0], rng.normal(0, 0.5, n - 1)])
         self._start = default if start is None else np.asarray(start, dtype=float)
         if self._start.shape != (n,):
             raise ConfigError(f"neural template start has {self._start.size} values for {n} parameters")
 
+    @property
+    def uses(self) -> set[str]:
+        return {"v", "i", self.x}
+
+    @property
+    def law_variable(self) -> str:
+        return self.x
+
+    def _units(self) -> list[list[str]]:
+        keys = "abde" if self.coupled else "abe"
+        return [[f"{k}{j}" for k in keys] for j in range(1, self.hidden + 1)]
+
     def parameter_names(self) -> list[str]:
-        names = ["c"]
-        for j in range(1, self.hidden + 1):
-            names += [f"a{j}", f"b{j}", f"d{j}", f"e{j}"]
-        return names
+        return ["c"] + ([] if self.coupled else ["g"]) + [n for unit in self._units() for n in unit]
 
     def start(self) -> np.ndarray:
         return self._start.copy()
 
+    def _split(self, w):
+        w = np.asarray(w, dtype=float)
+        k = 1 if self.coupled else 2
+        units = w[k:].reshape(self.hidden, self.per_unit)
+        return w[0], (0.0 if self.coupled else w[1]), units
+
     def law(self) -> str:
-        units = " + ".join(f"a{j}*tanh(b{j}*v + d{j}*i + e{j})" for j in range(1, self.hidden + 1))
-        return f"c*i = {units}"
+        x = self.x
+        if self.coupled:
+            units = " + ".join(f"a{j}*tanh(b{j}*{x} + d{j}*i + e{j})" for j in range(1, self.hidden + 1))
+            return f"c*i = {units}"
+        units = " + ".join(f"a{j}*tanh(b{j}*{x} + e{j})" for j in range(1, self.hidden + 1))
+        return f"c*i = g*{x} + {units}"
 
     def residual(self, w, env: dict) -> np.ndarray:
-        w = np.asarray(w, dtype=float)
-        v, i = np.asarray(env["v"], dtype=float), np.asarray(env["i"], dtype=float)
-        out = w[0] * i
-        for j in range(self.hidden):
-            a, b, d, e = w[1 + 4 * j: 5 + 4 * j]
-            out = out - a * np.tanh(b * v + d * i + e)
+        c, g, units = self._split(w)
+        x, i = np.asarray(env[self.x], dtype=float), np.asarray(env["i"], dtype=float)
+        out = c * i - g * x
+        for u in units:
+            a, b, e = u[0], u[1], u[-1]
+            out = out - a * np.tanh(b * x + (u[2] * i if self.coupled else 0.0) + e)
         return out
 
+    def start_from(self, env: dict) -> np.ndarray:
+        """The network fitted (least squares, c = 1) to the law observed in ``env``."""
+        from scipy.optimize import least_squares
+
+        w0 = self.start()
+        scale = float(np.std(env["i"])) or 1.0
+        fun = lambda r: self.residual(np.concatenate([[1.0], r]), env) / scale
+        return np.concatenate([[1.0], least_squares(fun, w0[1:], max_nfev=200 * len(w0)).x])
+
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
-        w = np.asarray(w, dtype=float)
-        units = " + ".join(f"{w[1 + 4 * j]:.{digits}g}*tanh({w[2 + 4 * j]:.{digits}g}*{across} + "
-                           f"{w[3 + 4 * j]:.{digits}g}*{flow} + {w[4 + 4 * j]:.{digits}g})"
-                           for j in range(self.hidden))
-        return f"{w[0]:.{digits}g}*{flow} = {units}".replace("+ -", "- ")
+        c, g, units = self._split(w)
+        x = across if self.x == "v" else f"der({across})"
+        fmt = lambda z: f"{z:.{digits}g}"
+        parts = [f"{fmt(u[0])}*tanh({fmt(u[1])}*{x}" + (f" + {fmt(u[2])}*{flow}" if self.coupled else "")
+                 + f" + {fmt(u[-1])})" for u in units]
+        if not self.coupled:
+            parts.insert(0, f"{fmt(g)}*{x}")
+        return f"{fmt(c)}*{flow} = {' + '.join(parts)}".replace("+ -", "- ")
 
 
 def make_template(registry_templates: dict[str, type], spec) -> Template:

@@ -58,15 +58,18 @@ def test_electrical_discovery_names_the_component_and_learns_the_law(tmp_path, c
     report = json.loads((tmp_path / "out/rc/report.json").read_text())
     assert report["misfit"]["significant"]
     cause = report["cause"]
-    assert cause["component"] == "Rx" and cause["evidence"]["strength"] == "decisive"
-    assert "v^3" in cause["effect"]
+    # Rx is in parallel with C: a capacitor leaking through a cubic conductance fits as well,
+    # with a law chosen from a larger family; the evidence says it is not decisive
+    assert cause["component"] == "Rx" and cause["evidence"]["strength"] in ("decisive", "strong", "positive")
+    assert "Rx.v^3" in cause["effect"] and cause["law"]["equation"].startswith("Rx.i = ")
     xs, fs = np.array(cause["law"]["curve"]).T
     truth = 0.5 * xs + 0.3 * xs**3
     assert np.max(np.abs(fs - truth)) <= 0.05 * np.max(np.abs(truth))
     g = report["gain"]
     assert g["validation_rms_after"] <= 0.2 * g["validation_rms_before"]
     assert (tmp_path / "out/rc" / cause["fmu"]).exists() and (tmp_path / "out/rc/report.html").exists()
-    assert {c["component"] for c in report["candidates"]} == {"R1", "C", "Rx"}
+    assert {s["component"] for s in report["screening"]} == {"R1", "C", "Rx"}   # all were tried
+    assert {c["component"] for c in report["candidates"]} <= {"R1", "C", "Rx"}
     assert not (tmp_path / "out/rc.partial").exists()
     assert "cause: Rx" in capsys.readouterr().out
 
@@ -104,12 +107,12 @@ def test_run_file_problems_are_reported_together_with_lines(tmp_path):
 def test_data_problems_name_file_and_key(tmp_path):
     run = setup_run(tmp_path, cubic=0.3)
     (tmp_path / "train.csv").write_text("time,x,y\n0,1,2\n1,2,3\n")
-    (tmp_path / "validate.csv").write_text("time,u,y\n0,1,2\n0,2,nan\n")
+    (tmp_path / "validate.csv").write_text("time,u,y\n0,1,2\n0,2,\n")
     with pytest.raises(ConfigError) as err:
         load_runfile(run)
     text = str(err.value)
     assert "data.train: train.csv lacks the model input column(s) u" in text
-    assert "column(s) x of train.csv are not inputs or outputs of Circuit.RC" in text
+    assert "column(s) x of train.csv are not inputs or variables of Circuit.RC" in text
     assert "data.validate:" in text and "not strictly increasing" in text
 
 
@@ -168,7 +171,10 @@ def test_named_unknown_component(tmp_path):
     assert main(["run", str(run)]) == 0
     report = json.loads((tmp_path / "out/rc/report.json").read_text())
     assert [c["component"] for c in report["candidates"]] == ["C"]    # only the named one
-    assert report["cause"] is None     # a memoryless law for C explains less than the nominal model
+    # told that C is wrong, discovery finds the law that puts the parallel cubic leak into C
+    # (storage family: i = C dv + g(v)), equivalent to the hidden cubic resistor in parallel
+    eq = report["cause"]["law"]["equation"]
+    assert "der(C.v)" in eq and "C.v^3" in eq
     run.write_text(run.read_text().replace("unknown: C", "unknown: Nope"))
     with pytest.raises(ConfigError, match="unknown: no component 'Nope'"):
         load_runfile(run)

@@ -194,7 +194,7 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     dXI = ca.mtimes(ca.Function("dxi", [xs, zs, up, t], [ca.jacobian(x_impl, xs)])(X, Z, UP, T), xdot)
     init = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI)
     # SX evaluates faster than the MX call graph, where there is no Newton or QR solve in it
-    ode, out, alg_res, drift, probe, init, checks = map(_expanded, (ode, out, alg_res, drift, probe, init, checks))
+    ode, out, alg_res, drift, probe, init, checks = map(expanded, (ode, out, alg_res, drift, probe, init, checks))
     return Ode(
         x_names=x_names, u_names=list(dae.u_names), p_names=list(dae.p_names),
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
@@ -211,7 +211,7 @@ def composed_checks(out: ca.Function, alg_res: ca.Function, drift: ca.Function) 
                        ["x", "u", "p", "t"], ["y", "res", "drift"])
 
 
-def _expanded(f: ca.Function) -> ca.Function:
+def expanded(f: ca.Function) -> ca.Function:
     try:
         return f.expand()
     except RuntimeError:  # holds a rootfinder or a run-time linear solver

@@ -15,7 +15,7 @@ from pathlib import Path
 from ..data import as_timeseries
 from ..errors import ConfigError
 from ..progress import console
-from ..runfile import DEFAULT_TEMPLATES, RunSpec
+from ..runfile import RunSpec
 
 __all__ = ["Discovery"]
 
@@ -69,7 +69,7 @@ class Discovery:
         output = Path(self.output) if self.output else Path(tempfile.mkdtemp(prefix="mcl-run-")) / "run"
         return RunSpec(path=None, sources=as_paths(self.sources), model_name=self.model, train=None,
                        validate=None, unknown=self.unknown, output=output,
-                       templates=list(self.templates or DEFAULT_TEMPLATES),
+                       templates=list(self.templates) if self.templates else None,
                        max_simulations=self.max_simulations, screen=self.screen, criterion=self.criterion,
                        refinement_method=self.refinement, executor=executor, second=self.second,
                        report=dict(self.report_options or {}), libraries=as_paths(self.libraries))
@@ -101,7 +101,7 @@ class Discovery:
         if spec.refinement_method not in METHODS:
             raise ConfigError(f"refinement '{spec.refinement_method}': choose one of {', '.join(METHODS)}")
         reg.executor_class(spec.executor)
-        for t in spec.templates:
+        for t in spec.templates or []:
             reg.template(t)
 
     def _set_results(self, report: dict, run_dir: Path) -> None:

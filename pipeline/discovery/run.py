@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,16 +29,33 @@ from ..data import TimeSeries, read_csv
 from ..progress import log
 from ..errors import ConfigError, MclError, ModelicaError
 from ..executor import TaskFailed
-from ..stats import aic, bic, noise_estimate, rms
+from ..stats import criterion as criterion_of, noise_estimate, rms, rss as rss_of
 from ..swap import class_name_for
+from .families import distil, families, role_of
+from .words import in_words, words
 
 LEARNED_PACKAGE = "Learned"
+#: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
+#: and measured inputs (linear between samples) make CVODES stop at every kink; 10x looser
+#: tolerances take 3x fewer steps. Scores are computed again at the default tolerances.
+FIT_OPTIONS = {"rtol": 1e-5, "atol": 1e-7}
+#: a fit stops when a step lowers the cost (or is predicted to) by less than this fraction: a
+#: change in RSS of 1e-5 moves a criterion by n 1e-5, far below the differences that rank candidates
+FIT_TOL = 1e-5
+
+
+def residual(data: TimeSeries, model, result, outputs=None) -> np.ndarray:
+    """Measured minus simulated outputs (N, n_outputs), NaN where a value was not measured;
+    ``outputs`` default to every model output the data measures."""
+    outputs = [o for o in model.output_names if o in data.names] if outputs is None else outputs
+    return data.select(outputs).values - result.outputs[:, [model.output_names.index(o) for o in outputs]]
 
 
 def probe(model, result, inputs: TimeSeries, params: dict, names: list[str]) -> np.ndarray:
     """Values of named model variables along a simulation, (N, len(names))."""
     ode = model.ode
     N = len(result.time)
+    inputs = inputs.select(ode.u_names).filled() if ode.u_names else inputs
     u = np.array([np.interp(result.time, inputs.time, inputs.column(n)) for n in ode.u_names]).reshape(-1, N)
     p = model.parameter_vector(params)
     vals = np.array(ode.probe.map(N)(result.states.T, u, np.repeat(p[:, None], N, 1), result.time[None]))
@@ -51,27 +69,28 @@ def component_variables(comp) -> tuple[str, str]:
             f"{comp.name}.{a.name}.{a.flow[0]}")
 
 
-def nominal_start(template, v, i, t) -> np.ndarray:
-    """w0: the template's least-squares fit to the nominal component's law (lhs weight 1)."""
-    env = {"v": v, "i": i, "dv": np.gradient(v, t), "di": np.gradient(i, t)}
-    phi = template.features(env)
-    w_rest, *_ = np.linalg.lstsq(phi[:, 1:], -phi[:, 0], rcond=None)
-    return np.concatenate([[1.0], w_rest])
+def law_env(v: np.ndarray, i: np.ndarray, t: np.ndarray) -> dict:
+    """A component's law variables along a simulation: v, i and their time derivatives."""
+    return {"v": v, "i": i, "dv": np.gradient(v, t), "di": np.gradient(i, t)}
 
 
-def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str):
-    """LM fit of the template parameters, then backward elimination of terms (w1 anchors the scale)."""
+def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str,
+                  give_up=None, prune: bool = True):
+    """LM fit of the template parameters, then backward elimination of terms (w1 anchors the
+    scale; ``prune=False`` keeps every parameter: a network has no terms to remove). ``give_up``
+    (see :class:`mcl.fit.LevenbergMarquardt`) stops a candidate that cannot win."""
     from ..fit import FitProblem, LevenbergMarquardt
 
-    score_of = bic if criterion == "bic" else aic
-    n_obs = len(data.time) * len([o for o in model.output_names if o in data.names])
+    score_of = criterion_of(criterion).score
+    n_obs = int(np.isfinite(data.select([o for o in model.output_names if o in data.names]).values).sum())
     active = np.ones(len(names), bool)
 
     def fit(active_mask, start):
         params = [n for n, on in zip(names, active_mask) if on]
         fixed = {n: 0.0 for n, on in zip(names, active_mask) if not on}
-        problem = FitProblem(model, data, params, fixed=fixed)
-        res = LevenbergMarquardt(max_simulations=budget).fit(problem, np.asarray(start)[active_mask])
+        problem = FitProblem(model, data, params, fixed=fixed, options=FIT_OPTIONS)
+        res = LevenbergMarquardt(max_simulations=budget, tol=FIT_TOL, give_up=give_up).fit(
+            problem, np.asarray(start)[active_mask])
         w = np.zeros(len(names))
         w[active_mask] = res.w
         rss = res.cost * len(data.time)   # J of eq. (3) is the mean over samples of the RSS
@@ -88,9 +107,9 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     w, rss, problem, res = fit(active, w0)
     record(problem, active)
     sims, path = res.simulations, []
-    score = score_of(rss, n_obs, int(active.sum()) - 1)
-    path.append({"removed": None, "rss": rss, "score": score, "accepted": True})
-    while active.sum() > 2:
+    score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
+    path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
+    while prune and active.sum() > 2 and not res.message.startswith("stopped"):
         sim = problem.simulate(w[active], gradient=True)
         sims += 1
         if not sim.ok:
@@ -105,13 +124,20 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         w_t, rss_t, problem_t, res_t = fit(trial, w)
         record(problem_t, trial)
         sims += res_t.simulations
-        score_t = score_of(rss_t, n_obs, int(trial.sum()) - 1)
+        score_t = score_of(rss_t, n_obs, int(trial.sum()) - 1, len(names) - 1)
         ok = score_t < score
         path.append({"removed": names[k], "estimate": float(rss + est.min()), "rss": rss_t,
                      "score": score_t, "accepted": bool(ok)})
         if not ok:
             break
         active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
+    from ..api import simulate
+
+    final = simulate(model, data, dict(zip(names, w)))    # the score at the default tolerances
+    sims += 1
+    if final.ok:
+        rss = rss_of(residual(data, model, final))
+        score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
     return w, active, rss, score, sims, path, visited
 
 
@@ -122,14 +148,13 @@ def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: s
     from ..refine import refine
 
     w, active, path = refine(model, data, names, w0, criterion, terms=getattr(template, "terms", None))
-    outs = [o for o in model.output_names if o in data.names]
     res, sims = simulate(model, data, dict(zip(names, w * active))), 2   # and refine's start
     if not res.ok:   # the refined law does not simulate: keep the start (nominal) law
         w, active = np.asarray(w0, float), np.ones(len(names), bool)
         res, sims = simulate(model, data, dict(zip(names, w))), 3
-    r = data.select(outs).values - res.outputs[:, [model.output_names.index(o) for o in outs]]
-    rss = float(np.sum(r**2))
-    score = (bic if criterion == "bic" else aic)(rss, r.size, int(active.sum()) - 1)
+    r = residual(data, model, res)
+    rss = rss_of(r)
+    score = criterion_of(criterion).score(rss, int(np.isfinite(r).sum()), int(active.sum()) - 1, len(names) - 1)
     return w * active, active, rss, score, sims, path, []
 
 
@@ -137,7 +162,7 @@ def _candidate_model(ctx, item):
     """(template, w0, swapped model description, compiled model) of one candidate, compiled by
     the parent before the batch (a forked worker must not run the Rust front end: its threads
     do not survive a fork); a candidate that did not compile raises its error here."""
-    built = ctx[8][(item[0], item[1])]
+    built = ctx.models[(item[0], item[1])]
     if isinstance(built, Exception):
         raise built
     return built
@@ -161,11 +186,25 @@ def build_candidate(graph, train, nominal_probe, item, workdir, libraries=()):
 
     comp_name, tpl_index, tpl_spec = item
     template = registry().template(tpl_spec)
-    v, i = nominal_probe[comp_name]
-    w0 = nominal_start(template, v, i, train.time)
+    # an explicit start (a distilled law) is where the fit begins; otherwise the template
+    # fitted to the nominal component's own law, so the first simulation is the nominal model
+    explicit = isinstance(tpl_spec, dict) and "start" in tpl_spec
+    w0 = template.start() if explicit else template.start_from(nominal_probe[comp_name])
     tm = swap_component(graph, comp_name, template, Path(workdir) / f"{comp_name}_{tpl_index}",
                         w=w0, package=f"Candidate_{comp_name}_{tpl_index}")
-    return template, w0, tm, compile_model(tm.sources, tm.model_name, libraries=libraries)
+    return template, w0, tm, compile_model(tm.sources, tm.model_name, libraries=libraries).with_outputs(train.names)
+
+
+def promising(screening: list[dict], limit: int, ratio: float = 10.0) -> list[int]:
+    """Indices of the candidates worth a full fit: at most ``limit``, best predicted first, and
+    only those whose predicted RSS after one Gauss-Newton step is within ``ratio`` of the best
+    prediction (a candidate predicted 10x worse loses by n ln 10 in any criterion unless the
+    linearisation is badly wrong; fitting it costs more than all the others)."""
+    ok = sorted((s["predicted_rss"], k) for k, s in enumerate(screening) if s.get("predicted_rss") is not None)
+    if not ok:
+        return []
+    floor = max(ok[0][0], 1e-300)
+    return [k for pred, k in ok[:limit] if pred <= ratio * floor]
 
 
 def _screen_task(ctx, item):
@@ -177,16 +216,17 @@ def _screen_task(ctx, item):
     """
     from ..api import simulate
 
-    train = ctx[1]
+    train = ctx.train
     comp_name, _, tpl_spec = item
     template, w0, tm, model = _candidate_model(ctx, item)
     params = dict(zip(tm.parameter_names, w0))
-    res = simulate(model, train, params, sensitivities=tm.parameter_names[1:])
+    res = simulate(model, train, params, sensitivities=tm.parameter_names[1:], options=FIT_OPTIONS)
     if not res.ok:
         return {"component": comp_name, "template": tpl_spec, "predicted_rss": None, "reason": res.reason}
     idx = [model.output_names.index(o) for o in model.output_names if o in train.names]
-    r = (train.select([model.output_names[k] for k in idx]).values - res.outputs[:, idx]).ravel()
+    r = residual(train, model, res).ravel()
     S = res.sensitivities[:, idx, :].reshape(-1, len(tm.parameter_names) - 1)
+    S, r = S[np.isfinite(r)], r[np.isfinite(r)]      # only what was measured
     g = S.T @ r
     gain = float(g @ np.linalg.pinv(S.T @ S) @ g)
     return {"component": comp_name, "template": tpl_spec, "rss0": float(r @ r), "n_params": len(tm.parameter_names),
@@ -197,37 +237,142 @@ def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
     from ..api import simulate
 
-    graph, train, validate, _, budget, criterion, _, method, _ = ctx
+    train, validate, criterion = ctx.train, ctx.validate, ctx.criterion
     comp_name, _, tpl_spec = item
     template, w0, tm, model = _candidate_model(ctx, item)
-    comp = graph.components[comp_name]
-    if method == "full-discretisation":
+    comp = ctx.graph.components[comp_name]
+    if ctx.method == "full-discretisation" and getattr(template, "terms", None):
         w, active, rss, score, sims, path, visited = refine_candidate(model, train, tm.parameter_names, w0,
                                                                       criterion, template)
     else:
-        w, active, rss, score, sims, path, visited = fit_and_prune(model, train, tm.parameter_names, w0,
-                                                                   budget, criterion)
+        w, active, rss, score, sims, path, visited = fit_and_prune(
+            model, train, tm.parameter_names, w0, ctx.budget, criterion, give_up=ctx.give_up,
+            prune=bool(getattr(template, "terms", None)))
     params = dict(zip(tm.parameter_names, w))
-    out = {"component": comp_name, "class": comp.cls, "template": tpl_spec, "w0": w0.tolist(),
+    out = {"component": comp_name, "class": comp.cls, "template": tpl_spec,
+           "family": getattr(template, "family", "") or template.name, "law_variable": template.law_variable,
+           "w0": w0.tolist(),
            "w": w.tolist(), "active": active.tolist(), "rss": rss, "score": score,
            "simulations": sims, "pruning": path, "equation": template.equation(w * active),
            "visited": visited,
            "terms": [str(m) for m in getattr(template, "terms", [])]}
     res = simulate(model, train, params)
-    out["train_rms"] = rms(train.select(model.output_names).values - res.outputs) if res.ok else None
+    out["train_rms"] = rms(residual(train, model, res)) if res.ok else None
     if validate is not None:
         rv = simulate(model, validate, params)
-        out["validation_rms"] = (rms(validate.select(model.output_names).values - rv.outputs)
-                                 if rv.ok else None)
+        out["validation_rms"] = rms(residual(validate, model, rv)) if rv.ok else None
     if res.ok:
-        pv = probe(model, res, train, params, [f"{comp_name}.v"])[:, 0]
-        out["v_range"] = [float(pv.min()), float(pv.max())]
+        pv = probe(model, res, train, params, [f"{comp_name}.v", f"{comp_name}.i"])
+        env = law_env(pv[:, 0], pv[:, 1], train.time)
+        out["v_range"] = [float(pv[:, 0].min()), float(pv[:, 0].max())]
+        x = env[template.law_variable]
+        out["law_range"] = [float(np.min(x)), float(np.max(x))]
     return out
 
 
-def ctx_of(graph, train, validate, nominal_probe, spec, part, models):
-    return (graph, train, validate, nominal_probe, spec.max_simulations, spec.criterion, str(part / "work"),
-            spec.refinement_method, models)
+@dataclass
+class Context:
+    """What every executor task of a run shares (sent once per worker)."""
+
+    graph: object
+    train: TimeSeries
+    validate: TimeSeries | None
+    budget: int                 # simulations per fit
+    criterion: str
+    method: str                 # simulation | full-discretisation
+    models: dict                # (component, family index) -> built candidate or its error
+    best_file: str              # the best finished candidate's RSS, written by the parent
+
+    def give_up(self, reachable_rss: float) -> bool:
+        """A fit stops when even its Gauss-Newton model cannot come within a factor of 10 of the
+        RSS of a candidate already fitted (n ln 10 in any criterion: it cannot win)."""
+        try:
+            best = json.loads(Path(self.best_file).read_text())["rss"]
+        except (OSError, ValueError, KeyError):
+            return False
+        return reachable_rss > 10.0 * best
+
+
+def context(graph, train, validate, spec, part, models) -> Context:
+    return Context(graph, train, validate, spec.max_simulations, spec.criterion, spec.refinement_method,
+                   models, str(part / "best.json"))
+
+
+class _Batch:
+    """Fits candidates (compiled by the parent, fitted by the executor's workers), each saved as
+    it finishes so that a rerun skips it."""
+
+    def __init__(self, graph, train, validate, spec, part, models, nominal_probe, rundir, reg):
+        self.graph, self.train, self.validate, self.spec, self.part = graph, train, validate, spec, part
+        self.models, self.nominal_probe, self.rundir, self.reg = models, nominal_probe, rundir, reg
+
+    def __call__(self, items: list) -> list[dict]:
+        part, spec = self.part, self.spec
+        todo = [it for it in items if not _done(part / "candidates" / f"{it[0]}_{it[1]}.json")]
+        log.info("      fitting %d candidate(s) (%d already done)", len(items), len(items) - len(todo))
+        self.models.update(build_candidates(self.graph, self.train, self.nominal_probe,
+                                            [it for it in todo if it[:2] not in self.models],
+                                            part / "work", spec.libraries))
+        ctx = context(self.graph, self.train, self.validate, spec, part, self.models)
+
+        def checkpoint(k, r):
+            it = todo[k]
+            if isinstance(r, TaskFailed):
+                r = {"component": it[0], "template": it[2], "failed": r.reason, "score": None}
+            self.rundir.write_json(f"candidates/{it[0]}_{it[1]}.json", r)
+            _note_best(part / "best.json", r, self.rundir)
+
+        if todo:
+            with self.reg.executor(spec.executor) as ex:
+                ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates", on_result=checkpoint)
+        return [json.loads((part / "candidates" / f"{n}_{k}.json").read_text()) for n, k, _ in items]
+
+
+#: family indices of the shape stage (after any family list)
+NEURAL_INDEX, SHAPE_INDEX = 100, 101
+
+
+def _shapes(fit: _Batch, cands: list[dict], sigma: float) -> list[dict]:
+    """Non-polynomial shapes for the most promising component: a neural law in the variable of
+    its best polynomial law, fitted to the data, then distilled into a sparse readable law over
+    tanh, sinh, |x| x, x/sqrt(1 + x^2), exp and polynomial terms (:func:`families.distil`) and
+    fitted and pruned like any candidate. Skipped when the polynomial law already fits to the
+    noise, or when it is not a law of one variable."""
+    done = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
+    if not done:
+        return []
+    best = done[0]
+    var = best.get("law_variable")
+    if var not in ("v", "dv") or (best.get("train_rms") is not None and best["train_rms"] < 1.2 * sigma):
+        return []
+    log.info("      shape of %s's law in %s: neural fit, then a sparse law distilled from it", best["component"], var)
+    neural = fit([(best["component"], NEURAL_INDEX, {"name": "neural", "hidden": 3, "x": var, "coupled": False})])
+    out = list(neural)
+    n = neural[0]
+    if n.get("score") is None or not n.get("law_range"):
+        return out
+    from ..api import registry
+
+    template = registry().template(n["template"])
+    xs = np.linspace(*n["law_range"], 201)
+    terms, c = distil(xs, template.curve(np.asarray(n["w"]), xs), var)
+    if not terms:
+        return out
+    spec = {"name": "polynomial", "lhs": ["i"], "rhs": terms, "start": [1.0, *map(float, c)], "family": "shape"}
+    return out + fit([(best["component"], SHAPE_INDEX, spec)])
+
+
+def _note_best(path: Path, result: dict, rundir) -> None:
+    """Keep the least RSS of the finished candidates where running fits can read it."""
+    rss = result.get("rss")
+    if rss is None or result.get("failed"):
+        return
+    try:
+        best = json.loads(path.read_text())["rss"]
+    except (OSError, ValueError, KeyError):
+        best = None
+    if best is None or rss < best:
+        rundir.write_json(path.name, {"rss": rss, "component": result["component"]})
 
 
 def _done(path: Path) -> bool:
@@ -238,6 +383,16 @@ def _done(path: Path) -> bool:
         return "failed" not in json.loads(path.read_text())
     except ValueError:
         return False
+
+
+def _helps(after, before: float, margin: float = 0.02) -> bool:
+    """Whether the validation error improves by more than ``margin`` (relative): a law that
+    only fits the training data is not a cause."""
+    return after is not None and np.isfinite(after) and after < (1 - margin) * before
+
+
+def _fmt(x) -> str:
+    return "failed" if x is None else f"{x:.4g}"
 
 
 def _template_name(spec) -> str:
@@ -257,7 +412,7 @@ def _weigh_unevaluated(evidence: dict, best: dict, cands: list, screening: list,
     """A contender that failed in fitting can only be excluded by its screening prediction:
     its predicted score (one linearised step) must lose by the criterion's 'decisive' margin;
     otherwise the cause is at most 'undecided'."""
-    score_of = bic if spec.criterion == "bic" else aic
+    score_of = criterion_of(spec.criterion).score
     open_ = []
     for c in (c for c in cands if c.get("failed")):
         pred = next((s for s in screening if s["component"] == c["component"] and s["template"] == c["template"]), {})
@@ -267,12 +422,6 @@ def _weigh_unevaluated(evidence: dict, best: dict, cands: list, screening: list,
     if open_:
         evidence["unevaluated"] = open_
         evidence["strength"] = f"undecided: {', '.join(open_)} could not be evaluated"
-
-
-def strength(delta: float) -> str:
-    """Kass & Raftery's reading of a BIC difference."""
-    return ("decisive" if delta > 10 else "strong" if delta > 6 else
-            "positive" if delta > 2 else "weak")
 
 
 def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, force: bool = False,
@@ -288,7 +437,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     (part / "candidates").mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     reg = registry()
-    nominal = compile_model(spec.sources, spec.model_name, libraries=spec.libraries)
+    nominal = compile_model(spec.sources, spec.model_name, libraries=spec.libraries).with_outputs(train.names)
     graph = build_graph(spec.sources, spec.model_name, libraries=spec.libraries)
     outputs = [o for o in nominal.output_names if o in train.names]
     log.info("[1/5] nominal model %s: simulating the training data", spec.model_name)
@@ -298,7 +447,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     y_meas = train.select(outputs).values
     y0 = sim0.outputs[:, [nominal.output_names.index(o) for o in outputs]]
     resid = y_meas - y0
-    sigma = float(np.sqrt(np.mean([noise_estimate(y_meas[:, k]) ** 2 for k in range(len(outputs))])))
+    sigma = float(np.sqrt(np.mean([noise_estimate(y_meas[:, k], train.time) ** 2 for k in range(len(outputs))])))
     train_rms0 = rms(resid)
     significant = bool(train_rms0 > 1.5 * sigma and train_rms0 > 1e-12)
     report = {"model": spec.model_name, "outputs": outputs,
@@ -312,7 +461,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     val0 = None
     if validate is not None:
         sv = simulate(nominal, validate)
-        val0 = rms(validate.select(outputs).values - sv.outputs[:, [nominal.output_names.index(o) for o in outputs]])
+        val0 = rms(residual(validate, nominal, sv, outputs)) if sv.ok else None
     extended_y = None
     if significant:
         comps = [c for c in graph.two_connector_components() if not c.inputs]
@@ -322,8 +471,11 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         for c in comps:
             va, vb, fa = component_variables(c)
             pv = probe(nominal, sim0, train, {}, [va, vb, fa])
-            nominal_probe[c.name] = (pv[:, 0] - pv[:, 1], pv[:, 2])
-        items = [(c.name, k, t) for c in comps for k, t in enumerate(spec.templates)]
+            nominal_probe[c.name] = law_env(pv[:, 0] - pv[:, 1], pv[:, 2], train.time)
+        roles = {c.name: role_of(nominal_probe[c.name]) for c in comps}
+        report["roles"] = roles
+        items = [(c.name, k, t) for c in comps
+                 for k, t in enumerate(spec.templates or families(roles[c.name]))]
         screen_file = part / "screening.json"
         models = {}
         if screen_file.exists():
@@ -332,31 +484,21 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
             log.info("[2/5] screening %d candidate(s): one linearised step each", len(items))
             models = build_candidates(graph, train, nominal_probe, items, part / "work", spec.libraries)
             with reg.executor(spec.executor) as ex:
-                res = ex.map(_screen_task, items, context=ctx_of(graph, train, validate, nominal_probe, spec,
-                                                                  part, models),
+                res = ex.map(_screen_task, items, context=context(graph, train, validate, spec, part, models),
                              timeout=3600, label="screening")
             screening = [r if not isinstance(r, TaskFailed) else
                          {"component": it[0], "template": it[2], "predicted_rss": None, "reason": r.reason}
                          for it, r in zip(items, res)]
             rundir.write_json("screening.json", screening)
-        order = sorted(range(len(items)), key=lambda k: (screening[k]["predicted_rss"] is None,
-                                                         screening[k]["predicted_rss"] or 0.0))
-        items = [items[k] for k in order[: spec.screen]]
-        todo = [it for it in items if not _done(part / "candidates" / f"{it[0]}_{it[1]}.json")]
-        log.info("      fitting the %d most promising (%d already done)", len(items), len(items) - len(todo))
-        models.update(build_candidates(graph, train, nominal_probe, [it for it in todo if it[:2] not in models],
-                                       part / "work", spec.libraries))
-        ctx = ctx_of(graph, train, validate, nominal_probe, spec, part, models)
-
-        def checkpoint(k, r):  # each candidate is saved as it finishes: a rerun skips it
-            it = todo[k]
-            if isinstance(r, TaskFailed):
-                r = {"component": it[0], "template": it[2], "failed": r.reason, "score": None}
-            rundir.write_json(f"candidates/{it[0]}_{it[1]}.json", r)
-
-        with reg.executor(spec.executor) as ex:
-            ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates", on_result=checkpoint)
-        cands = [json.loads((part / "candidates" / f"{n}_{k}.json").read_text()) for n, k, _ in items]
+        keep = promising(screening, spec.screen)
+        for k, s_ in enumerate(screening):
+            if k not in keep and s_.get("predicted_rss") is not None:
+                s_["not_fitted"] = "screening predicts it cannot compete"
+        items = [items[k] for k in keep]
+        fit = _Batch(graph, train, validate, spec, part, models, nominal_probe, rundir, reg)
+        cands = fit(items)
+        if spec.templates is None:
+            cands += _shapes(fit, cands, sigma)
         ranked = sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
         report["candidates"] = ranked + [c for c in cands if c.get("score") is None]
         report["screening"] = screening
@@ -365,20 +507,29 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
             log.warning("      %s with %s could not be evaluated (%s): %s", f["component"],
                         _template_name(f["template"]), f["stage"], f["reason"])
         # the nominal model is a contender too: a cause must explain the data better than it
-        n_obs = y_meas.size
-        nominal_score = (bic if spec.criterion == "bic" else aic)(float(np.sum(resid**2)), n_obs, 0)
+        n_obs = int(np.isfinite(y_meas).sum())
+        nominal_score = criterion_of(spec.criterion).score(rss_of(resid), n_obs, 0)
         report["nominal_score"] = nominal_score
         ranked = [c for c in ranked if c["score"] < nominal_score]
         if not ranked:
-            log.info("      no candidate explains the data better than the nominal model")
-        if ranked:
+            report["no_cause"] = "no candidate explains the training data better than the nominal model"
+        elif val0 is not None and not _helps(ranked[0].get("validation_rms"), val0):
             best = ranked[0]
-            delta = min([c["score"] for c in ranked[1:]] + [nominal_score]) - best["score"]
+            report["no_cause"] = (f"the best candidate, {best['component']} ({_template_name(best['template'])}), "
+                                  f"does not improve the validation data (RMS {val0:.4g} -> "
+                                  f"{_fmt(best.get('validation_rms'))})")
+        else:
+            best = ranked[0]
+            # the component's evidence: its lead over the best law of any other component
+            others = [c["score"] for c in ranked if c["component"] != best["component"]]
+            delta = min(others + [nominal_score]) - best["score"]
             report["cause"], extended_y = _explain(best, delta, graph, spec, part, train, validate,
                                                    outputs, reg, nominal_probe)
             _weigh_unevaluated(report["cause"]["evidence"], best, cands, screening, spec, n_obs)
             report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),
                               "validation_rms_before": val0, "validation_rms_after": best.get("validation_rms")}
+        if report.get("no_cause"):
+            log.info("      no convincing cause: %s", report["no_cause"])
     if report["gain"] is None:
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
                           "validation_rms_before": val0, "validation_rms_after": val0}
@@ -408,31 +559,41 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nomi
     template = reg.template(best["template"])
     w = np.asarray(best["w"]) * np.asarray(best["active"])
     comp = graph.components[best["component"]]
-    log.info("[3/5] cause: %s (%s): %s", comp.name, comp.cls, template.equation(w))
-    lo, hi = best.get("v_range") or [-1.0, 1.0]
+    law = in_words(template, w, comp)
+    log.info("[3/5] cause: %s (%s): %s", comp.name, comp.cls, law)
+    var = template.law_variable
+    lo, hi = best.get("law_range") or best.get("v_range") or [-1.0, 1.0]
     xs = np.linspace(lo, hi, 41)
-    curve = [[float(x), float(f)] for x, f in zip(xs, template.flow_of(w, xs))]
-    v_nom, i_nom = nominal_probe[best["component"]]
-    pick = np.linspace(0, len(v_nom) - 1, min(200, len(v_nom))).astype(int)
-    nominal_points = [[float(v_nom[k]), float(i_nom[k])] for k in pick]
+    curve = [[float(x), float(f)] for x, f in zip(xs, template.curve(w, xs))]
+    env = nominal_probe[best["component"]]
+    x_nom, f_nom = (env["i"], env["v"]) if var == "i" else (env[var], env["i"])
+    pick = np.linspace(0, len(x_nom) - 1, min(200, len(x_nom))).astype(int)
+    nominal_points = [[float(x_nom[k]), float(f_nom[k])] for k in pick]
     nominal_terms = [t for t, a in zip(best.get("terms", []), np.abs(best["w0"]) > 1e-9 * np.max(np.abs(best["w0"]))) if a]
     new_terms = [t for t, on, w0 in zip(best.get("terms", []), best["active"], best["w0"])
                  if on and t not in nominal_terms]
-    effect = (f"{comp.name} follows {template.equation(w)}"
+    effect = (f"{comp.name} follows {law}"
               + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else ""))
     ext_dir = part / "extended"
     tm = swap_component(graph, comp.name, template, ext_dir, w=w, package=LEARNED_PACKAGE)
     log.info("[4/5] extended model: compiling to an FMU")
-    ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
+    ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries).with_outputs(train.names)
     fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")
     res = simulate(ext, train)
     y_ext = res.outputs[:, [ext.output_names.index(o) for o in outputs]] if res.ok else None
     cause = {"component": comp.name, "class": comp.cls, "effect": effect,
-             "evidence": {"delta_bic_to_next": delta, "strength": strength(delta)},
-             "law": {"equation": template.equation(w, across="v", flow="i"),
+             "evidence": {"criterion": spec.criterion, "delta_to_next": delta,
+                          "strength": criterion_of(spec.criterion).strength(delta)},
+             "law": {"equation": law, "where": words(comp).definitions,
+                     "template_equation": template.equation(w, across="v", flow="i"),
+                     "family": best.get("family"),
                      "across": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].potential[0]} - "
                                f"{comp.name}.{comp.connectors[1].name}.{comp.connectors[1].potential[0]}",
                      "flow": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].flow[0]}",
+                     # the curve: the law against the variable it is in (der(across) for a law
+                     # in the rate; across against flow for a law in the flow), over the visited range
+                     "variable": {"v": "across", "dv": "der(across)", "i": "flow"}[var],
+                     "range": [float(lo), float(hi)],
                      "curve": curve, "nominal": nominal_points},
              "visited": best.get("visited", []), "parameters": template.parameter_names(),
              "modelica": str(tm.path.relative_to(part)), "fmu": str(fmu.relative_to(part)),
@@ -454,14 +615,12 @@ def _second(spec, template, w, component: str, part: Path) -> dict:
     name = sec["model"]["name"]
     target = sec.get("component", component)
     data = read_csv(base / sec["data"])
-    nominal = compile_model(sources, name, libraries=spec.libraries)
+    nominal = compile_model(sources, name, libraries=spec.libraries).with_outputs(data.names)
     graph = build_graph(sources, name, libraries=spec.libraries)
     tm = swap_component(graph, target, template, part / "second", w=w, package="LearnedSecond")
-    learned = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
+    learned = compile_model(tm.sources, tm.model_name, libraries=spec.libraries).with_outputs(data.names)
     outs = [o for o in nominal.output_names if o in data.names]
-    meas = data.select(outs).values
     before, after = simulate(nominal, data), simulate(learned, data)
-    pick = (lambda m, r: r.outputs[:, [m.output_names.index(o) for o in outs]])
     return {"model": name, "component": target,
-            "rms_before": rms(meas - pick(nominal, before)) if before.ok else None,
-            "rms_after": rms(meas - pick(learned, after)) if after.ok else None}
+            "rms_before": rms(residual(data, nominal, before, outs)) if before.ok else None,
+            "rms_after": rms(residual(data, learned, after, outs)) if after.ok else None}

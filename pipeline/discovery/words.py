@@ -1,0 +1,88 @@
+"""Laws in the component's own words: the domain's names for the across and flow variables.
+
+Templates are written in v (across, connector a minus b) and i (flow into connector a). A
+report names them as the domain does, with the Modelica Standard Library's orientation: an
+electrical or thermal element's v = p.v - n.v / dT = port_a.T - port_b.T with the flow into the
+first connector; a mechanical element's s_rel = flange_b.s - flange_a.s with f = flange_b.f (the
+opposite orientation, so the law's odd and even terms are rewritten accordingly).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: potential variable -> (across, its derivative, flow, orientation b - a)
+DOMAINS = {
+    "v": ("v", "der(v)", "i", False),
+    "T": ("dT", "der(dT)", "Q_flow", False),
+    "s": ("s_rel", "v_rel", "f", True),
+    "phi": ("phi_rel", "w_rel", "tau", True),
+    "p": ("dp", "der(dp)", "m_flow", False),
+}
+
+
+@dataclass(frozen=True)
+class Words:
+    """A component's law variables by name, with their definitions."""
+
+    across: str
+    rate: str
+    flow: str
+    flipped: bool           # across and flow are b - a and the flow into b
+    definitions: str
+
+    @property
+    def names(self) -> dict:
+        return {"v": self.across, "dv": self.rate, "i": self.flow}
+
+
+def words(comp) -> Words:
+    a, b = comp.connectors
+    x, f = a.potential[0], a.flow[0]
+    across, rate, flow, flipped = DOMAINS.get(x, (f"d{x}", f"der(d{x})", f, False))
+    first, second = (b, a) if flipped else (a, b)
+    q = lambda name: f"{comp.name}.{name}"
+    rate_def = f"der({q(across)})" if not rate.startswith("der(") else None
+    defs = (f"{q(across)} = {q(first.name)}.{x} - {q(second.name)}.{x}, {q(flow)} = {q(first.name)}.{f}"
+            + (f", {q(rate)} = {rate_def}" if rate_def else ""))
+    rate_name = f"der({q(across)})" if rate.startswith("der(") else q(rate)
+    return Words(q(across), rate_name, q(flow), flipped, defs)
+
+
+def parity(term) -> int:
+    """+1 for an even term, -1 for an odd one, 0 for neither (checked numerically on v, i, dv, di
+    changing sign together: the orientation flip)."""
+    rng = np.random.default_rng(1)
+    env = {k: rng.uniform(0.1, 2.0, 16) for k in ("v", "i", "dv", "di")}
+    neg = {k: -x for k, x in env.items()}
+    with np.errstate(all="ignore"):
+        a, b = np.asarray(term.value(env), float), np.asarray(term.value(neg), float)
+    if np.allclose(a, b, rtol=1e-9, atol=1e-12):
+        return 1
+    if np.allclose(a, -b, rtol=1e-9, atol=1e-12):
+        return -1
+    return 0
+
+
+def in_words(template, w, comp, digits: int = 4) -> str:
+    """The fitted law of ``template`` with the component's own variable names."""
+    wd = words(comp)
+    if not wd.flipped or not hasattr(template, "terms"):
+        if wd.flipped:   # no terms to rewrite: name the variables by their definitions
+            return template.equation(w, across=f"(-{wd.across})", flow=f"(-{wd.flow})", digits=digits)
+        return _renamed(template.equation(w, across=wd.across, flow=wd.flow, digits=digits), wd)
+    # v = -across', i = -flow': an even term keeps its value, an odd one changes sign; with a
+    # term that is neither, the law is written in the negated variables
+    signs = np.array([parity(t) for t in template.terms])
+    if (signs == 0).any():
+        return _renamed(template.equation(w, across=f"(-{wd.across})", flow=f"(-{wd.flow})", digits=digits), wd)
+    w = np.asarray(w, float) * signs * signs[0]
+    return _renamed(template.equation(w, across=wd.across, flow=wd.flow, digits=digits), wd)
+
+
+def _renamed(text: str, wd: Words) -> str:
+    """der(s_rel) reads v_rel, der(phi_rel) w_rel."""
+    if not wd.rate.startswith("der("):
+        text = text.replace(f"der({wd.across})", wd.rate)
+    return text
