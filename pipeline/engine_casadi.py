@@ -92,7 +92,7 @@ class _Plan:
             xa, fa = ca.vertcat(X, ca.vec(S)), ca.vertcat(f, ca.vec(dS))
         dae = {"x": xa, "p": P, "t": T, "ode": fa}
         iopts = {"reltol": opts.rtol, "abstol": opts.atol, "max_num_steps": opts.max_steps,
-                 "disable_internal_warnings": True}
+                 "disable_internal_warnings": True, "show_eval_warnings": False}
         # the integration grid: the output times and the model's time events, a restart at each
         events = [te for te in ode.time_events if t_out[0] < te < t_out[-1]]
         self.t_int = np.union1d(t_out, events)

@@ -33,7 +33,8 @@ class Monomial:
     powers: tuple[tuple[str, int], ...]
 
     @classmethod
-    def parse(cls, text: str) -> "Monomial":
+    def parse(cls, text: str, names=()) -> "Monomial":
+        """A monomial, or an :class:`Expression` (which may also use the parameter ``names``)."""
         text = text.replace(" ", "").replace("**", "^")
         if text in ("", "1"):
             return cls(())
@@ -41,7 +42,7 @@ class Monomial:
         for factor in text.split("*"):
             m = re.fullmatch(r"(der\((v|i)\)|dv|di|v|i)(?:\^(\d+))?", factor)
             if not m:
-                return Expression.parse(text)
+                return Expression.parse(text, names)
             name = {"der(v)": "dv", "der(i)": "di"}.get(m.group(1), m.group(1))
             powers[name] = powers.get(name, 0) + int(m.group(3) or 1)
         return cls(tuple(sorted(powers.items(), key=lambda kv: VARIABLES.index(kv[0]))))
@@ -82,31 +83,31 @@ class Expression:
     powers: tuple = ()       # not a monomial: degree 0 for refinement's stage order
 
     @classmethod
-    def parse(cls, text: str) -> "Expression":
+    def parse(cls, text: str, names=()) -> "Expression":
         text = text.replace(" ", "").replace("**", "^").replace("der(v)", "dv").replace("der(i)", "di")
         try:
             tree = ast.parse(text.replace("^", "**"), mode="eval")
         except SyntaxError:
             tree = None
-        bad = cls._check(tree.body) if tree else "not an expression"
+        bad = cls._check(tree.body, set(names)) if tree else "not an expression"
         if bad:
             raise ConfigError(f"template term '{text}': {bad} (use v, i, dv, di, numbers, + - * / ^ and "
                               f"{', '.join(_FUNCTIONS)}, e.g. v^3, v*i, tanh(v/0.3))")
         return cls(text)
 
     @classmethod
-    def _check(cls, node) -> str | None:
+    def _check(cls, node, names: set) -> str | None:
         if isinstance(node, ast.Name):
-            return None if node.id in VARIABLES else f"'{node.id}' is not v, i, dv or di"
+            return None if node.id in VARIABLES or node.id in names else f"'{node.id}' is not v, i, dv or di"
         if isinstance(node, ast.Constant):
             return None if isinstance(node.value, (int, float)) and not isinstance(node.value, bool) else "not a number"
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
-            return cls._check(node.operand)
+            return cls._check(node.operand, names)
         if isinstance(node, ast.BinOp) and type(node.op) in _BINOPS:
-            return cls._check(node.left) or cls._check(node.right)
+            return cls._check(node.left, names) or cls._check(node.right, names)
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id in _FUNCTIONS \
                 and len(node.args) == 1 and not node.keywords:
-            return cls._check(node.args[0])
+            return cls._check(node.args[0], names)
         return f"'{ast.unparse(node)}' is not allowed"
 
     def __str__(self) -> str:
@@ -263,20 +264,31 @@ class PolynomialTemplate(Template):
     Options: ``lhs`` and ``rhs`` term lists (e.g. lhs=["i"], rhs=["v^2", "v^3"], the paper's
     w1 i = w2 v^2 + w3 v^3), or ``degree`` for lhs=["i"], rhs = v, v^2, ..., v^degree.
     ``start`` gives the initial w (default 0.1 for every parameter, as in Table I).
+    ``scales`` names parameters used inside terms with their start values (``rhs: [v,
+    tanh(v/s1)]``, ``scales: {s1: 0.3}``): they are fitted with the coefficients (the law is
+    then not linear in them) but never pruned.
     """
 
     name = "polynomial"
     description = "polynomial constitutive law"
     symmetric_axis = 0
 
-    def __init__(self, lhs=None, rhs=None, degree: int = 3, start=None, prefix: str = "w", family: str = ""):
+    def __init__(self, lhs=None, rhs=None, degree: int = 3, start=None, prefix: str = "w", family: str = "",
+                 scales: dict | None = None):
         self.family = family     # which law family discovery chose it as (static, rate, storage, shape)
-        self.lhs = [Monomial.parse(t) for t in (lhs or ["i"])]
-        self.rhs = [Monomial.parse(t) for t in (rhs or [f"v^{k}" if k > 1 else "v"
-                                                        for k in range(1, degree + 1)])]
+        self.scales = {str(k): float(v) for k, v in (scales or {}).items()}
+        bad = [k for k in self.scales if not re.fullmatch(r"[A-Za-z_]\w*", k) or k in VARIABLES
+               or k in _FUNCTIONS or re.fullmatch(rf"{re.escape(prefix)}\d+", k)]
+        if bad:
+            raise ConfigError(f"template scale name '{bad[0]}' is not free to use")
+        self.lhs = [Monomial.parse(t, self.scales) for t in (lhs or ["i"])]
+        self.rhs = [Monomial.parse(t, self.scales) for t in (rhs or [f"v^{k}" if k > 1 else "v"
+                                                                     for k in range(1, degree + 1)])]
         self.prefix = prefix
         n = len(self.lhs) + len(self.rhs)
         self._start = np.full(n, 0.1) if start is None else np.asarray(start, dtype=float)
+        if self._start.shape == (n + len(self.scales),):
+            self._start = self._start[:n]
         if self._start.shape != (n,):
             raise ConfigError(f"template start has {self._start.size} values for {n} parameters")
 
@@ -289,7 +301,14 @@ class PolynomialTemplate(Template):
         return set().union(*(m.variables for m in self.terms)) | {"v", "i"}
 
     def parameter_names(self) -> list[str]:
-        return [f"{self.prefix}{k + 1}" for k in range(len(self.terms))]
+        return [f"{self.prefix}{k + 1}" for k in range(len(self.terms))] + list(self.scales)
+
+    def _env(self, env: dict, w=None) -> dict:
+        """``env`` with the scale parameters' values (from w, else their start values)."""
+        if not self.scales:
+            return env
+        vals = self.scales if w is None else dict(zip(self.scales, np.asarray(w, float)[len(self.terms):]))
+        return {**vals, **env}
 
     @property
     def law_variable(self) -> str:
@@ -299,7 +318,10 @@ class PolynomialTemplate(Template):
         return "dv" if "dv" in rhs and "v" not in rhs else "v"
 
     def start(self) -> np.ndarray:
-        return self._start.copy()
+        return np.concatenate([self._start, list(self.scales.values())])
+
+    def start_from(self, env: dict) -> np.ndarray:
+        return np.concatenate([super().start_from(env), list(self.scales.values())])
 
     def _side(self, names, terms) -> str:
         return " + ".join(f"{n}*{m.modelica()}" if str(m) != "1" else n for n, m in zip(names, terms)) or "0"
@@ -311,11 +333,16 @@ class PolynomialTemplate(Template):
 
     def features(self, env: dict) -> np.ndarray:
         """Signed features phi with G = phi @ w (lhs positive, rhs negative): columns per term."""
+        env = self._env(env)
         cols = [m.value(env) for m in self.lhs] + [-m.value(env) for m in self.rhs]
         return np.column_stack([np.broadcast_to(c, np.shape(env["v"])) for c in cols])
 
     def residual(self, w, env: dict) -> np.ndarray:
-        return self.features(env) @ np.asarray(w, dtype=float)
+        w = np.asarray(w, dtype=float)
+        n = len(self.terms)
+        env = self._env(env, w)
+        cols = [m.value(env) for m in self.lhs] + [-m.value(env) for m in self.rhs]
+        return np.column_stack([np.broadcast_to(c, np.shape(env["v"])) for c in cols]) @ w[:n]
 
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
         rename = {"v": across, "i": flow, "dv": f"der({across})", "di": f"der({flow})"}
@@ -333,8 +360,11 @@ class PolynomialTemplate(Template):
             return " + ".join(parts).replace("+ -", "- ") or "0"
 
         w = np.asarray(w, dtype=float)
-        k = len(self.lhs)
-        return f"{side(w[:k], self.lhs)} = {side(w[k:], self.rhs)}"
+        k, n = len(self.lhs), len(self.terms)
+        text = f"{side(w[:k], self.lhs)} = {side(w[k:n], self.rhs)}"
+        for name, value in zip(self.scales, w[n:]):      # scales by their fitted values
+            text = re.sub(rf"\b{name}\b", f"{value:.{digits}g}", text)
+        return text
 
 
 class MemoryTemplate(PolynomialTemplate):
@@ -416,13 +446,50 @@ class NeuralTemplate(Template):
         return out
 
     def start_from(self, env: dict) -> np.ndarray:
-        """The network fitted (least squares, c = 1) to the law observed in ``env``."""
+        """w reproducing the law observed in ``env`` (c = 1).
+
+        Uncoupled: the linear term g is the law's slope and the units are silent (a_j = 0) with
+        their centres spread over the visited range (-e_j/b_j at -1/2, 0, +1/2 of the largest
+        |x|, width 1/b_j a third of it), so the first simulation is the nominal model and every
+        unit can bend the law where the data go. Coupled: the network fitted by least squares.
+        """
         from scipy.optimize import least_squares
 
+        x, i = np.asarray(env[self.x], float), np.asarray(env["i"], float)
+        if not self.coupled:
+            g = float(x @ i / (x @ x)) if np.any(x) else 0.0
+            span = float(np.max(np.abs(x))) or 1.0
+            centres = np.linspace(-0.5, 0.5, self.hidden) * span if self.hidden > 1 else np.zeros(1)
+            b = 3.0 / span
+            units = np.column_stack([np.zeros(self.hidden), np.full(self.hidden, b), -b * centres])
+            return np.concatenate([[1.0, g], units.ravel()])
         w0 = self.start()
-        scale = float(np.std(env["i"])) or 1.0
+        scale = float(np.std(i)) or 1.0
         fun = lambda r: self.residual(np.concatenate([[1.0], r]), env) / scale
         return np.concatenate([[1.0], least_squares(fun, w0[1:], max_nfev=200 * len(w0)).x])
+
+    def fit_curve(self, xs: np.ndarray, fs: np.ndarray, tries: int = 4) -> np.ndarray:
+        """w (c = 1) of the uncoupled network closest to the curve i = f(x) given at ``xs``: least
+        squares from a few seeded starts with the units spread over the range (the start of a
+        network that must first do what a known law does, then better)."""
+        from scipy.optimize import least_squares
+
+        xs, fs = np.asarray(xs, float), np.asarray(fs, float)
+        span, scale = float(np.max(np.abs(xs))) or 1.0, float(np.std(fs)) or 1.0
+        best = None
+        for seed in range(tries):
+            rng = np.random.default_rng(seed)
+            # widths from a third of the range down to 1/30 of it (a friction law's step at 0)
+            centres = rng.uniform(-0.6, 0.6, self.hidden) * span
+            centres[0] = 0.0
+            b = np.exp(rng.uniform(np.log(1.0), np.log(30.0), self.hidden)) / span
+            units = np.column_stack([rng.normal(0, scale, self.hidden), b, -b * centres])
+            r0 = np.concatenate([[float(xs @ fs / (xs @ xs)) if np.any(xs) else 0.0], units.ravel()])
+            fun = lambda r: self.residual(np.concatenate([[1.0], r]), {self.x: xs, "i": fs}) / scale
+            sol = least_squares(fun, r0, max_nfev=400 * len(r0))
+            if best is None or sol.cost < best.cost:
+                best = sol
+        return np.concatenate([[1.0], best.x])
 
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
         c, g, units = self._split(w)

@@ -47,8 +47,11 @@ def test_data_frames_structured_arrays_and_back():
     assert np.allclose(as_timeseries(ts.to_frame()).values, ts.values)   # the index is time
     with pytest.raises(DataError, match="no 'time' column"):
         as_timeseries({"u": t})
-    with pytest.raises(DataError, match="non-finite"):
-        as_timeseries(pd.DataFrame({"time": t, "u": [0, 1, np.nan, 3, 4]}))
+    # NaN is pandas' missing value: not measured there; infinity is refused
+    part = as_timeseries(pd.DataFrame({"time": t, "u": [0, 1, np.nan, 3, 4]}))
+    assert part.measured().sum() == 4 and np.allclose(part.filled().column("u"), [0, 1, 2, 3, 4])
+    with pytest.raises(DataError, match="infinite"):
+        as_timeseries(pd.DataFrame({"time": t, "u": [0, 1, np.inf, 3, 4]}))
 
 
 def test_simulation_result_to_frame():

@@ -33,8 +33,10 @@ def test_malformed_files_name_the_line(tmp_path, text, message, line):
 
 
 @pytest.mark.parametrize("text,message", [
-    ("time,u\n0,1\n1,nan\n", "column 'u' has a missing or non-finite value at data row 2"),
-    ("time,u\n0,1\n1,\n", "missing or non-finite"),
+    ("time,u\n0,1\n1,nan\n", "column 'u': 'nan' is not a measured value"),
+    ("time,u\n0,1\n1,inf\n", "'inf' is not a measured value"),
+    ("time,u\n0,\n1,\n", "column 'u' has no measured value"),
+    ("time,u\n,1\n1,2\n", "time is not a finite number"),
     ("time,u\n0,1\n0,2\n", "not strictly increasing at data row 2"),
     ("time,u\n0,1\n", "at least two samples"),
 ])
@@ -47,3 +49,9 @@ def test_missing_columns_are_listed(tmp_path):
     ts = read_csv(csv(tmp_path, "time,a\n0,1\n1,2\n"))
     with pytest.raises(DataError, match="missing column.* u, T_amb; the file has: a"):
         ts.select(["u", "T_amb"])
+
+
+def test_blank_cells_are_values_not_measured(tmp_path):
+    ts = read_csv(csv(tmp_path, "time,u,y\n0,1,2\n1,2,\n2,3,4\n3,4,\n"))
+    assert ts.measured()[:, 1].tolist() == [True, False, True, False]
+    assert np.allclose(ts.filled().column("y"), [2, 3, 4, 4])

@@ -110,7 +110,7 @@ def test_rotational_law_in_a_derivative_seen_from_the_far_side(tmp_path):
                                      "{name: memory, lhs: [i], rhs: [dv, dv^2, dv^3]}"])
     cause = report["cause"]
     assert cause["component"] == "bearing" and cause["evidence"]["strength"] in ("decisive", "strong")
-    assert "der(v)" in cause["law"]["equation"]
+    assert "bearing.w_rel" in cause["law"]["equation"] and cause["law"]["variable"] == "der(across)"
     best = report["candidates"][0]
     coef = np.asarray(best["w"]) * np.asarray(best["active"])
     speed = np.linspace(-1, 1, 21)

@@ -134,7 +134,7 @@ def test_discovery_on_a_user_model_of_msl_parts(msl_path, tmp_path, capsys):
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     cause = report["cause"]
     assert cause["component"] == "R2" and cause["class"] == "Modelica.Electrical.Analog.Basic.Resistor"
-    assert {c["component"] for c in report["candidates"]} == {"R1", "C", "R2"}   # not the source, sensor, ground
+    assert {c["component"] for c in report["screening"]} == {"R1", "C", "R2"}   # not the source, sensor, ground
     xs, fs = np.array(cause["law"]["curve"]).T
     truth = 0.5 * xs + 0.3 * xs**3
     assert np.max(np.abs(fs - truth)) <= 0.05 * np.max(np.abs(truth))

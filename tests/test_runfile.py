@@ -26,7 +26,7 @@ def write(tmp_path, text):
     ("executor: {kind: local, workers: -3}\n", 4, "executor.workers: -3 is less than 1"),
     ("refinement: {criterion: bci}\n", 4, "refinement.criterion: 'bci' is not one of bic, aic (did you mean 'bic'?)"),
     ("fitting: {max_simulatons: 10}\n", 4, "fitting.max_simulatons: unknown key (did you mean 'max_simulations'?)"),
-    ("templates:\n  - {name: polynomial, rhs: [v, 'v^-1']}\n", 5, "templates.0: template term 'v^-1'"),
+    ("templates:\n  - {name: polynomial, rhs: [v, 'v^q']}\n", 5, "templates.0: template term 'v^q'"),
     ("templates:\n  - {name: polynomial, rsh: [v]}\n", 5, "templates.0.rsh: unknown key (did you mean 'rhs'?)"),
     ("templates:\n  - {name: nope}\n", 5, "templates.0.name: 'nope' is not one of"),
     ("report: {title: [1, 2]}\n", 4, "report.title: must be string"),

@@ -11,7 +11,8 @@ Families per role (each a template spec; all start from the nominal law, so the 
 simulation of a candidate reproduces the nominal model):
 
 - ``static``: i = f(v) (cubic); a storage law i = f(v) dv + g(v) (a spring with damping);
-- ``rate``: i = h(dv) (a damper cubic in the speed, friction); the storage law (a capacitor whose
+- ``rate``: i = h(dv) (a damper cubic in the speed; Coulomb-like friction tanh(dv/s)); the
+  storage law (a capacitor whose
   capacitance depends on its voltage, a leaky capacitor: i = C dv + G v);
 - ``integral``: v = f(i) di + g(i).
 
@@ -20,6 +21,8 @@ most promising component only: a neural law fitted to the data is distilled into
 readable law over that basis (:func:`distil`), which is fitted and pruned like the others.
 """
 from __future__ import annotations
+
+import re
 
 import numpy as np
 
@@ -50,8 +53,18 @@ def role_of(env: dict) -> str:
     return best if fits[best] > 0.99 else "unknown"
 
 
-def families(role: str) -> list[dict]:
-    return [dict(f) for f in FAMILIES[role]]
+def families(role: str, env: dict | None = None) -> list[dict]:
+    """The template specs tried for a component of this role. A law in the rate also gets
+    Coulomb-like friction terms tanh(dv/s), the dissipative element's classic non-polynomial
+    part, at two fixed scales (a twentieth and a quarter of the rate's nominal span: the law
+    stays linear in its parameters, and pruning keeps what the data need; the shape stage
+    fits the scale itself)."""
+    out = [dict(f) for f in FAMILIES[role]]
+    span = float(np.max(np.abs(env["dv"]))) if env is not None and np.any(env["dv"]) else 1.0
+    for f in out:
+        if f.get("family") == "rate":
+            f["rhs"] = [*f["rhs"], f"tanh(dv/{0.05 * span:.3g})", f"tanh(dv/{0.25 * span:.3g})"]
+    return out
 
 
 _SHAPES = ("tanh({x}/{s})", "sinh({x}/{s})", "{x}/sqrt(1 + ({x}/{s})^2)", "exp({x}/{s}) - 1")
@@ -107,10 +120,22 @@ def _fit_scales(chosen, x, f, name):
 
 def distil(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3, tol: float = 2e-3,
            refine_best: int = 6) -> tuple[list[str], np.ndarray]:
-    """A sparse law f(x) ~ sum_k c_k phi_k(x) over :func:`basis`: the fewest terms that follow the
-    curve within ``tol`` of its range (subsets of one, then two, ... ``max_terms`` terms; the
-    ``refine_best`` best of each size by least squares at the grid's scales get their shapes'
-    scales fitted), else the best of ``max_terms`` terms. Returns (terms, c)."""
+    """The sparsest law of :func:`distillations` that follows the curve within ``tol`` of its
+    range (the last, richest one if none does). Returns (terms with their scales' values, c)."""
+    laws = distillations(x, f, name, max_terms, refine_best)
+    scale = float(np.ptp(np.asarray(f, float)[np.isfinite(f)])) or 1.0
+    law = next((law for law in laws if law["err"] < tol * scale), laws[-1])
+    text = lambda t: re.sub(r"\bs\d+\b", lambda m: f"{law['scales'][m.group(0)]:.4g}", t)
+    return [text(t) for t in law["terms"]], law["c"]
+
+
+def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
+                  refine_best: int = 6) -> list[tuple[list[str], np.ndarray, float]]:
+    """Sparse laws f(x) ~ sum_k c_k phi_k(x) over :func:`basis`, the best of one, two, ...
+    ``max_terms`` terms: every subset is fitted by least squares at the grid's scales, the
+    ``refine_best`` best of each size get their shapes' scales fitted. Returns (terms, c, rms
+    error) per size; a simulation fit of each then decides (the curve is only a network's
+    reading of the data). Each law is a dict: terms (scales named s1, s2, ...), scales, c, err."""
     import heapq
     from itertools import combinations
 
@@ -123,13 +148,14 @@ def distil(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3, tol: flo
     Phi = Phi / np.where(np.abs(Phi).max(axis=0) > 0, np.abs(Phi).max(axis=0), 1.0)   # conditioning
     scale = float(np.ptp(f)) or 1.0
     span = float(np.max(np.abs(x))) or 1.0
-    best = (np.inf, [], {}, None)
+    out = []
     for size in range(1, max_terms + 1):
         errs = []
         for combo in combinations(usable, size):
             A = Phi[:, combo]
             c, *_ = np.linalg.lstsq(A, f, rcond=None)
             errs.append((float(np.sqrt(np.mean((f - A @ c) ** 2))), combo))
+        best = (np.inf, None)
         for _, combo in heapq.nsmallest(refine_best, errs):
             chosen = [terms[k] for k in combo]
             err, scales, c = _fit_scales(chosen, x, f, name)
@@ -137,8 +163,21 @@ def distil(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3, tol: flo
             # beyond the visited span (a tanh become linear) a large one
             score = err / scale + 1e-4 * len(scales) + sum(s > 20 * span for s in scales.values())
             if score < best[0]:
-                best = (score, chosen, scales, c)
-        if best[0] < tol:
-            break
-    _, chosen, scales, c = best
-    return [_text(t, name, scales.get(k)) for k, t in enumerate(chosen)], c
+                best = (score, _law(chosen, name, scales, c, err))
+        if best[1] is not None:
+            out.append(best[1])
+    return out
+
+
+def _law(chosen, name: str, scales: dict, c, err: float) -> dict:
+    """A distilled law: its terms with named scales (s1, s2, ...: fitted further by simulation),
+    their values, the coefficients and the curve error."""
+    terms, named = [], {}
+    for k, (pattern, s) in enumerate(chosen):
+        if s is None:
+            terms.append(pattern.format(x=name))
+            continue
+        key = f"s{len(named) + 1}"
+        named[key] = float(scales.get(k, s))
+        terms.append(pattern.format(x=name, s=key))
+    return {"terms": terms, "scales": named, "c": np.asarray(c, float), "err": err}

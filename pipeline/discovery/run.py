@@ -31,7 +31,7 @@ from ..errors import ConfigError, MclError, ModelicaError
 from ..executor import TaskFailed
 from ..stats import criterion as criterion_of, noise_estimate, rms, rss as rss_of
 from ..swap import class_name_for
-from .families import distil, families, role_of
+from .families import distillations, families, role_of
 from .words import in_words, words
 
 LEARNED_PACKAGE = "Learned"
@@ -75,7 +75,7 @@ def law_env(v: np.ndarray, i: np.ndarray, t: np.ndarray) -> dict:
 
 
 def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str,
-                  give_up=None, prune: bool = True):
+                  give_up=None, prune: bool = True, n_terms: int | None = None):
     """LM fit of the template parameters, then backward elimination of terms (w1 anchors the
     scale; ``prune=False`` keeps every parameter: a network has no terms to remove). ``give_up``
     (see :class:`mcl.fit.LevenbergMarquardt`) stops a candidate that cannot win."""
@@ -109,7 +109,8 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     sims, path = res.simulations, []
     score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
-    while prune and active.sum() > 2 and not res.message.startswith("stopped"):
+    n_terms = n_terms or len(names)
+    while prune and active[:n_terms].sum() > 2 and not res.message.startswith("stopped"):
         sim = problem.simulate(w[active], gradient=True)
         sims += 1
         if not sim.ok:
@@ -118,6 +119,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         H_inv = np.linalg.pinv(S.T @ S)
         idx = np.flatnonzero(active)[1:]
         est = w[idx] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
+        est = np.where(idx < (n_terms or len(names)), est, np.inf)  # a scale is not a term
         k = idx[int(np.argmin(est))]
         trial = active.copy()
         trial[k] = False
@@ -233,6 +235,10 @@ def _screen_task(ctx, item):
             "predicted_rss": float(max(r @ r - gain, 0.0))}
 
 
+def names_of(tm) -> list[str]:
+    return tm.parameter_names
+
+
 def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
     from ..api import simulate
@@ -241,13 +247,16 @@ def _candidate_task(ctx, item):
     comp_name, _, tpl_spec = item
     template, w0, tm, model = _candidate_model(ctx, item)
     comp = ctx.graph.components[comp_name]
-    if ctx.method == "full-discretisation" and getattr(template, "terms", None):
+    if ctx.method == "full-discretisation" and item[1] < NEURAL_INDEX and getattr(template, "terms", None):
         w, active, rss, score, sims, path, visited = refine_candidate(model, train, tm.parameter_names, w0,
                                                                       criterion, template)
     else:
         w, active, rss, score, sims, path, visited = fit_and_prune(
-            model, train, tm.parameter_names, w0, ctx.budget, criterion, give_up=ctx.give_up,
-            prune=bool(getattr(template, "terms", None)))
+            # a network has many parameters and one chance: it gets three fits' budget
+            model, train, tm.parameter_names, w0, ctx.budget * (3 if item[1] == NEURAL_INDEX else 1), criterion,
+            # the shape stage refines the best law: it is not stopped for being behind it
+            give_up=None if item[1] >= NEURAL_INDEX else ctx.give_up,
+            prune=bool(getattr(template, "terms", None)), n_terms=len(getattr(template, "terms", names_of(tm))))
     params = dict(zip(tm.parameter_names, w))
     out = {"component": comp_name, "class": comp.cls, "template": tpl_spec,
            "family": getattr(template, "family", "") or template.name, "law_variable": template.law_variable,
@@ -339,27 +348,34 @@ def _shapes(fit: _Batch, cands: list[dict], sigma: float) -> list[dict]:
     fitted and pruned like any candidate. Skipped when the polynomial law already fits to the
     noise, or when it is not a law of one variable."""
     done = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
-    if not done:
+    if not done or (done[0].get("train_rms") is not None and done[0]["train_rms"] < 1.2 * sigma):
         return []
-    best = done[0]
-    var = best.get("law_variable")
-    if var not in ("v", "dv") or (best.get("train_rms") is not None and best["train_rms"] < 1.2 * sigma):
+    # the best law of one variable (a storage law in v and dv has no single curve to shape)
+    one = [c for c in done if c.get("family") in ("static", "rate") and c.get("law_variable") in ("v", "dv")]
+    if not one:
         return []
+    best, var = one[0], one[0]["law_variable"]
     log.info("      shape of %s's law in %s: neural fit, then a sparse law distilled from it", best["component"], var)
-    neural = fit([(best["component"], NEURAL_INDEX, {"name": "neural", "hidden": 3, "x": var, "coupled": False})])
+    from ..api import registry
+
+    # the network starts as the best polynomial law (fitted to its curve), so it only has to improve
+    poly = registry().template(best["template"])
+    xs = np.linspace(*(best.get("law_range") or [-1.0, 1.0]), 201)
+    spec = {"name": "neural", "hidden": 4, "x": var, "coupled": False}
+    start = registry().template(spec).fit_curve(xs, poly.curve(np.asarray(best["w"]) * np.asarray(best["active"]), xs))
+    neural = fit([(best["component"], NEURAL_INDEX, {**spec, "start": start.tolist()})])
     out = list(neural)
     n = neural[0]
     if n.get("score") is None or not n.get("law_range"):
         return out
-    from ..api import registry
-
     template = registry().template(n["template"])
     xs = np.linspace(*n["law_range"], 201)
-    terms, c = distil(xs, template.curve(np.asarray(n["w"]), xs), var)
-    if not terms:
-        return out
-    spec = {"name": "polynomial", "lhs": ["i"], "rhs": terms, "start": [1.0, *map(float, c)], "family": "shape"}
-    return out + fit([(best["component"], SHAPE_INDEX, spec)])
+    laws = distillations(xs, template.curve(np.asarray(n["w"]), xs), var)
+    items = [(best["component"], SHAPE_INDEX + k,
+              {"name": "polynomial", "lhs": ["i"], "rhs": law["terms"], "scales": law["scales"],
+               "start": [1.0, *map(float, law["c"])], "family": "shape"})
+             for k, law in enumerate(laws)]
+    return out + fit(items)
 
 
 def _note_best(path: Path, result: dict, rundir) -> None:
@@ -399,10 +415,32 @@ def _template_name(spec) -> str:
     return spec if isinstance(spec, str) else spec.get("name", "?")
 
 
+def _screen(items, models, reg, spec, ctx) -> list[dict]:
+    """The screening prediction of every item. A law family chosen automatically that does not
+    fit the component's place (a storage law across a voltage source needs du/dt) is not
+    applicable there: recorded as such, not as a failure."""
+    auto = [isinstance(it[2], dict) and "family" in it[2] and isinstance(models.get(it[:2]), Exception)
+            for it in items]
+    run = [it for it, a in zip(items, auto) if not a]
+    with reg.executor(spec.executor) as ex:
+        res = iter(ex.map(_screen_task, run, context=ctx, timeout=3600, label="screening") if run else [])
+    out = []
+    for it, a in zip(items, auto):
+        if a:
+            out.append({"component": it[0], "template": it[2], "predicted_rss": None,
+                        "not_applicable": str(models[it[:2]])})
+            continue
+        r = next(res)
+        out.append(r if not isinstance(r, TaskFailed) else
+                   {"component": it[0], "template": it[2], "predicted_rss": None, "reason": r.reason})
+    return out
+
+
 def _failures(screening: list, cands: list) -> list[dict]:
     """Every candidate that could not be evaluated, with the stage and the reason."""
     out = [{"component": s["component"], "template": s["template"], "stage": "screening",
-            "reason": s.get("reason", "failed")} for s in screening if s.get("predicted_rss") is None]
+            "reason": s.get("reason", "failed")} for s in screening
+           if s.get("predicted_rss") is None and not s.get("not_applicable")]
     out += [{"component": c["component"], "template": c["template"], "stage": "fitting",
              "reason": c["failed"]} for c in cands if c.get("failed")]
     return out
@@ -475,20 +513,16 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         roles = {c.name: role_of(nominal_probe[c.name]) for c in comps}
         report["roles"] = roles
         items = [(c.name, k, t) for c in comps
-                 for k, t in enumerate(spec.templates or families(roles[c.name]))]
+                 for k, t in enumerate(spec.templates or families(roles[c.name], nominal_probe[c.name]))]
         screen_file = part / "screening.json"
         models = {}
         if screen_file.exists():
             screening = json.loads(screen_file.read_text())
         else:
-            log.info("[2/5] screening %d candidate(s): one linearised step each", len(items))
+            log.info("[2/5] screening %d candidate(s) (components x law families): one linearised step each",
+                     len(items))
             models = build_candidates(graph, train, nominal_probe, items, part / "work", spec.libraries)
-            with reg.executor(spec.executor) as ex:
-                res = ex.map(_screen_task, items, context=context(graph, train, validate, spec, part, models),
-                             timeout=3600, label="screening")
-            screening = [r if not isinstance(r, TaskFailed) else
-                         {"component": it[0], "template": it[2], "predicted_rss": None, "reason": r.reason}
-                         for it, r in zip(items, res)]
+            screening = _screen(items, models, reg, spec, context(graph, train, validate, spec, part, models))
             rundir.write_json("screening.json", screening)
         keep = promising(screening, spec.screen)
         for k, s_ in enumerate(screening):
@@ -577,8 +611,9 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nomi
     ext_dir = part / "extended"
     tm = swap_component(graph, comp.name, template, ext_dir, w=w, package=LEARNED_PACKAGE)
     log.info("[4/5] extended model: compiling to an FMU")
-    ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries).with_outputs(train.names)
-    fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")
+    ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
+    fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")   # the model's own outputs
+    ext = ext.with_outputs(train.names)
     res = simulate(ext, train)
     y_ext = res.outputs[:, [ext.output_names.index(o) for o in outputs]] if res.ok else None
     cause = {"component": comp.name, "class": comp.cls, "effect": effect,

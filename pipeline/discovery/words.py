@@ -50,12 +50,13 @@ def words(comp) -> Words:
     return Words(q(across), rate_name, q(flow), flipped, defs)
 
 
-def parity(term) -> int:
+def parity(term, constants: dict | None = None) -> int:
     """+1 for an even term, -1 for an odd one, 0 for neither (checked numerically on v, i, dv, di
-    changing sign together: the orientation flip)."""
+    changing sign together: the orientation flip; ``constants``: the values of scale names)."""
     rng = np.random.default_rng(1)
     env = {k: rng.uniform(0.1, 2.0, 16) for k in ("v", "i", "dv", "di")}
-    neg = {k: -x for k, x in env.items()}
+    neg = {**(constants or {}), **{k: -x for k, x in env.items()}}
+    env = {**(constants or {}), **env}
     with np.errstate(all="ignore"):
         a, b = np.asarray(term.value(env), float), np.asarray(term.value(neg), float)
     if np.allclose(a, b, rtol=1e-9, atol=1e-12):
@@ -74,10 +75,11 @@ def in_words(template, w, comp, digits: int = 4) -> str:
         return _renamed(template.equation(w, across=wd.across, flow=wd.flow, digits=digits), wd)
     # v = -across', i = -flow': an even term keeps its value, an odd one changes sign; with a
     # term that is neither, the law is written in the negated variables
-    signs = np.array([parity(t) for t in template.terms])
+    signs = np.array([parity(t, getattr(template, "scales", None)) for t in template.terms])
     if (signs == 0).any():
         return _renamed(template.equation(w, across=f"(-{wd.across})", flow=f"(-{wd.flow})", digits=digits), wd)
-    w = np.asarray(w, float) * signs * signs[0]
+    w = np.asarray(w, float).copy()
+    w[:len(signs)] *= signs * signs[0]
     return _renamed(template.equation(w, across=wd.across, flow=wd.flow, digits=digits), wd)
 
 
