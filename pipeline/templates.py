@@ -448,25 +448,26 @@ class NeuralTemplate(Template):
     def start_from(self, env: dict) -> np.ndarray:
         """w reproducing the law observed in ``env`` (c = 1).
 
-        Uncoupled: the linear term g is the law's slope and the units are silent (a_j = 0) with
-        their centres spread over the visited range (-e_j/b_j at -1/2, 0, +1/2 of the largest
-        |x|, width 1/b_j a third of it), so the first simulation is the nominal model and every
-        unit can bend the law where the data go. Coupled: the network fitted by least squares.
+        The law's slope k = i/x is carried by the linear term g (uncoupled) or by the first unit
+        in its linear range (coupled: b_1 = 0.3/max|x|, a_1 = k/b_1, within 3% of linear); the
+        other units are silent (a_j = 0) with their centres spread over the visited range
+        (-e_j/b_j at -1/2 ... +1/2 of the largest |x|, width 1/b_j a third of it). So the first
+        simulation is (nearly) the nominal model and every unit can bend the law where the
+        data go.
         """
-        from scipy.optimize import least_squares
-
         x, i = np.asarray(env[self.x], float), np.asarray(env["i"], float)
-        if not self.coupled:
-            g = float(x @ i / (x @ x)) if np.any(x) else 0.0
-            span = float(np.max(np.abs(x))) or 1.0
-            centres = np.linspace(-0.5, 0.5, self.hidden) * span if self.hidden > 1 else np.zeros(1)
-            b = 3.0 / span
-            units = np.column_stack([np.zeros(self.hidden), np.full(self.hidden, b), -b * centres])
-            return np.concatenate([[1.0, g], units.ravel()])
-        w0 = self.start()
-        scale = float(np.std(i)) or 1.0
-        fun = lambda r: self.residual(np.concatenate([[1.0], r]), env) / scale
-        return np.concatenate([[1.0], least_squares(fun, w0[1:], max_nfev=200 * len(w0)).x])
+        k = float(x @ i / (x @ x)) if np.any(x) else 0.0
+        span = float(np.max(np.abs(x))) or 1.0
+        centres = np.linspace(-0.5, 0.5, self.hidden) * span if self.hidden > 1 else np.zeros(1)
+        b = np.full(self.hidden, 3.0 / span)
+        a = np.zeros(self.hidden)
+        if self.coupled:
+            centres[0], b[0] = 0.0, 0.3 / span
+            a[0] = k / b[0]
+            units = np.column_stack([a, b, np.zeros(self.hidden), -b * centres])
+            return np.concatenate([[1.0], units.ravel()])
+        units = np.column_stack([a, b, -b * centres])
+        return np.concatenate([[1.0, k], units.ravel()])
 
     def fit_curve(self, xs: np.ndarray, fs: np.ndarray, tries: int = 4) -> np.ndarray:
         """w (c = 1) of the uncoupled network closest to the curve i = f(x) given at ``xs``: least

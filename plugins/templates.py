@@ -5,7 +5,9 @@ from mcl.templates import MemoryTemplate, NeuralTemplate, PolynomialTemplate
 _TERMS = {"type": "array", "minItems": 1, "items": {"type": "string", "minLength": 1}}
 _POLY = {"type": "object", "additionalProperties": False, "properties": {
     "lhs": _TERMS, "rhs": _TERMS, "degree": {"type": "integer", "minimum": 1, "maximum": 9},
-    "start": {"type": "array", "items": {"type": "number"}}, "prefix": {"type": "string", "pattern": "^[A-Za-z_]\\w*$"}}}
+    "start": {"type": "array", "items": {"type": "number"}}, "prefix": {"type": "string", "pattern": "^[A-Za-z_]\\w*$"},
+    "scales": {"type": "object", "additionalProperties": {"type": "number"}},
+    "family": {"type": "string"}}}
 
 
 @hookimpl
@@ -21,5 +23,5 @@ def mcl_option_schemas():
         "neural": {"type": "object", "additionalProperties": False, "properties": {
             "hidden": {"type": "integer", "minimum": 1, "maximum": 64},
             "start": {"type": "array", "items": {"type": "number"}},
-            "seed": {"type": "integer"}}},
+            "seed": {"type": "integer"}, "x": {"enum": ["v", "dv"]}, "coupled": {"type": "boolean"}}},
     }}

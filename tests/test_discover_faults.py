@@ -283,3 +283,27 @@ def test_no_cause_when_the_best_candidate_does_not_help_on_validation(tmp_path):
     assert report["misfit"]["significant"]
     assert report["cause"] is None and report.get("no_cause")
     assert report["candidates"]          # the best candidates are still listed
+
+
+def test_every_builtin_template_runs_through_mcl_run(tmp_path):
+    """Pinned templates: the neural one (an equation in v and i, solved for i) and the memory
+    one go through the same run as the families do."""
+    from mcl.api import registry
+
+    f = lambda v: 0.5 * v + 0.6 * v**3
+    slider_data(tmp_path / "train.csv", 17, f)
+    slider_data(tmp_path / "validate.csv", 18, f)
+    (tmp_path / "Faults.mo").write_text(SYSTEMS)
+    specs = {"polynomial": "{name: polynomial, lhs: [i], rhs: [dv, dv^3]}",
+             "memory": "{name: memory, lhs: [i], rhs: [dv, dv^3]}",
+             "neural": "{name: neural, hidden: 2, x: dv}"}
+    assert set(specs) == set(registry().templates)          # a new built-in needs a line here
+    for name, spec in specs.items():
+        (tmp_path / "run.yaml").write_text(
+            f"model:\n  sources: [Faults.mo, {LIB}]\n  name: Faults.Slider\n"
+            f"data:\n  train: train.csv\n  validate: validate.csv\nunknown: D\noutput: out-{name}\n"
+            f"templates:\n  - {spec}\n")
+        assert main(["run", str(tmp_path / "run.yaml")]) == 0, name
+        report = json.loads((tmp_path / f"out-{name}/report.json").read_text())
+        assert report["cause"]["component"] == "D", name
+        assert_gain(report, 0.5)

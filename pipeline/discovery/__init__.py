@@ -146,11 +146,29 @@ class Discovery:
         else:
             lines.append("cause: none (the model explains the data to the noise level)"
                          if not m["significant"] else
-                         "cause: none found (no candidate explains the data better than the model)")
+                         f"cause: no convincing cause ({self.report_.get('no_cause', 'no candidate explains the data')})")
+        lines += self._tried()
         failed = self.report_.get("failed") or []
         if failed:
             lines.append(f"warning: {len(failed)} candidate(s) could not be evaluated: " + "; ".join(
                 f"{f['component']} ({f['stage']}: {f['reason']})"[:160] for f in failed))
+        return lines
+
+    def _tried(self) -> list[str]:
+        """What was tried (components x law families) and the runners-up with their scores."""
+        screening = self.report_.get("screening") or []
+        if not screening:
+            return []
+        fam = lambda t: t.get("family") or t.get("name", "?") if isinstance(t, dict) else str(t)
+        comps = sorted({s["component"] for s in screening})
+        lines = [f"tried: {len(screening)} law(s) on {len(comps)} component(s): " + "; ".join(
+            f"{c} ({', '.join(fam(s['template']) for s in screening if s['component'] == c)})" for c in comps)]
+        ranked = [c for c in self.report_.get("candidates", []) if c.get("score") is not None]
+        crit = (self.cause_ or {}).get("evidence", {}).get("criterion", "").upper() or "score"
+        if ranked:
+            lines.append("ranking: " + "; ".join(
+                f"{c['component']} {c.get('family', '')} {crit} {c['score']:.1f}" for c in ranked[:4])
+                + (f"; nominal {self.report_['nominal_score']:.1f}" if "nominal_score" in self.report_ else ""))
         return lines
 
     def __str__(self) -> str:

@@ -496,10 +496,14 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
               "software": software_versions(), "inputs": fingerprint or {}}
     log.info("      residual RMS %.4g vs noise %.4g: %s", train_rms0, sigma,
              "significant" if significant else "not significant")
-    val0 = None
+    from ..report import misfit_in_time
+
+    report["misfit"]["where"] = misfit_in_time(train.time, resid, sigma) if significant else []
+    val0, val_y = None, None
     if validate is not None:
         sv = simulate(nominal, validate)
         val0 = rms(residual(validate, nominal, sv, outputs)) if sv.ok else None
+        val_y = [sv.outputs[:, [nominal.output_names.index(o) for o in outputs]] if sv.ok else None, None]
     extended_y = None
     if significant:
         comps = [c for c in graph.two_connector_components() if not c.inputs]
@@ -546,7 +550,8 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         report["nominal_score"] = nominal_score
         ranked = [c for c in ranked if c["score"] < nominal_score]
         if not ranked:
-            report["no_cause"] = "no candidate explains the training data better than the nominal model"
+            report["no_cause"] = ("no candidate could be evaluated" if not any(c.get("score") is not None for c in cands)
+                                  else "no candidate explains the training data better than the nominal model")
         elif val0 is not None and not _helps(ranked[0].get("validation_rms"), val0):
             best = ranked[0]
             report["no_cause"] = (f"the best candidate, {best['component']} ({_template_name(best['template'])}), "
@@ -557,8 +562,10 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
             # the component's evidence: its lead over the best law of any other component
             others = [c["score"] for c in ranked if c["component"] != best["component"]]
             delta = min(others + [nominal_score]) - best["score"]
-            report["cause"], extended_y = _explain(best, delta, graph, spec, part, train, validate,
-                                                   outputs, reg, nominal_probe)
+            report["cause"], extended_y, ext_val = _explain(best, delta, graph, spec, part, train, validate,
+                                                            outputs, reg, nominal_probe)
+            if val_y is not None:
+                val_y[1] = ext_val
             _weigh_unevaluated(report["cause"]["evidence"], best, cands, screening, spec, n_obs)
             report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),
                               "validation_rms_before": val0, "validation_rms_after": best.get("validation_rms")}
@@ -571,7 +578,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     log.info("[5/5] report")
     from ..report import write_report
 
-    write_report(part, report, train, outputs, y0, extended_y, **spec.report)
+    write_report(part, report, train, outputs, y0, extended_y, validate=validate, validation=val_y, **spec.report)
     rundir.finish()
     log.info("wrote %s/report.html and report.json", spec.output)
     return report
@@ -614,8 +621,9 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nomi
     ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
     fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")   # the model's own outputs
     ext = ext.with_outputs(train.names)
-    res = simulate(ext, train)
-    y_ext = res.outputs[:, [ext.output_names.index(o) for o in outputs]] if res.ok else None
+    pick = lambda r: r.outputs[:, [ext.output_names.index(o) for o in outputs]] if r.ok else None
+    y_ext = pick(simulate(ext, train))
+    y_val = pick(simulate(ext, validate)) if validate is not None else None
     cause = {"component": comp.name, "class": comp.cls, "effect": effect,
              "evidence": {"criterion": spec.criterion, "delta_to_next": delta,
                           "strength": criterion_of(spec.criterion).strength(delta)},
@@ -635,7 +643,7 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nomi
              "learned_class": class_name_for(comp.name, template)}
     if spec.second:
         cause["second_configuration"] = _second(spec, template, w, comp.name, part)
-    return cause, y_ext
+    return cause, y_ext, y_val
 
 
 def _second(spec, template, w, component: str, part: Path) -> dict:
