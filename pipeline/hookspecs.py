@@ -61,6 +61,12 @@ def mcl_executors() -> list[type]:
 
 
 @hookspec
+def mcl_fitters() -> list[type]:
+    """Return candidate fitter classes (subclasses of
+    :class:`mcl.discovery.fitters.CandidateFitter`), chosen by ``refinement: {method: name}``."""
+
+
+@hookspec
 def mcl_prioritisers() -> list[type]:
     """Register prioritiser classes for backward elimination (subclasses of
     :class:`mcl.sparsify.Prioritiser`): which parameters may be removed next, in stages.

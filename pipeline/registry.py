@@ -28,6 +28,7 @@ DEFAULT_PLUGINS = (
     "mcl.plugins.feasibility",
     "mcl.plugins.executors",
     "mcl.plugins.prioritisers",
+    "mcl.plugins.fitters",
 )
 ENV_DISABLE = "MCL_DISABLE_EXTERNAL_PLUGINS"
 ENV_ALLOW = "MCL_PLUGINS"
@@ -112,6 +113,7 @@ class Registry:
         self.feasibility_models = _named(self.pm.hook.mcl_feasibility_models(), "feasibility model")
         self.executors = _named(self.pm.hook.mcl_executors(), "executor")
         self.prioritisers = _named(self.pm.hook.mcl_prioritisers(), "prioritiser")
+        self.fitters = _named(self.pm.hook.mcl_fitters(), "fitter")
         self.option_schemas: dict[str, dict[str, dict]] = {}
         for contribution in reversed(self.pm.hook.mcl_option_schemas()):  # later plugins win
             for section, kinds in (contribution or {}).items():
@@ -145,6 +147,13 @@ class Registry:
         from .templates import make_template
 
         return make_template(self.templates, spec)
+
+    def fitter(self, name: str):
+        """A candidate fitter by name (``refinement: {method: name}``)."""
+        if name not in self.fitters:
+            raise ConfigError(f"no candidate fitter named '{name}'{did_you_mean(name, self.fitters)} "
+                              f"(installed: {', '.join(self.fitters)})")
+        return self.fitters[name]()
 
     def feasibility_model(self, spec="logistic"):
         spec = {"name": spec} if isinstance(spec, str) else dict(spec)

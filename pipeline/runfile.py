@@ -11,7 +11,8 @@
     output: out/plant            # the run directory
 
 Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations`` per
-fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully),
+fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully;
+``early_stop: false`` fits them all even where screening or a fit shows they cannot win),
 ``refinement`` (``criterion``: bic or aic; ``method``: simulation, the default, or
 full-discretisation for paper 004's states-and-parameters least squares), ``executor``
 (``kind`` and that kind's options), ``second`` (``model``/``data`` of another configuration where
@@ -35,7 +36,7 @@ from .registry import did_you_mean
 #: no ``templates`` in a run file: discovery picks law families by each component's role
 DEFAULT_TEMPLATES = None
 CRITERIA = ("bic", "aic")
-METHODS = ("simulation", "full-discretisation")
+METHODS = ("simulation", "full-discretisation")   # the built-in fitters (plugins may add more)
 
 _PATH = {"type": "string", "minLength": 1}
 _PATHS = {"anyOf": [_PATH, {"type": "array", "items": _PATH}]}
@@ -58,9 +59,10 @@ def schema(option_schemas: dict, kinds: dict) -> dict:
                 "name", kinds["template"], option_schemas.get("template", {}), allow_string=True)},
             "fitting": {"type": "object", "additionalProperties": False, "properties": {
                 "max_simulations": {"type": "integer", "minimum": 5},
-                "screen": {"type": "integer", "minimum": 1}}},
+                "screen": {"type": "integer", "minimum": 1},
+                "early_stop": {"type": "boolean"}}},
             "refinement": {"type": "object", "additionalProperties": False, "properties": {
-                "criterion": {"enum": list(CRITERIA)}, "method": {"enum": list(METHODS)}}},
+                "criterion": {"enum": list(CRITERIA)}, "method": {"enum": kinds.get("fitter", list(METHODS))}}},
             "executor": _kind_schema("kind", kinds["executor"], option_schemas.get("executor", {})),
             "second": {"type": "object", "additionalProperties": False, "required": ["model", "data"],
                        "properties": {"model": _MODEL, "data": _PATH, "component": _NAME}},
@@ -96,6 +98,7 @@ class RunSpec:
     templates: list | None = None      # None: law families chosen per component (discovery.families)
     max_simulations: int = 60
     screen: int = 3
+    early_stop: bool = True     # drop candidates screening says cannot compete; stop hopeless fits
     criterion: str = "bic"
     refinement_method: str = "simulation"
     executor: dict = field(default_factory=lambda: {"kind": "local"})
@@ -260,7 +263,7 @@ def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
     raw, lines = _read_yaml(path)
     reg = registry or default_registry()
     problems = _Problems(path, lines)
-    kinds = {"template": list(reg.templates), "executor": list(reg.executors)}
+    kinds = {"template": list(reg.templates), "executor": list(reg.executors), "fitter": list(reg.fitters)}
     validator = jsonschema.Draft202012Validator(schema(reg.option_schemas, kinds))
     for error in sorted(validator.iter_errors(raw), key=lambda e: list(map(str, e.absolute_path))):
         _describe(error, problems)
@@ -273,6 +276,7 @@ def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
                    validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
                    output=output, templates=raw.get("templates", DEFAULT_TEMPLATES),
                    max_simulations=fitting.get("max_simulations", 60), screen=fitting.get("screen", 3),
+                   early_stop=fitting.get("early_stop", True),
                    criterion=refinement.get("criterion", "bic"),
                    refinement_method=refinement.get("method", "simulation"),
                    executor=dict(raw.get("executor") or {"kind": "local"}), second=raw.get("second"),

@@ -231,9 +231,6 @@ def test_sinh_shunt_is_distilled_from_a_neural_law(tmp_path):
 
 def test_outputs_at_two_rates(tmp_path):
     # y1 logged at a quarter of the rate of y2 (blank cells); the fault is a cubic in R2
-    law = lambda v2, i2: i2 + 0.0 * v2
-    rhs_r2 = None  # noqa: F841 - the truth below changes R2's law, not C2's
-
     def data(path, seed):
         rng = np.random.default_rng(seed)
         t = np.linspace(0, 30, 1201)
@@ -250,7 +247,6 @@ def test_outputs_at_two_rates(tmp_path):
         y1[np.arange(len(t)) % 4 != 0] = np.nan
         save(path, {"time": t, "u": u(t), "y1": y1, "y2": y2})
 
-    del law
     data(tmp_path / "train.csv", 11)
     data(tmp_path / "validate.csv", 12)
     report = discover(tmp_path, "Ladder")

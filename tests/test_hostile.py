@@ -15,7 +15,7 @@ from helpers import LIB
 from mcl import hookimpl
 from mcl.cli import main
 from mcl.errors import DataError
-from mcl.executor import LocalExecutor, TaskFailed
+from mcl.executor import LocalExecutor
 from mcl.compile.fmu.archive import check_archive
 from mcl.registry import Registry
 

@@ -25,7 +25,7 @@ class Discovery:
 
     Parameters mirror the run file: ``model`` (class name), ``sources`` (.mo files or package
     directories; may be empty for a class on the library path), ``unknown`` ("auto" or a
-    component name), ``templates``, ``libraries``, ``max_simulations``, ``screen``,
+    component name), ``templates``, ``libraries``, ``max_simulations``, ``screen``, ``early_stop``,
     ``criterion`` ("bic"/"aic"), ``refinement`` ("simulation"/"full-discretisation"),
     ``executor`` (a kind or ``{kind: ..., options}``), ``second`` (another configuration),
     ``output`` (run directory; a temporary one by default), ``force``, ``verbose``.
@@ -37,8 +37,10 @@ class Discovery:
     def __init__(self, model: str, sources=(), unknown: str = "auto", templates=None, libraries=(),
                  max_simulations: int = 60, screen: int = 3, criterion: str = "bic",
                  refinement: str = "simulation", executor="local", second: dict | None = None,
-                 report: dict | None = None, output=None, force: bool = False, verbose: bool = True):
+                 report: dict | None = None, output=None, force: bool = False, verbose: bool = True,
+                 early_stop: bool = True):
         self.model, self.sources, self.unknown = model, sources, unknown
+        self.early_stop = early_stop
         self.templates, self.libraries = templates, libraries
         self.max_simulations, self.screen, self.criterion = max_simulations, screen, criterion
         self.refinement, self.executor, self.second = refinement, executor, second
@@ -49,7 +51,7 @@ class Discovery:
     def from_spec(cls, spec: RunSpec, force: bool = False, verbose: bool = True) -> "Discovery":
         self = cls(spec.model_name, spec.sources, spec.unknown, spec.templates, spec.libraries,
                    spec.max_simulations, spec.screen, spec.criterion, spec.refinement_method,
-                   spec.executor, spec.second, spec.report, spec.output, force, verbose)
+                   spec.executor, spec.second, spec.report, spec.output, force, verbose, spec.early_stop)
         self._spec = spec
         return self
 
@@ -70,7 +72,8 @@ class Discovery:
         return RunSpec(path=None, sources=as_paths(self.sources), model_name=self.model, train=None,
                        validate=None, unknown=self.unknown, output=output,
                        templates=list(self.templates) if self.templates else None,
-                       max_simulations=self.max_simulations, screen=self.screen, criterion=self.criterion,
+                       max_simulations=self.max_simulations, screen=self.screen, early_stop=self.early_stop,
+                       criterion=self.criterion,
                        refinement_method=self.refinement, executor=executor, second=self.second,
                        report=dict(self.report_options or {}), libraries=as_paths(self.libraries))
 
@@ -93,13 +96,12 @@ class Discovery:
     def _check(self, spec: RunSpec) -> None:
         """The options an API user gives, checked like a run file's (kinds, templates)."""
         from ..api import registry
-        from ..runfile import CRITERIA, METHODS
+        from ..runfile import CRITERIA
 
         reg = registry()
         if spec.criterion not in CRITERIA:
             raise ConfigError(f"criterion '{spec.criterion}': choose one of {', '.join(CRITERIA)}")
-        if spec.refinement_method not in METHODS:
-            raise ConfigError(f"refinement '{spec.refinement_method}': choose one of {', '.join(METHODS)}")
+        reg.fitter(spec.refinement_method)
         reg.executor_class(spec.executor)
         for t in spec.templates or []:
             reg.template(t)

@@ -30,27 +30,12 @@ from ..progress import log
 from ..errors import ConfigError, MclError, ModelicaError
 from ..executor import TaskFailed
 from ..stats import criterion as criterion_of, noise_estimate, rms, rss as rss_of
+from .fitters import FIT_OPTIONS, residual
 from ..swap import class_name_for
 from .families import distillations, families, role_of
 from .words import in_words, words
 
 LEARNED_PACKAGE = "Learned"
-#: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
-#: and measured inputs (linear between samples) make CVODES stop at every kink; 10x looser
-#: tolerances take 3x fewer steps. Scores are computed again at the default tolerances.
-FIT_OPTIONS = {"rtol": 1e-5, "atol": 1e-7}
-#: a fit stops when a step lowers the cost (or is predicted to) by less than this fraction: a
-#: change in RSS of 1e-5 moves a criterion by n 1e-5, far below the differences that rank candidates
-FIT_TOL = 1e-5
-
-
-def residual(data: TimeSeries, model, result, outputs=None) -> np.ndarray:
-    """Measured minus simulated outputs (N, n_outputs), NaN where a value was not measured;
-    ``outputs`` default to every model output the data measures."""
-    outputs = [o for o in model.output_names if o in data.names] if outputs is None else outputs
-    return data.select(outputs).values - result.outputs[:, [model.output_names.index(o) for o in outputs]]
-
-
 def probe(model, result, inputs: TimeSeries, params: dict, names: list[str]) -> np.ndarray:
     """Values of named model variables along a simulation, (N, len(names))."""
     ode = model.ode
@@ -72,92 +57,6 @@ def component_variables(comp) -> tuple[str, str]:
 def law_env(v: np.ndarray, i: np.ndarray, t: np.ndarray) -> dict:
     """A component's law variables along a simulation: v, i and their time derivatives."""
     return {"v": v, "i": i, "dv": np.gradient(v, t), "di": np.gradient(i, t)}
-
-
-def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str,
-                  give_up=None, prune: bool = True, n_terms: int | None = None):
-    """LM fit of the template parameters, then backward elimination of terms (w1 anchors the
-    scale; ``prune=False`` keeps every parameter: a network has no terms to remove). ``give_up``
-    (see :class:`mcl.fit.LevenbergMarquardt`) stops a candidate that cannot win."""
-    from ..fit import FitProblem, LevenbergMarquardt
-
-    score_of = criterion_of(criterion).score
-    n_obs = int(np.isfinite(data.select([o for o in model.output_names if o in data.names]).values).sum())
-    active = np.ones(len(names), bool)
-
-    def fit(active_mask, start):
-        params = [n for n, on in zip(names, active_mask) if on]
-        fixed = {n: 0.0 for n, on in zip(names, active_mask) if not on}
-        problem = FitProblem(model, data, params, fixed=fixed, options=FIT_OPTIONS)
-        res = LevenbergMarquardt(max_simulations=budget, tol=FIT_TOL, give_up=give_up).fit(
-            problem, np.asarray(start)[active_mask])
-        w = np.zeros(len(names))
-        w[active_mask] = res.w
-        rss = res.cost * len(data.time)   # J of eq. (3) is the mean over samples of the RSS
-        return w, rss, problem, res
-
-    visited = []
-
-    def record(problem, active_mask):
-        for e in problem.recorder.evaluations:
-            full = np.zeros(len(names))
-            full[active_mask] = e.w
-            visited.append([*full.tolist(), bool(e.feasible)])
-
-    w, rss, problem, res = fit(active, w0)
-    record(problem, active)
-    sims, path = res.simulations, []
-    score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
-    path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
-    n_terms = n_terms or len(names)
-    while prune and active[:n_terms].sum() > 2 and not res.message.startswith("stopped"):
-        sim = problem.simulate(w[active], gradient=True)
-        sims += 1
-        if not sim.ok:
-            break
-        S = sim.sensitivities[:, problem.idx, :].reshape(-1, int(active.sum()))[:, 1:]
-        H_inv = np.linalg.pinv(S.T @ S)
-        idx = np.flatnonzero(active)[1:]
-        est = w[idx] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
-        est = np.where(idx < (n_terms or len(names)), est, np.inf)  # a scale is not a term
-        k = idx[int(np.argmin(est))]
-        trial = active.copy()
-        trial[k] = False
-        w_t, rss_t, problem_t, res_t = fit(trial, w)
-        record(problem_t, trial)
-        sims += res_t.simulations
-        score_t = score_of(rss_t, n_obs, int(trial.sum()) - 1, len(names) - 1)
-        ok = score_t < score
-        path.append({"removed": names[k], "estimate": float(rss + est.min()), "rss": rss_t,
-                     "score": score_t, "accepted": bool(ok)})
-        if not ok:
-            break
-        active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
-    from ..api import simulate
-
-    final = simulate(model, data, dict(zip(names, w)))    # the score at the default tolerances
-    sims += 1
-    if final.ok:
-        rss = rss_of(residual(data, model, final))
-        score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
-    return w, active, rss, score, sims, path, visited
-
-
-def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: str, template):
-    """Paper 004's refinement (:func:`mcl.refine.refine`), scored like :func:`fit_and_prune`:
-    RSS and BIC/AIC of a simulation of the refined law on the training data."""
-    from ..api import simulate
-    from ..refine import refine
-
-    w, active, path = refine(model, data, names, w0, criterion, terms=getattr(template, "terms", None))
-    res, sims = simulate(model, data, dict(zip(names, w * active))), 2   # and refine's start
-    if not res.ok:   # the refined law does not simulate: keep the start (nominal) law
-        w, active = np.asarray(w0, float), np.ones(len(names), bool)
-        res, sims = simulate(model, data, dict(zip(names, w))), 3
-    r = residual(data, model, res)
-    rss = rss_of(r)
-    score = criterion_of(criterion).score(rss, int(np.isfinite(r).sum()), int(active.sum()) - 1, len(names) - 1)
-    return w * active, active, rss, score, sims, path, []
 
 
 def _candidate_model(ctx, item):
@@ -235,10 +134,6 @@ def _screen_task(ctx, item):
             "predicted_rss": float(max(r @ r - gain, 0.0))}
 
 
-def names_of(tm) -> list[str]:
-    return tm.parameter_names
-
-
 def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
     from ..api import simulate
@@ -247,16 +142,18 @@ def _candidate_task(ctx, item):
     comp_name, _, tpl_spec = item
     template, w0, tm, model = _candidate_model(ctx, item)
     comp = ctx.graph.components[comp_name]
-    if ctx.method == "full-discretisation" and item[1] < NEURAL_INDEX and getattr(template, "terms", None):
-        w, active, rss, score, sims, path, visited = refine_candidate(model, train, tm.parameter_names, w0,
-                                                                      criterion, template)
-    else:
-        w, active, rss, score, sims, path, visited = fit_and_prune(
-            # a network has many parameters and one chance: it gets three fits' budget
-            model, train, tm.parameter_names, w0, ctx.budget * (3 if item[1] == NEURAL_INDEX else 1), criterion,
-            # the shape stage refines the best law: it is not stopped for being behind it
-            give_up=None if item[1] >= NEURAL_INDEX else ctx.give_up,
-            prune=bool(getattr(template, "terms", None)), n_terms=len(getattr(template, "terms", names_of(tm))))
+    from ..api import registry
+
+    # the shape stage (a network, then distilled laws with fitted scales) always simulates: it
+    # refines the best law and is not stopped for being behind it; a network has many
+    # parameters and one chance, so it gets three fits' budget
+    shape = item[1] >= NEURAL_INDEX
+    fitter = registry().fitter("simulation" if shape else ctx.method)
+    fit = fitter.fit(model, train, tm.parameter_names, w0, template, criterion,
+                     ctx.budget * (3 if item[1] == NEURAL_INDEX else 1), give_up=None if shape else ctx.give_up,
+                     prune=bool(getattr(template, "terms", None)))
+    w, active, rss, score, sims, path, visited = (fit.w, fit.active, fit.rss, fit.score, fit.simulations,
+                                                  fit.path, fit.visited)
     params = dict(zip(tm.parameter_names, w))
     out = {"component": comp_name, "class": comp.cls, "template": tpl_spec,
            "family": getattr(template, "family", "") or template.name, "law_variable": template.law_variable,
@@ -295,6 +192,8 @@ class Context:
     def give_up(self, reachable_rss: float) -> bool:
         """A fit stops when even its Gauss-Newton model cannot come within a factor of 10 of the
         RSS of a candidate already fitted (n ln 10 in any criterion: it cannot win)."""
+        if not self.best_file:
+            return False
         try:
             best = json.loads(Path(self.best_file).read_text())["rss"]
         except (OSError, ValueError, KeyError):
@@ -304,7 +203,7 @@ class Context:
 
 def context(graph, train, validate, spec, part, models) -> Context:
     return Context(graph, train, validate, spec.max_simulations, spec.criterion, spec.refinement_method,
-                   models, str(part / "best.json"))
+                   models, str(part / "best.json") if spec.early_stop else "")
 
 
 class _Batch:
@@ -528,7 +427,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
             models = build_candidates(graph, train, nominal_probe, items, part / "work", spec.libraries)
             screening = _screen(items, models, reg, spec, context(graph, train, validate, spec, part, models))
             rundir.write_json("screening.json", screening)
-        keep = promising(screening, spec.screen)
+        keep = promising(screening, spec.screen, ratio=10.0 if spec.early_stop else np.inf)
         for k, s_ in enumerate(screening):
             if k not in keep and s_.get("predicted_rss") is not None:
                 s_["not_fitted"] = "screening predicts it cannot compete"

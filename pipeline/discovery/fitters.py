@@ -1,0 +1,174 @@
+"""Candidate fitters: how a candidate's law is fitted to the data and pruned.
+
+Two built-in routes, registered through the hook ``mcl_fitters`` like any third-party one and
+chosen in the run file by ``refinement: {method: ...}``:
+
+- ``simulation`` (:class:`SimulationFitter`): the low-budget Levenberg-Marquardt of the fit
+  stage on simulations with exact sensitivities (paper 000's cost J of eq. 3), then backward
+  elimination of terms (the RSS increase of removing a term estimated from the sensitivities,
+  the best removal refitted, kept if the criterion improves);
+- ``full-discretisation`` (:class:`FullDiscretisationFitter`): paper 004's least squares over
+  states and parameters (eq. 12) with stage-wise backward elimination (:mod:`mcl.refine`).
+
+Both are scored the same way: the RSS of a simulation of the result on the training data and
+the run's :class:`mcl.stats.Criterion`, so candidates from either route compare.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..data import TimeSeries
+from ..stats import criterion as criterion_of, rss as rss_of
+
+#: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
+#: and measured inputs (linear between samples) make CVODES stop at every kink; 10x looser
+#: tolerances take 3x fewer steps. Scores are computed again at the default tolerances.
+FIT_OPTIONS = {"rtol": 1e-5, "atol": 1e-7}
+#: a fit stops when a step lowers the cost (or is predicted to) by less than this fraction: a
+#: change in RSS of 1e-5 moves a criterion by n 1e-5, far below the differences that rank candidates
+FIT_TOL = 1e-5
+
+
+def residual(data: TimeSeries, model, result, outputs=None) -> np.ndarray:
+    """Measured minus simulated outputs (N, n_outputs), NaN where a value was not measured;
+    ``outputs`` default to every model output the data measures."""
+    outputs = [o for o in model.output_names if o in data.names] if outputs is None else outputs
+    return data.select(outputs).values - result.outputs[:, [model.output_names.index(o) for o in outputs]]
+
+
+
+@dataclass
+class FitOutcome:
+    """A fitted candidate: the parameters, which terms survive, the RSS and criterion on the
+    training data, the simulations spent, the pruning path and the points visited."""
+
+    w: np.ndarray
+    active: np.ndarray
+    rss: float
+    score: float
+    simulations: int
+    path: list = field(default_factory=list)
+    visited: list = field(default_factory=list)
+
+
+class CandidateFitter:
+    """Base of candidate fitters (hook ``mcl_fitters``): ``fit`` a compiled candidate model whose
+    template parameters are ``names`` (``names[0]`` the law's scale), started at ``w0``."""
+
+    name = ""
+    description = ""
+
+    def fit(self, model, data: TimeSeries, names: list[str], w0, template, criterion: str, budget: int,
+            give_up=None, prune: bool = True) -> FitOutcome:
+        raise NotImplementedError
+
+
+class SimulationFitter(CandidateFitter):
+    name = "simulation"
+    description = "Levenberg-Marquardt on simulations with sensitivities, then backward elimination"
+
+    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True):
+        n_terms = len(getattr(template, "terms", names))
+        return FitOutcome(*fit_and_prune(model, data, names, w0, budget, criterion, give_up=give_up,
+                                         prune=prune, n_terms=n_terms))
+
+
+class FullDiscretisationFitter(CandidateFitter):
+    name = "full-discretisation"
+    description = "paper 004: least squares over states and parameters, stage-wise backward elimination"
+
+    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True):
+        if not getattr(template, "terms", None) or getattr(template, "scales", None):
+            # a network, or a law with fitted scales, has no terms to prune stage-wise by degree
+            return SimulationFitter().fit(model, data, names, w0, template, criterion, budget, give_up, prune)
+        return FitOutcome(*refine_candidate(model, data, names, w0, criterion, template))
+
+
+def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str,
+                  give_up=None, prune: bool = True, n_terms: int | None = None):
+    """LM fit of the template parameters, then backward elimination of terms (w1 anchors the
+    scale; ``prune=False`` keeps every parameter: a network has no terms to remove). ``give_up``
+    (see :class:`mcl.fit.LevenbergMarquardt`) stops a candidate that cannot win."""
+    from ..fit import FitProblem, LevenbergMarquardt
+
+    score_of = criterion_of(criterion).score
+    n_obs = int(np.isfinite(data.select([o for o in model.output_names if o in data.names]).values).sum())
+    active = np.ones(len(names), bool)
+
+    def fit(active_mask, start):
+        params = [n for n, on in zip(names, active_mask) if on]
+        fixed = {n: 0.0 for n, on in zip(names, active_mask) if not on}
+        problem = FitProblem(model, data, params, fixed=fixed, options=FIT_OPTIONS)
+        res = LevenbergMarquardt(max_simulations=budget, tol=FIT_TOL, give_up=give_up).fit(
+            problem, np.asarray(start)[active_mask])
+        w = np.zeros(len(names))
+        w[active_mask] = res.w
+        rss = res.cost * len(data.time)   # J of eq. (3) is the mean over samples of the RSS
+        return w, rss, problem, res
+
+    visited = []
+
+    def record(problem, active_mask):
+        for e in problem.recorder.evaluations:
+            full = np.zeros(len(names))
+            full[active_mask] = e.w
+            visited.append([*full.tolist(), bool(e.feasible)])
+
+    w, rss, problem, res = fit(active, w0)
+    record(problem, active)
+    sims, path = res.simulations, []
+    score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
+    path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
+    n_terms = n_terms or len(names)
+    while prune and active[:n_terms].sum() > 2 and not res.message.startswith("stopped"):
+        sim = problem.simulate(w[active], gradient=True)
+        sims += 1
+        if not sim.ok:
+            break
+        S = sim.sensitivities[:, problem.idx, :].reshape(-1, int(active.sum()))[:, 1:]
+        H_inv = np.linalg.pinv(S.T @ S)
+        idx = np.flatnonzero(active)[1:]
+        est = w[idx] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
+        est = np.where(idx < (n_terms or len(names)), est, np.inf)  # a scale is not a term
+        k = idx[int(np.argmin(est))]
+        trial = active.copy()
+        trial[k] = False
+        w_t, rss_t, problem_t, res_t = fit(trial, w)
+        record(problem_t, trial)
+        sims += res_t.simulations
+        score_t = score_of(rss_t, n_obs, int(trial.sum()) - 1, len(names) - 1)
+        ok = score_t < score
+        path.append({"removed": names[k], "estimate": float(rss + est.min()), "rss": rss_t,
+                     "score": score_t, "accepted": bool(ok)})
+        if not ok:
+            break
+        active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
+    from ..api import simulate
+
+    final = simulate(model, data, dict(zip(names, w)))    # the score at the default tolerances
+    sims += 1
+    if final.ok:
+        rss = rss_of(residual(data, model, final))
+        score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
+    return w, active, rss, score, sims, path, visited
+
+
+def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: str, template):
+    """Paper 004's refinement (:func:`mcl.refine.refine`), scored like :func:`fit_and_prune`:
+    RSS and BIC/AIC of a simulation of the refined law on the training data."""
+    from ..api import simulate
+    from ..refine import refine
+
+    w, active, path = refine(model, data, names, w0, criterion, terms=getattr(template, "terms", None))
+    res, sims = simulate(model, data, dict(zip(names, w * active))), 2   # and refine's start
+    if not res.ok:   # the refined law does not simulate: keep the start (nominal) law
+        w, active = np.asarray(w0, float), np.ones(len(names), bool)
+        res, sims = simulate(model, data, dict(zip(names, w))), 3
+    r = residual(data, model, res)
+    rss = rss_of(r)
+    score = criterion_of(criterion).score(rss, int(np.isfinite(r).sum()), int(active.sum()) - 1, len(names) - 1)
+    return w * active, active, rss, score, sims, path, []
+
+
