@@ -11,9 +11,11 @@ is a function of one variable, and the gain on held-out data; an effect that is 
 import json
 
 import numpy as np
+import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import LIB
+from mcl import hookimpl
 from mcl.cli import main
 
 SYSTEMS = """
@@ -151,11 +153,11 @@ def shunt_data(path, seed, shunt):
     save(path, {"time": t, "u": u(t), "y": noisy(rng, sol.y[0])})
 
 
-def discover(tmp_path, name) -> dict:
+def discover(tmp_path, name, extra: str = "") -> dict:
     (tmp_path / "Faults.mo").write_text(SYSTEMS)
     (tmp_path / "run.yaml").write_text(
         f"model:\n  sources: [Faults.mo, {LIB}]\n  name: Faults.{name}\n"
-        "data:\n  train: train.csv\n  validate: validate.csv\nunknown: auto\noutput: out\n")
+        "data:\n  train: train.csv\n  validate: validate.csv\nunknown: auto\noutput: out\n" + extra)
     assert main(["run", str(tmp_path / "run.yaml")]) == 0
     return json.loads((tmp_path / "out/report.json").read_text())
 
@@ -229,11 +231,13 @@ def test_sinh_shunt_is_distilled_from_a_neural_law(tmp_path):
     assert_gain(report)
 
 
-def test_outputs_at_two_rates(tmp_path):
-    # y1 logged at a quarter of the rate of y2 (blank cells); the fault is a cubic in R2
+@pytest.mark.parametrize("method,irregular", [("simulation", False), ("full-discretisation", True)])
+def test_outputs_at_two_rates(tmp_path, method, irregular):
+    # y1 logged at a quarter of the rate of y2 (blank cells), on a regular or an irregular time
+    # grid, fitted by simulation or by full discretisation; the fault is a cubic in R2
     def data(path, seed):
         rng = np.random.default_rng(seed)
-        t = np.linspace(0, 30, 1201)
+        t = np.sort(np.r_[0, rng.uniform(0, 30, 1199), 30]) if irregular else np.linspace(0, 30, 1201)
         u = excitation(rng, 1.2, lo=0.2, hi=1.5)
 
         def rhs(s, x):
@@ -249,7 +253,7 @@ def test_outputs_at_two_rates(tmp_path):
 
     data(tmp_path / "train.csv", 11)
     data(tmp_path / "validate.csv", 12)
-    report = discover(tmp_path, "Ladder")
+    report = discover(tmp_path, "Ladder", f"refinement: {{method: {method}}}\n")
     cause = report["cause"]
     assert cause["component"] == "R2"
     assert law_error(cause, lambda d: d / 2 + 0.3 * d**3) < 0.05
@@ -303,3 +307,32 @@ def test_every_builtin_template_runs_through_mcl_run(tmp_path):
         report = json.loads((tmp_path / f"out-{name}/report.json").read_text())
         assert report["cause"]["component"] == "D", name
         assert_gain(report, 0.5)
+
+
+class KeepAllTerms:
+    """A third-party candidate fitter (hook mcl_fitters): the simulation route without pruning."""
+
+    @hookimpl
+    def mcl_fitters(self):
+        from mcl.discovery.fitters import SimulationFitter
+
+        class NoPrune(SimulationFitter):
+            name = "keep-all-terms"
+
+            def fit(self, *args, **kw):
+                return super().fit(*args, **{**kw, "prune": False})
+
+        return [NoPrune]
+
+
+def test_a_third_party_fitter_is_chosen_by_the_run_file(tmp_path, monkeypatch):
+    import mcl.api
+    from mcl.registry import Registry
+
+    monkeypatch.setattr(mcl.api, "_registry", Registry(extra=[KeepAllTerms()]))
+    f = lambda v: 0.5 * v + 0.6 * v**3
+    slider_data(tmp_path / "train.csv", 19, f)
+    slider_data(tmp_path / "validate.csv", 20, f)
+    report = discover(tmp_path, "Slider", "refinement: {method: keep-all-terms}\n")
+    assert report["cause"]["component"] == "D"
+    assert all(all(c["active"]) for c in report["candidates"] if c.get("family") != "shape")
