@@ -43,7 +43,7 @@ def class_name_for(component: str, template: Template) -> str:
 
 
 def swap_component(graph: SystemGraph, component: str, template: Template, directory,
-                   w=None, package: str = "MCLLearn") -> TemplateModel:
+                   w=None, package: str = "MCLLearn", note: str = "") -> TemplateModel:
     """Replace ``component`` of ``graph`` by ``template`` (parameters ``w``, default its start)."""
     comps = graph.components
     if component not in comps:
@@ -55,7 +55,7 @@ def swap_component(graph: SystemGraph, component: str, template: Template, direc
     cls = class_name_for(component, template)
     system = graph.replaced(component, f"{package}.{cls}")
     short = graph.name.split(".")[-1]
-    path = write_package(directory, package, [template.modelica_class(cls, comp, w),
+    path = write_package(directory, package, [template.modelica_class(cls, comp, w, note),
                                               system.to_modelica(short)])
     return TemplateModel(path, f"{package}.{short}", [*graph.sources, path], component, template,
                          [f"{component}.{p}" for p in template.parameter_names()])

@@ -197,12 +197,18 @@ class Template:
         """Which of v, i, dv, di the law uses."""
         return {"v", "i"}
 
-    def modelica_class(self, class_name: str, component: Component, w=None) -> str:
-        """A component class implementing the template, with the connectors of ``component``."""
+    def parameter_descriptions(self) -> list[str]:
+        """What each parameter is, for the Modelica class (one per parameter name)."""
+        return ["scale of the law" if k == 0 else "" for k in range(len(self.parameter_names()))]
+
+    def modelica_class(self, class_name: str, component: Component, w=None, note: str = "") -> str:
+        """A component class implementing the template, with the connectors of ``component``;
+        ``note`` goes into the class description (e.g. the range the law was learned on)."""
         a, b = component.connectors
         xa, fa, xb, fb = a.potential[0], a.flow[0], b.potential[0], b.flow[0]
         w = self.start() if w is None else np.asarray(w, dtype=float)
-        params = "\n".join(f"  parameter Real {n} = {float(v)!r};" for n, v in zip(self.parameter_names(), w))
+        params = "\n".join(f"  parameter Real {n} = {float(v)!r}" + (f' "{d}"' if d else "") + ";"
+                           for n, v, d in zip(self.parameter_names(), w, self.parameter_descriptions()))
         memory = ""
         if "dv" in self.uses:
             memory += "  Real dv \"der(v)\";\n"
@@ -210,7 +216,7 @@ class Template:
             memory += "  Real di \"der(i)\";\n"
         mem_eq = ("  dv = der(v);\n" if "dv" in self.uses else "") + \
                  ("  di = der(i);\n" if "di" in self.uses else "")
-        return (f'model {class_name} "{self.description} (mcl template {self.name})"\n'
+        return (f'model {class_name} "{self.description} (mcl template {self.name}){note}"\n'
                 f"  {a.cls} {a.name};\n  {b.cls} {b.name};\n"
                 f'  Real v "across: {a.name}.{xa} - {b.name}.{xb}";\n'
                 f'  Real i "flow into {a.name}";\n{memory}{params}\n'
@@ -309,6 +315,11 @@ class PolynomialTemplate(Template):
             return env
         vals = self.scales if w is None else dict(zip(self.scales, np.asarray(w, float)[len(self.terms):]))
         return {**vals, **env}
+
+    def parameter_descriptions(self) -> list[str]:
+        side = ["left"] * len(self.lhs) + ["right"] * len(self.rhs)
+        return ([f"coefficient of {m} ({s}-hand side)" for m, s in zip(self.terms, side)]
+                + [f"scale inside the terms using {n}" for n in self.scales])
 
     @property
     def law_variable(self) -> str:

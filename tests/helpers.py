@@ -11,6 +11,7 @@ from mcl.data import TimeSeries
 ROOT = Path(__file__).resolve().parents[1]
 LIB = ROOT / "modelica" / "MCL"
 DATA = Path(__file__).resolve().parent / "data"
+FAULTS = ROOT / "examples" / "faults" / "Faults.mo"      # systems with hidden faults (and their truths)
 
 _compiled: dict = {}
 

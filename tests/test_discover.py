@@ -153,6 +153,8 @@ def test_second_configuration_resume_and_export(tmp_path, capsys):
     # export the learned resistor as a library and use it in a model of one's own
     assert main(["export", str(out), "-o", str(tmp_path / "lib"), "--name", "MyParts"]) == 0
     lib = tmp_path / "lib" / "MyParts"
+    text = (lib / "package.mo").read_text()
+    assert "learned for v in [" in text and '"coefficient of v^3 (right-hand side)"' in text
     (tmp_path / "Use.mo").write_text(
         "model Use\n  output Real y;\n  MCL.Electrical.Ground G;\n  MCL.Electrical.VoltageSource V;\n"
         f"  MyParts.{report['cause']['learned_class']} R;\nequation\n  V.u = 1;\n"

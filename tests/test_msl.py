@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from mcl.cli import main
+from helpers import FAULTS
 from test_discover import rc_data
 from mcl.compile.fmu.export import validate_fmu
 
@@ -75,28 +76,7 @@ def test_msl_example_compiles_validates_and_matches_rumoca(msl_path, tmp_path, c
         assert np.max(np.abs(ours - ref_states[s])) <= 2e-3 * span, f"{s} differs from rumoca's simulation"
 
 
-USER_RC = """model UserRC "a user's circuit from MSL parts: input voltage, sensor output"
-  Modelica.Blocks.Interfaces.RealInput u "source voltage";
-  Modelica.Blocks.Interfaces.RealOutput y "capacitor voltage";
-  Modelica.Electrical.Analog.Sources.SignalVoltage V;
-  Modelica.Electrical.Analog.Basic.Resistor R1(R = 1);
-  Modelica.Electrical.Analog.Basic.Capacitor C(C = 0.5);
-  Modelica.Electrical.Analog.Basic.Resistor R2(R = 2);
-  Modelica.Electrical.Analog.Basic.Ground G;
-  Modelica.Electrical.Analog.Sensors.VoltageSensor S;
-equation
-  connect(u, V.v);
-  connect(V.p, R1.p);
-  connect(R1.n, C.p);
-  connect(C.p, R2.p);
-  connect(R2.n, G.p);
-  connect(C.n, G.p);
-  connect(V.n, G.p);
-  connect(S.p, C.p);
-  connect(S.n, G.p);
-  connect(S.v, y);
-end UserRC;
-"""
+USER_RC = (FAULTS.parent / "UserRC.mo").read_text()   # MSL parts: input voltage, sensor output
 
 
 def test_a_user_model_of_msl_parts_takes_its_connectors_as_data_columns(msl_path, tmp_path):

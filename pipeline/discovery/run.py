@@ -515,7 +515,9 @@ def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nomi
     effect = (f"{comp.name} follows {law}"
               + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else ""))
     ext_dir = part / "extended"
-    tm = swap_component(graph, comp.name, template, ext_dir, w=w, package=LEARNED_PACKAGE)
+    name = {"v": "v", "dv": "der(v)", "i": "i"}[var]
+    note = f"; learned for {name} in [{lo:.4g}, {hi:.4g}] (the range of the training data)"
+    tm = swap_component(graph, comp.name, template, ext_dir, w=w, package=LEARNED_PACKAGE, note=note)
     log.info("[4/5] extended model: compiling to an FMU")
     ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
     fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")   # the model's own outputs
