@@ -361,6 +361,66 @@ def _weigh_unevaluated(evidence: dict, best: dict, cands: list, screening: list,
         evidence["strength"] = f"undecided: {', '.join(open_)} could not be evaluated"
 
 
+def _search(spec, graph, nominal, sim0, train, validate, part, rundir, reg, sigma, report):
+    """Steps 2-3: every candidate component with its law families (or the pinned templates),
+    screened by one linearised step, the promising ones fitted, then the shape stage. Returns
+    (candidate results, screening, each component's nominal law variables)."""
+    comps = [c for c in graph.two_connector_components() if not c.inputs]
+    if spec.unknown != "auto":
+        comps = [graph.components[spec.unknown]]
+    nominal_probe = {}
+    for c in comps:
+        va, vb, fa = component_variables(c)
+        pv = probe(nominal, sim0, train, {}, [va, vb, fa])
+        nominal_probe[c.name] = law_env(pv[:, 0] - pv[:, 1], pv[:, 2], train.time)
+    roles = {c.name: role_of(nominal_probe[c.name]) for c in comps}
+    report["roles"] = roles
+    items = [(c.name, k, t) for c in comps
+             for k, t in enumerate(spec.templates or families(roles[c.name], nominal_probe[c.name]))]
+    screen_file = part / "screening.json"
+    models = {}
+    if screen_file.exists():
+        screening = json.loads(screen_file.read_text())
+    else:
+        log.info("[2/5] screening %d candidate(s) (components x law families): one linearised step each",
+                 len(items))
+        models = build_candidates(graph, train, nominal_probe, items, part / "work", spec.libraries)
+        screening = _screen(items, models, reg, spec, context(graph, train, validate, spec, part, models))
+        rundir.write_json("screening.json", screening)
+    keep = promising(screening, spec.screen, ratio=10.0 if spec.early_stop else np.inf)
+    for k, s_ in enumerate(screening):
+        if k not in keep and s_.get("predicted_rss") is not None:
+            s_["not_fitted"] = "screening predicts it cannot compete"
+    fit = _Batch(graph, train, validate, spec, part, models, nominal_probe, rundir, reg)
+    cands = fit([items[k] for k in keep])
+    if spec.templates is None:
+        cands += _shapes(fit, cands, sigma)
+    return cands, screening, nominal_probe
+
+
+def _decide(report: dict, spec, resid, val0):
+    """Step 4's verdict: the best candidate and its lead (in the criterion) over the best law of
+    any other component or the nominal model, or (None, None) with ``report["no_cause"]`` saying
+    why: nothing beats the nominal model, or the best does not improve the validation data."""
+    n_obs = int(np.isfinite(resid).sum())
+    nominal_score = criterion_of(spec.criterion).score(rss_of(resid), n_obs, 0)
+    report["nominal_score"] = nominal_score      # the nominal model is a contender too
+    scored = [c for c in report["candidates"] if c.get("score") is not None]
+    ranked = [c for c in scored if c["score"] < nominal_score]
+    if not ranked:
+        report["no_cause"] = ("no candidate could be evaluated" if not scored
+                              else "no candidate explains the training data better than the nominal model")
+        return None, None
+    best = ranked[0]
+    if val0 is not None and not _helps(best.get("validation_rms"), val0):
+        report["no_cause"] = (f"the best candidate, {best['component']} ({_template_name(best['template'])}), "
+                              f"does not improve the validation data (RMS {val0:.4g} -> "
+                              f"{_fmt(best.get('validation_rms'))})")
+        return None, None
+    others = [c["score"] for c in ranked if c["component"] != best["component"]]
+    return best, min(others + [nominal_score]) - best["score"]
+
+
 def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, force: bool = False,
                   fingerprint: dict | None = None) -> dict:
     """Execute a validated :class:`mcl.runfile.RunSpec` on ``train`` (and ``validate``) data;
@@ -405,70 +465,26 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         val_y = [sv.outputs[:, [nominal.output_names.index(o) for o in outputs]] if sv.ok else None, None]
     extended_y = None
     if significant:
-        comps = [c for c in graph.two_connector_components() if not c.inputs]
-        if spec.unknown != "auto":
-            comps = [graph.components[spec.unknown]]
-        nominal_probe = {}
-        for c in comps:
-            va, vb, fa = component_variables(c)
-            pv = probe(nominal, sim0, train, {}, [va, vb, fa])
-            nominal_probe[c.name] = law_env(pv[:, 0] - pv[:, 1], pv[:, 2], train.time)
-        roles = {c.name: role_of(nominal_probe[c.name]) for c in comps}
-        report["roles"] = roles
-        items = [(c.name, k, t) for c in comps
-                 for k, t in enumerate(spec.templates or families(roles[c.name], nominal_probe[c.name]))]
-        screen_file = part / "screening.json"
-        models = {}
-        if screen_file.exists():
-            screening = json.loads(screen_file.read_text())
-        else:
-            log.info("[2/5] screening %d candidate(s) (components x law families): one linearised step each",
-                     len(items))
-            models = build_candidates(graph, train, nominal_probe, items, part / "work", spec.libraries)
-            screening = _screen(items, models, reg, spec, context(graph, train, validate, spec, part, models))
-            rundir.write_json("screening.json", screening)
-        keep = promising(screening, spec.screen, ratio=10.0 if spec.early_stop else np.inf)
-        for k, s_ in enumerate(screening):
-            if k not in keep and s_.get("predicted_rss") is not None:
-                s_["not_fitted"] = "screening predicts it cannot compete"
-        items = [items[k] for k in keep]
-        fit = _Batch(graph, train, validate, spec, part, models, nominal_probe, rundir, reg)
-        cands = fit(items)
-        if spec.templates is None:
-            cands += _shapes(fit, cands, sigma)
-        ranked = sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
-        report["candidates"] = ranked + [c for c in cands if c.get("score") is None]
+        cands, screening, nominal_probe = _search(spec, graph, nominal, sim0, train, validate, part, rundir, reg,
+                                                  sigma, report)
+        report["candidates"] = (sorted([c for c in cands if c.get("score") is not None], key=lambda c: c["score"])
+                                + [c for c in cands if c.get("score") is None])
         report["screening"] = screening
         report["failed"] = _failures(screening, cands)
         for f in report["failed"]:
             log.warning("      %s with %s could not be evaluated (%s): %s", f["component"],
                         _template_name(f["template"]), f["stage"], f["reason"])
-        # the nominal model is a contender too: a cause must explain the data better than it
-        n_obs = int(np.isfinite(y_meas).sum())
-        nominal_score = criterion_of(spec.criterion).score(rss_of(resid), n_obs, 0)
-        report["nominal_score"] = nominal_score
-        ranked = [c for c in ranked if c["score"] < nominal_score]
-        if not ranked:
-            report["no_cause"] = ("no candidate could be evaluated" if not any(c.get("score") is not None for c in cands)
-                                  else "no candidate explains the training data better than the nominal model")
-        elif val0 is not None and not _helps(ranked[0].get("validation_rms"), val0):
-            best = ranked[0]
-            report["no_cause"] = (f"the best candidate, {best['component']} ({_template_name(best['template'])}), "
-                                  f"does not improve the validation data (RMS {val0:.4g} -> "
-                                  f"{_fmt(best.get('validation_rms'))})")
-        else:
-            best = ranked[0]
-            # the component's evidence: its lead over the best law of any other component
-            others = [c["score"] for c in ranked if c["component"] != best["component"]]
-            delta = min(others + [nominal_score]) - best["score"]
+        best, delta = _decide(report, spec, resid, val0)
+        if best is not None:
             report["cause"], extended_y, ext_val = _explain(best, delta, graph, spec, part, train, validate,
                                                             outputs, reg, nominal_probe)
             if val_y is not None:
                 val_y[1] = ext_val
-            _weigh_unevaluated(report["cause"]["evidence"], best, cands, screening, spec, n_obs)
+            _weigh_unevaluated(report["cause"]["evidence"], best, cands, screening, spec,
+                               int(np.isfinite(y_meas).sum()))
             report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": best.get("train_rms"),
                               "validation_rms_before": val0, "validation_rms_after": best.get("validation_rms")}
-        if report.get("no_cause"):
+        else:
             log.info("      no convincing cause: %s", report["no_cause"])
     if report["gain"] is None:
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
