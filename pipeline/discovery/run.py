@@ -1,17 +1,19 @@
 """The main job (``mcl run``): what the model gets wrong, which component, which law, what gain.
 
-1. Misfit: simulate the nominal model on the training inputs; the residual RMS is compared with
-   the measurement noise estimated from the data (second differences of a smooth signal are
-   noise: Var(d2 y) = 6 sigma^2), so a correct model comes out not significant.
-2. Cause: every candidate two-connector component (or the named one) is replaced by each
-   template, started from the template's fit to the nominal component's own law (so the first
-   simulation reproduces the nominal model), fitted with the low-budget Levenberg-Marquardt of
-   the fit stage, and pruned by backward elimination (the cost increase of removing a term is
-   estimated from the sensitivities, the best removal refitted, kept if the criterion improves).
-   Candidates are ranked by BIC on the training data.
-3. Extend: the learned class and the extended system as a Modelica package, compiled to an FMU.
-4. Gain: RMS before and after on training and validation data.
-5. Report: report.json and report.html with plots.
+1. Misfit: the nominal model simulated on the training inputs; the residual (where measured)
+   against the noise estimated from the data (:func:`mcl.stats.noise_estimate`, any time
+   grid), so a correct model comes out not significant; where it exceeds the noise.
+2. Candidates: every two-connector component (or the named one) with the law families of its
+   role (:mod:`.families`) or the pinned templates, each started from its fit to the nominal
+   component's own law (the first simulation is the nominal model); screened by one
+   Gauss-Newton step; the promising fitted and pruned by a fitter plugin (:mod:`.fitters`),
+   stopped early when they cannot win; then the shape stage (a network distilled into sparse
+   laws) for the best law of one variable.
+3. Verdict: ranked by the run's :class:`mcl.stats.Criterion` against each other and the
+   nominal model; a cause must also improve the validation data (:func:`_decide`).
+4. Extend (:mod:`.extend`): the law in the component's words, the extended model as Modelica
+   and FMU, gains on training and validation data, another configuration.
+5. Report (:mod:`.report`): report.json and report.html.
 
 The run directory is built in ``<output>.partial`` (each candidate's result saved as it
 finishes, so an interrupted run resumes) and renamed to ``<output>`` at the end.
@@ -25,17 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
-from ..data import TimeSeries, read_csv
+from ..data import TimeSeries
 from ..progress import log
 from ..errors import ConfigError, MclError, ModelicaError
 from ..executor import TaskFailed
 from ..stats import criterion as criterion_of, noise_estimate, rms, rss as rss_of
 from .fitters import FIT_OPTIONS, residual
-from ..swap import class_name_for
 from .families import distillations, families, role_of
-from .words import in_words, words
+from .extend import explain
 
-LEARNED_PACKAGE = "Learned"
 def probe(model, result, inputs: TimeSeries, params: dict, names: list[str]) -> np.ndarray:
     """Values of named model variables along a simulation, (N, len(names))."""
     ode = model.ode
@@ -455,7 +455,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
               "software": software_versions(), "inputs": fingerprint or {}}
     log.info("      residual RMS %.4g vs noise %.4g: %s", train_rms0, sigma,
              "significant" if significant else "not significant")
-    from ..report import misfit_in_time
+    from .report import misfit_in_time
 
     report["misfit"]["where"] = misfit_in_time(train.time, resid, sigma) if significant else []
     val0, val_y = None, None
@@ -476,7 +476,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
                         _template_name(f["template"]), f["stage"], f["reason"])
         best, delta = _decide(report, spec, resid, val0)
         if best is not None:
-            report["cause"], extended_y, ext_val = _explain(best, delta, graph, spec, part, train, validate,
+            report["cause"], extended_y, ext_val = explain(best, delta, graph, spec, part, train, validate,
                                                             outputs, reg, nominal_probe)
             if val_y is not None:
                 val_y[1] = ext_val
@@ -491,7 +491,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
                           "validation_rms_before": val0, "validation_rms_after": val0}
     report["seconds"] = time.perf_counter() - t_start
     log.info("[5/5] report")
-    from ..report import write_report
+    from .report import write_report
 
     write_report(part, report, train, outputs, y0, extended_y, validate=validate, validation=val_y, **spec.report)
     rundir.finish()
@@ -504,83 +504,3 @@ def software_versions() -> dict:
     from ..compile.library import distribution_versions
 
     return distribution_versions("mcl", "casadi", "fmpy", "numpy", "scipy", "pymoca", "rumoca")
-
-
-def _explain(best, delta, graph, spec, part, train, validate, outputs, reg, nominal_probe):
-    """The winner as a law, the extended model (Modelica + FMU) and its simulated outputs."""
-    from ..api import compile_model, simulate
-    from ..compile.fmu.export import build_fmu
-    from ..swap import swap_component
-
-    template = reg.template(best["template"])
-    w = np.asarray(best["w"]) * np.asarray(best["active"])
-    comp = graph.components[best["component"]]
-    law = in_words(template, w, comp)
-    log.info("[3/5] cause: %s (%s): %s", comp.name, comp.cls, law)
-    var = template.law_variable
-    lo, hi = best.get("law_range") or best.get("v_range") or [-1.0, 1.0]
-    xs = np.linspace(lo, hi, 41)
-    curve = [[float(x), float(f)] for x, f in zip(xs, template.curve(w, xs))]
-    env = nominal_probe[best["component"]]
-    x_nom, f_nom = (env["i"], env["v"]) if var == "i" else (env[var], env["i"])
-    pick = np.linspace(0, len(x_nom) - 1, min(200, len(x_nom))).astype(int)
-    nominal_points = [[float(x_nom[k]), float(f_nom[k])] for k in pick]
-    nominal_terms = [t for t, a in zip(best.get("terms", []), np.abs(best["w0"]) > 1e-9 * np.max(np.abs(best["w0"]))) if a]
-    new_terms = [t for t, on, w0 in zip(best.get("terms", []), best["active"], best["w0"])
-                 if on and t not in nominal_terms]
-    effect = (f"{comp.name} follows {law}"
-              + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else ""))
-    ext_dir = part / "extended"
-    name = {"v": "v", "dv": "der(v)", "i": "i"}[var]
-    note = f"; learned for {name} in [{lo:.4g}, {hi:.4g}] (the range of the training data)"
-    tm = swap_component(graph, comp.name, template, ext_dir, w=w, package=LEARNED_PACKAGE, note=note)
-    log.info("[4/5] extended model: compiling to an FMU")
-    ext = compile_model(tm.sources, tm.model_name, libraries=spec.libraries)
-    fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu")   # the model's own outputs
-    ext = ext.with_outputs(train.names)
-    pick = lambda r: r.outputs[:, [ext.output_names.index(o) for o in outputs]] if r.ok else None
-    y_ext = pick(simulate(ext, train))
-    y_val = pick(simulate(ext, validate)) if validate is not None else None
-    cause = {"component": comp.name, "class": comp.cls, "effect": effect,
-             "evidence": {"criterion": spec.criterion, "delta_to_next": delta,
-                          "strength": criterion_of(spec.criterion).strength(delta)},
-             "law": {"equation": law, "where": words(comp).definitions,
-                     "template_equation": template.equation(w, across="v", flow="i"),
-                     "family": best.get("family"),
-                     "across": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].potential[0]} - "
-                               f"{comp.name}.{comp.connectors[1].name}.{comp.connectors[1].potential[0]}",
-                     "flow": f"{comp.name}.{comp.connectors[0].name}.{comp.connectors[0].flow[0]}",
-                     # the curve: the law against the variable it is in (der(across) for a law
-                     # in the rate; across against flow for a law in the flow), over the visited range
-                     "variable": {"v": "across", "dv": "der(across)", "i": "flow"}[var],
-                     "range": [float(lo), float(hi)],
-                     "curve": curve, "nominal": nominal_points},
-             "visited": best.get("visited", []), "parameters": template.parameter_names(),
-             "modelica": str(tm.path.relative_to(part)), "fmu": str(fmu.relative_to(part)),
-             "learned_class": class_name_for(comp.name, template)}
-    if spec.second:
-        cause["second_configuration"] = _second(spec, template, w, comp.name, part)
-    return cause, y_ext, y_val
-
-
-def _second(spec, template, w, component: str, part: Path) -> dict:
-    """The learned law placed into another configuration (``second:`` in the run file)."""
-    from ..api import compile_model, simulate
-    from ..graph import build_graph
-    from ..swap import swap_component
-
-    sec = spec.second
-    base = spec.path.parent if spec.path else Path.cwd()
-    sources = [base / s for s in sec["model"]["sources"]]
-    name = sec["model"]["name"]
-    target = sec.get("component", component)
-    data = read_csv(base / sec["data"])
-    nominal = compile_model(sources, name, libraries=spec.libraries).with_outputs(data.names)
-    graph = build_graph(sources, name, libraries=spec.libraries)
-    tm = swap_component(graph, target, template, part / "second", w=w, package="LearnedSecond")
-    learned = compile_model(tm.sources, tm.model_name, libraries=spec.libraries).with_outputs(data.names)
-    outs = [o for o in nominal.output_names if o in data.names]
-    before, after = simulate(nominal, data), simulate(learned, data)
-    return {"model": name, "component": target,
-            "rms_before": rms(residual(data, nominal, before, outs)) if before.ok else None,
-            "rms_after": rms(residual(data, learned, after, outs)) if after.ok else None}

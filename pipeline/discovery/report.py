@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .plots import axis_label
+from ..plots import axis_label
 
 
 def _png(fig) -> str:
