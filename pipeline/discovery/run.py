@@ -24,6 +24,7 @@ import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -35,6 +36,23 @@ from ..stats import criterion as criterion_of, noise_estimate, rms, rss as rss_o
 from .fitters import FIT_OPTIONS, residual
 from .families import distillations, families, role_of
 from .extend import explain
+
+
+class Item(NamedTuple):
+    """One candidate: a component with one law (family index ``index`` of its list, or of the
+    shape stage) given by a template spec."""
+
+    component: str
+    index: int
+    spec: object
+
+    @property
+    def key(self) -> tuple[str, int]:
+        return (self.component, self.index)
+
+    @property
+    def file(self) -> str:
+        return f"candidates/{self.component}_{self.index}.json"
 
 def probe(model, result, inputs: TimeSeries, params: dict, names: list[str]) -> np.ndarray:
     """Values of named model variables along a simulation, (N, len(names))."""
@@ -63,7 +81,7 @@ def _candidate_model(ctx, item):
     """(template, w0, swapped model description, compiled model) of one candidate, compiled by
     the parent before the batch (a forked worker must not run the Rust front end: its threads
     do not survive a fork); a candidate that did not compile raises its error here."""
-    built = ctx.models[(item[0], item[1])]
+    built = ctx.models[item.key]
     if isinstance(built, Exception):
         raise built
     return built
@@ -75,9 +93,9 @@ def build_candidates(graph, train, nominal_probe, items, workdir, libraries=()) 
     out = {}
     for it in items:
         try:
-            out[(it[0], it[1])] = build_candidate(graph, train, nominal_probe, it, workdir, libraries)
+            out[it.key] = build_candidate(graph, train, nominal_probe, it, workdir, libraries)
         except MclError as exc:
-            out[(it[0], it[1])] = ModelicaError(f"the candidate does not compile: {exc.message}")
+            out[it.key] = ModelicaError(f"the candidate does not compile: {exc.message}")
     return out
 
 
@@ -147,10 +165,10 @@ def _candidate_task(ctx, item):
     # the shape stage (a network, then distilled laws with fitted scales) always simulates: it
     # refines the best law and is not stopped for being behind it; a network has many
     # parameters and one chance, so it gets three fits' budget
-    shape = item[1] >= NEURAL_INDEX
+    shape = item.index >= NEURAL_INDEX
     fitter = registry().fitter("simulation" if shape else ctx.method)
     fit = fitter.fit(model, train, tm.parameter_names, w0, template, criterion,
-                     ctx.budget * (3 if item[1] == NEURAL_INDEX else 1), give_up=None if shape else ctx.give_up,
+                     ctx.budget * (3 if item.index == NEURAL_INDEX else 1), give_up=None if shape else ctx.give_up,
                      prune=bool(getattr(template, "terms", None)))
     w, active, rss, score, sims, path, visited = (fit.w, fit.active, fit.rss, fit.score, fit.simulations,
                                                   fit.path, fit.visited)
@@ -216,24 +234,24 @@ class _Batch:
 
     def __call__(self, items: list) -> list[dict]:
         part, spec = self.part, self.spec
-        todo = [it for it in items if not _done(part / "candidates" / f"{it[0]}_{it[1]}.json")]
+        todo = [it for it in items if not _done(part / it.file)]
         log.info("      fitting %d candidate(s) (%d already done)", len(items), len(items) - len(todo))
         self.models.update(build_candidates(self.graph, self.train, self.nominal_probe,
-                                            [it for it in todo if it[:2] not in self.models],
+                                            [it for it in todo if it.key not in self.models],
                                             part / "work", spec.libraries))
         ctx = context(self.graph, self.train, self.validate, spec, part, self.models)
 
         def checkpoint(k, r):
             it = todo[k]
             if isinstance(r, TaskFailed):
-                r = {"component": it[0], "template": it[2], "failed": r.reason, "score": None}
-            self.rundir.write_json(f"candidates/{it[0]}_{it[1]}.json", r)
+                r = {"component": it.component, "template": it.spec, "failed": r.reason, "score": None}
+            self.rundir.write_json(it.file, r)
             _note_best(part / "best.json", r, self.rundir)
 
         if todo:
             with self.reg.executor(spec.executor) as ex:
                 ex.map(_candidate_task, todo, context=ctx, timeout=3600, label="candidates", on_result=checkpoint)
-        return [json.loads((part / "candidates" / f"{n}_{k}.json").read_text()) for n, k, _ in items]
+        return [json.loads((part / it.file).read_text()) for it in items]
 
 
 #: family indices of the shape stage (after any family list)
@@ -262,7 +280,7 @@ def _shapes(fit: _Batch, cands: list[dict], sigma: float) -> list[dict]:
     xs = np.linspace(*(best.get("law_range") or [-1.0, 1.0]), 201)
     spec = {"name": "neural", "hidden": 4, "x": var, "coupled": False}
     start = registry().template(spec).fit_curve(xs, poly.curve(np.asarray(best["w"]) * np.asarray(best["active"]), xs))
-    neural = fit([(best["component"], NEURAL_INDEX, {**spec, "start": start.tolist()})])
+    neural = fit([Item(best["component"], NEURAL_INDEX, {**spec, "start": start.tolist()})])
     out = list(neural)
     n = neural[0]
     if n.get("score") is None or not n.get("law_range"):
@@ -270,7 +288,7 @@ def _shapes(fit: _Batch, cands: list[dict], sigma: float) -> list[dict]:
     template = registry().template(n["template"])
     xs = np.linspace(*n["law_range"], 201)
     laws = distillations(xs, template.curve(np.asarray(n["w"]), xs), var)
-    items = [(best["component"], SHAPE_INDEX + k,
+    items = [Item(best["component"], SHAPE_INDEX + k,
               {"name": "polynomial", "lhs": ["i"], "rhs": law["terms"], "scales": law["scales"],
                "start": [1.0, *map(float, law["c"])], "family": "shape"})
              for k, law in enumerate(laws)]
@@ -318,7 +336,7 @@ def _screen(items, models, reg, spec, ctx) -> list[dict]:
     """The screening prediction of every item. A law family chosen automatically that does not
     fit the component's place (a storage law across a voltage source needs du/dt) is not
     applicable there: recorded as such, not as a failure."""
-    auto = [isinstance(it[2], dict) and "family" in it[2] and isinstance(models.get(it[:2]), Exception)
+    auto = [isinstance(it.spec, dict) and "family" in it.spec and isinstance(models.get(it.key), Exception)
             for it in items]
     run = [it for it, a in zip(items, auto) if not a]
     with reg.executor(spec.executor) as ex:
@@ -326,12 +344,12 @@ def _screen(items, models, reg, spec, ctx) -> list[dict]:
     out = []
     for it, a in zip(items, auto):
         if a:
-            out.append({"component": it[0], "template": it[2], "predicted_rss": None,
-                        "not_applicable": str(models[it[:2]])})
+            out.append({"component": it.component, "template": it.spec, "predicted_rss": None,
+                        "not_applicable": str(models[it.key])})
             continue
         r = next(res)
         out.append(r if not isinstance(r, TaskFailed) else
-                   {"component": it[0], "template": it[2], "predicted_rss": None, "reason": r.reason})
+                   {"component": it.component, "template": it.spec, "predicted_rss": None, "reason": r.reason})
     return out
 
 
@@ -375,7 +393,7 @@ def _search(spec, graph, nominal, sim0, train, validate, part, rundir, reg, sigm
         nominal_probe[c.name] = law_env(pv[:, 0] - pv[:, 1], pv[:, 2], train.time)
     roles = {c.name: role_of(nominal_probe[c.name]) for c in comps}
     report["roles"] = roles
-    items = [(c.name, k, t) for c in comps
+    items = [Item(c.name, k, t) for c in comps
              for k, t in enumerate(spec.templates or families(roles[c.name], nominal_probe[c.name]))]
     screen_file = part / "screening.json"
     models = {}
