@@ -93,6 +93,7 @@ class _Plan:
         dae = {"x": xa, "p": P, "t": T, "ode": fa}
         iopts = {"reltol": opts.rtol, "abstol": opts.atol, "max_num_steps": opts.max_steps,
                  "disable_internal_warnings": True, "show_eval_warnings": False}
+        self.events = _StateEvents(ode, xa, fa, P, T, Ut, nx, iopts) if ode.zero is not None else None
         # the integration grid: the output times and the model's time events, a restart at each
         events = [te for te in ode.time_events if t_out[0] < te < t_out[-1]]
         self.t_int = np.union1d(t_out, events)
@@ -120,6 +121,7 @@ class _Plan:
             x0 = ode.init(Us, Ps, Ts)
             self.dx0 = ca.Function("dx0", [Us, Ps, Ts], [x0, ca.jacobian(x0, Ps)[:, sel]])
         self.nx, self.ns = nx, ns
+        self.u_at = (lambda t: np.array([np.interp(t, u.time, u.values[:, j]) for j in range(len(u.names))]))
 
     def run(self, p: np.ndarray, opts: SimulationOptions) -> SimulationResult:
         ode, t_out, N = self.model.ode, self.t_out, len(self.t_out)
@@ -141,6 +143,8 @@ class _Plan:
         if not np.all(np.isfinite(xa)):
             return fail("initialisation gave non-finite values")
         t_int = self.t_int
+        if self.events is not None:
+            self.events.count = 0
         traj = np.full((len(xa), len(t_int)), np.nan)
         traj[:, 0] = xa
         for idx, integ in self.chunks:
@@ -154,6 +158,11 @@ class _Plan:
             if not np.all(np.isfinite(xf)):
                 bad = idx[np.argmax(~np.all(np.isfinite(xf), axis=0))]
                 return fail(f"non-finite state at t = {t_int[bad]:g}")
+            if self.events is not None and self.events.crossed(traj, idx, t_int, p, self.u_at):
+                try:
+                    self.events.correct(traj, idx, t_int, p, self.u_at)
+                except RuntimeError as exc:
+                    return fail(f"solver error after a state event before t = {t_int[idx[-1]]:g}: {_last_line(exc)}")
         traj = traj[:, self.out_idx]
         X = traj[: self.nx]
         P = np.repeat(p[:, None], N, axis=1)
@@ -174,6 +183,97 @@ class _Plan:
             result.sensitivities = dy.reshape(len(names), N, self.ns).transpose(1, 0, 2)
             result.sensitivity_names = [ode.p_names[i] for i in self.sel]
         return result
+
+
+class _StateEvents:
+    """State events: where a relation on the states changes sign between two output points, the
+    crossing is located (Illinois regula falsi on the relation along the solution) and the
+    solver restarted there and at every later point of the chunk (CVODES's own root-finding is
+    not reachable through CasADi's integrator). A relation that switches and switches back
+    between two output points is not seen: the solver's error control is all that handles it.
+
+    One integrator over normalised time tau in [0, 1] with (p, t0, h) as parameters, so any
+    interval is one call. Sensitivities are carried through unchanged across an event: their jump
+    (f+ - f-) dt*/dp is left out (a Gauss-Newton step only needs them roughly).
+    """
+
+    def __init__(self, ode, xa, fa, P, T, Ut, nx, iopts):
+        self.zero, self.nx = ode.zero, nx
+        self._dae = (xa, fa, P, T, iopts)
+        self.hop_int = None        # built at the first event (most runs have none)
+        self.count = 0
+
+    def hop(self, x, p, ta, tb):
+        """The state at tb from x at ta: one fresh integration (a restart)."""
+        if tb <= ta:
+            return np.asarray(x, float)
+        if self.hop_int is None:
+            xa, fa, P, T, iopts = self._dae
+            tau, t0, h = ca.MX.sym("tau"), ca.MX.sym("t0"), ca.MX.sym("h")
+            f = ca.substitute(fa, T, t0 + tau * h) * h
+            self.hop_int = ca.integrator("hop", "cvodes", {"x": xa, "p": ca.vertcat(P, t0, h), "t": tau, "ode": f},
+                                         0.0, [1.0], iopts)
+        return np.array(self.hop_int(x0=x, p=np.concatenate([p, [ta, tb - ta]]))["xf"]).ravel()
+
+    def g(self, x, p, t, u_at):
+        return np.array(self.zero(x[: self.nx], u_at(t), p, t)).ravel()
+
+    def crossed(self, traj, idx, t_int, p, u_at) -> bool:
+        """Whether any relation changes sign between the points of this chunk (one mapped call)."""
+        cols = np.r_[idx[0] - 1, idx]
+        G = np.array(self.zero.map(len(cols))(traj[: self.nx, cols], np.column_stack([u_at(t_int[c]) for c in cols])
+                                                 if len(u_at(0.0)) else np.zeros((0, len(cols))),
+                                                 np.repeat(np.asarray(p)[:, None], len(cols), 1), t_int[cols][None]))
+        return bool(np.any(np.sign(G[:, 1:]) * np.sign(G[:, :-1]) < 0))
+
+    def correct(self, traj, idx, t_int, p, u_at, max_events: int = 2000):
+        """Check each interval of this chunk for a sign change of a relation; from the first one
+        on, every point is integrated again from the located crossing(s) (restarts). Beyond
+        ``max_events`` in one simulation (a chattering switch) the solver steps through."""
+        g_prev = self.g(traj[:, idx[0] - 1], p, t_int[idx[0] - 1], u_at)
+        restarted = False
+        for j in idx:
+            ta, tb, x_a = t_int[j - 1], t_int[j], traj[:, j - 1]
+            x_b = self.hop(x_a, p, ta, tb) if restarted else traj[:, j]
+            g_b = self.g(x_b, p, tb, u_at)
+            g_a = g_prev
+            while self.count < max_events:
+                flips = np.flatnonzero(np.sign(g_a) * np.sign(g_b) < 0)
+                if not flips.size:
+                    break
+                self.count += 1
+                ta, x_a = self.locate(x_a, ta, tb, p, u_at, flips, g_a)
+                g_a = self.g(x_a, p, ta, u_at)
+                x_b = self.hop(x_a, p, ta, tb)          # the solver restarted past the crossing
+                g_b = self.g(x_b, p, tb, u_at)
+                restarted = True
+            traj[:, j] = x_b
+            g_prev = g_b
+
+    def locate(self, xa, ta, tb, p, u_at, flips, g_a):
+        """The earliest crossing of the relations ``flips`` in (ta, tb) and the state just past it."""
+        best_t = tb
+        for r in flips:
+            lo, hi, g_lo = ta, tb, g_a[r]
+            g_hi = self.g(self.hop(xa, p, ta, hi), p, hi, u_at)[r]
+            side = 0
+            for _ in range(60):
+                if hi - lo <= 1e-12 * max(1.0, abs(hi)):
+                    break
+                t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo) if g_hi != g_lo else 0.5 * (lo + hi)
+                t = min(max(t, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+                g_t = self.g(self.hop(xa, p, ta, t), p, t, u_at)[r]
+                if np.sign(g_t) == np.sign(g_lo):
+                    lo, g_lo = t, g_t
+                    g_hi = g_hi / 2 if side == -1 else g_hi      # Illinois
+                    side = -1
+                else:
+                    hi, g_hi = t, g_t
+                    g_lo = g_lo / 2 if side == 1 else g_lo
+                    side = 1
+            if hi < best_t:
+                best_t = hi
+        return best_t, self.hop(xa, p, ta, best_t)   # hi: just past the crossing
 
 
 def _check(y, res, drift, t, scale, opts) -> str | None:

@@ -17,7 +17,7 @@ import numpy as np
 from .errors import ConfigError, DataError, MclError
 from .compile.structure import Ode, expanded
 
-_FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks")
+_FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks", "zero")
 
 
 @dataclass
@@ -79,7 +79,8 @@ class CompiledModel:
             raise ConfigError("exists and is not a saved mcl model: choose another output", where=str(d))
         d.mkdir(parents=True, exist_ok=True)
         for f in _FUNCTIONS:
-            getattr(self.ode, f).save(str(d / f"{f}.casadi"))
+            if getattr(self.ode, f) is not None:     # zero: only a model with state events
+                getattr(self.ode, f).save(str(d / f"{f}.casadi"))
         o = self.ode
         meta = dict(name=self.name, info=self.info, x_names=o.x_names, u_names=o.u_names,
                     p_names=o.p_names, y_names=o.y_names, p_values=o.p_values.tolist(),

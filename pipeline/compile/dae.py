@@ -47,6 +47,9 @@ class Dae:
     units: dict[str, str] = field(default_factory=dict)
     descriptions: dict[str, str] = field(default_factory=dict)
     time_events: list[float] = field(default_factory=list)   # instants where the equations jump
+    #: zero-crossing functions: lhs - rhs of each relation on the unknowns in the equations
+    #: (outside noEvent); where one changes sign the equations switch: a state event
+    relations: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
 
 
 def check_balance(residual: ca.SX, nx: int, nz: int, name: str) -> None:
@@ -194,7 +197,7 @@ def eliminate_aliases(dae: Dae, passes: int = 20) -> Dae:
     connector's potential is a state's alias, not a second state), and simulation gets cheaper.
     States are never removed; every eliminated name stays readable through ``exprs``."""
     residual, z, z_names, z_start = dae.residual, dae.z, list(dae.z_names), dae.z_start
-    init_residual, exprs = dae.init_residual, dict(dae.exprs)
+    init_residual, exprs, relations = dae.init_residual, dict(dae.exprs), dae.relations
     for _ in range(passes):
         w = ca.vertcat(dae.x, z)
         nx = dae.x.numel()
@@ -237,6 +240,7 @@ def eliminate_aliases(dae: Dae, passes: int = 20) -> Dae:
         new = ca.vertcat(*[eliminated[j] for j in drop])   # names no variable of this pass ("taken")
         residual = ca.substitute(residual[keep_rows], old, new) if keep_rows else ca.SX(0, 1)
         init_residual = ca.substitute(init_residual, old, new)
+        relations = ca.substitute(relations, old, new)
         exprs = {n: ca.substitute(v, old, new) if ca.depends_on(v, old) else v for n, v in exprs.items()}
         z_start = z_start[keep] if keep else ca.SX(0, 1)
         z = ca.vertcat(*[z[j] for j in keep]) if keep else ca.SX(0, 1)
@@ -245,4 +249,4 @@ def eliminate_aliases(dae: Dae, passes: int = 20) -> Dae:
                init_residual=init_residual, x_names=dae.x_names, z_names=z_names, u_names=dae.u_names,
                p_names=dae.p_names, p_values=dae.p_values, x_start=dae.x_start, x_fixed=dae.x_fixed,
                z_start=z_start, u_start=dae.u_start, outputs=dae.outputs, exprs=exprs, units=dae.units,
-               descriptions=dae.descriptions, time_events=dae.time_events)
+               descriptions=dae.descriptions, time_events=dae.time_events, relations=relations)

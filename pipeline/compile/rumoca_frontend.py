@@ -32,6 +32,7 @@ _BINARY = {
     "greater": ca.gt, "greater_equal": ca.ge, "less": ca.lt, "less_equal": ca.le, "equal": ca.eq,
     "not_equal": ca.ne, "and": ca.logic_and, "or": ca.logic_or,
 }
+_RELATIONS = ("greater", "greater_equal", "less", "less_equal")
 _FUNCTIONS = {
     "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin, "acos": ca.acos, "atan": ca.atan,
     "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh, "tanh": ca.tanh, "exp": ca.exp, "log": ca.log,
@@ -45,7 +46,7 @@ _FUNCTIONS = {
     "scalar": lambda a: a[0], "vector": ca.vec,
     "promoted_cat1": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
     "promoted_cat2": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
-    "product": lambda a: functools.reduce(ca.times, ca.vertsplit(ca.vec(a)), ca.SX(1)), "noEvent": lambda a: a, "smooth": lambda _o, a: a,
+    "product": lambda a: functools.reduce(ca.times, ca.vertsplit(ca.vec(a)), ca.SX(1)), "noEvent": lambda a: a, "no_event": lambda a: a, "smooth": lambda _o, a: a,
     "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.sign(a / b) * ca.floor(ca.fabs(a / b)),   # truncation toward zero
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
@@ -324,6 +325,8 @@ class _Translator:
         self.functions = storage.get("functions", [])
         self.cache: dict[int, ca.SX] = {}
         self.coord = None   # set by the caller: (kind, index) -> SX
+        self.relations: list[ca.SX] = []   # lhs - rhs of <, <=, >, >= outside noEvent()
+        self.no_event = 0
 
     def operands(self, k: int) -> list[int]:
         body = self.nodes[k][next(iter(self.nodes[k]))]
@@ -370,14 +373,22 @@ class _Translator:
             op = body["operator"]
             if op not in _BINARY:
                 self.refuse(f"operator '{op}'")
-            out = _BINARY[op](self.sx(body["lhs"], bound), self.sx(body["rhs"], bound))
+            lhs, rhs = self.sx(body["lhs"], bound), self.sx(body["rhs"], bound)
+            out = _BINARY[op](lhs, rhs)
+            if op in _RELATIONS and bound is None and not self.no_event and lhs.numel() == rhs.numel() == 1:
+                self.relations.append(lhs - rhs)
         elif kind == "conditional":
             ops = [self.sx(o, bound) for o in self.operands(k)]
             out = ops[-1]   # if c1 then a1 elseif c2 then a2 ... else b
             for j in range(len(ops) - 3, -1, -2):
                 out = ca.if_else(ops[j], ops[j + 1], out)
         elif kind == "builtin":
-            out = self.call_builtin(body["builtin"], [self.sx(o, bound) for o in self.operands(k)])
+            quiet = str(body["builtin"]).split(".")[-1] in ("noEvent", "no_event", "smooth")
+            self.no_event += quiet
+            try:
+                out = self.call_builtin(body["builtin"], [self.sx(o, bound) for o in self.operands(k)])
+            finally:
+                self.no_event -= quiet
         elif kind == "call":
             out = self.call_function(body, [self.sx(o, bound) for o in self.operands(k)])
         elif kind == "array":
@@ -586,11 +597,15 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     units = {v["name"]: v["attributes"]["unit"] for v in variables if v["attributes"].get("unit")}
     descriptions = {v["name"]: v["attributes"]["description"] for v in variables
                     if v["attributes"].get("description")}
+    # relations on the unknowns are state events; on time alone they are time events (above)
+    unknowns = ca.vertcat(x, dx, z)
+    rel = [r for r in tr.relations if ca.depends_on(r, unknowns)]
+    relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
     return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=bind(residual), init_residual=bind(init_residual),
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
-               time_events=_time_events(st))
+               time_events=_time_events(st), relations=relations)
 
 
 def _time_events(st: dict) -> list[float]:

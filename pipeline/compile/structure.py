@@ -52,6 +52,7 @@ class Ode:
     index: int
     nonlinear_blocks: int
     time_events: tuple = ()      # the solvers restart at these instants
+    zero: ca.Function | None = None   # -> zero-crossing functions: a sign change is a state event
 
 
 def reduce_index(dae: Dae):
@@ -186,6 +187,10 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     alg_res = mk("alg_res", [absmax(g)])
     drift = mk("drift", [absmax(inv)])
     probe = mk("probe", [probe_all])
+    crossings = None
+    if dae.relations.numel():
+        rel_sx = ca.Function("rel", [dae.x, dae.z, dae.u, dae.p, dae.t], [dae.relations])
+        crossings = expanded(mk("zero", [rel_sx(XI, ZI, U, P, T)]))
     y_all = probe_all[y_idx] if y_idx else ca.MX(0, 1)
     checks = ca.Function("checks", args, [y_all, absmax(g), absmax(inv)], names, ["y", "res", "drift"])
 
@@ -200,7 +205,7 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
         ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe, checks=checks,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
-        time_events=tuple(dae.time_events),
+        time_events=tuple(dae.time_events), zero=crossings,
     )
 
 
