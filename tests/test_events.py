@@ -42,3 +42,21 @@ def test_a_model_without_relations_on_states_has_no_event_function(tmp_path):
                                        "equation\n  der(x) = if time > 0.5 then -x else u;\nend Plain;\n")
     model = compile_model([tmp_path / "Plain.mo"], "Plain")
     assert model.ode.zero is None and model.ode.time_events == (0.5,)
+
+
+def test_the_fmu_carries_the_event_indicators(tmp_path):
+    """FMPy's solver locates the zeros of the FMU's event indicators (the same relations)."""
+    from fmpy import read_model_description
+
+    from mcl import simulate
+    from mcl.compile.fmu.export import build_fmu
+    from mcl.model import FmuModel
+
+    (tmp_path / "Kink.mo").write_text(KINK)
+    fmu = build_fmu(compile_model([tmp_path / "Kink.mo"], "Kink"), tmp_path / "kink.fmu")
+    assert read_model_description(str(fmu)).numberOfEventIndicators == 1
+    t = np.linspace(0, 1.05, 8)
+    res = simulate(FmuModel.read(fmu), TimeSeries(t, np.zeros((len(t), 0)), []))
+    assert res.ok, res.reason
+    y = np.where(t < 0.5, 0.5 * t - t**2 / 2, 0.125 - 1.5 * (t - 0.5) ** 2)
+    assert np.max(np.abs(res.output("out") - y)) < 1e-4

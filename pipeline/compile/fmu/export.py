@@ -23,7 +23,7 @@ from ...errors import CompileError, ConfigError
 from ...model import CompiledModel
 
 _HERE = Path(__file__).parent
-FUNCTIONS = ("ode", "out", "alg_res", "init", "probe")
+FUNCTIONS = ("ode", "out", "alg_res", "init", "probe", "zero")
 
 
 def model_identifier(name: str) -> str:
@@ -65,7 +65,10 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
         sym = probe.mx_in()
         full = probe.call(sym)[0]
         probe = ca.Function("probe", sym, [full[[i for i, _ in probe_vars]]])
-    funcs = dict(ode=o.ode, out=o.out, alg_res=o.alg_res, init=o.init, probe=probe)
+    zero = o.zero
+    if zero is None:     # no state events: an empty indicator function keeps the C code uniform
+        zero = ca.Function("zero", o.out.mx_in(), [ca.MX(0, 1)], ["x", "u", "p", "t"], ["out"])
+    funcs = dict(ode=o.ode, out=o.out, alg_res=o.alg_res, init=o.init, probe=probe, zero=zero)
     cg = ca.CodeGenerator("mcl_funcs.c", {"with_header": True})
     for key in FUNCTIONS:
         cg.add(_renamed(funcs[key], prefix + key))
@@ -75,12 +78,18 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
                   NV=len(probe_vars), HAS_LOOP=int(o.nonlinear_blocks > 0),
                   RES_TOL=repr(residual_tol), GUID=guid, PREFIX=prefix,
                   P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start),
-                  N_EVENTS=len(o.time_events), EVENTS=_fmt(np.asarray(o.time_events, float)))
+                  N_EVENTS=len(o.time_events), EVENTS=_fmt(np.asarray(o.time_events, float)),
+                  NZ=n_indicators(model))
     source = re.sub(r"@(\w+)@", lambda m: str(values[m.group(1)]), template)
     (build / "fmi2_model.c").write_text(source)
     for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
         shutil.copy(_fmi_headers() / h, build / h)
     return [build / "fmi2_model.c", build / "mcl_funcs.c"]
+
+
+def n_indicators(model: CompiledModel) -> int:
+    """Event indicators of the FMU: the model's zero-crossing functions (state events)."""
+    return 0 if model.ode.zero is None else int(model.ode.zero.size1_out(0))
 
 
 def model_description(model: CompiledModel, ident: str, guid: str, sources: list[str]) -> str:
@@ -125,7 +134,7 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
                  + "\n  </UnitDefinitions>\n") if used_units else ""
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName={quoteattr(model.name)} guid="{guid}"
-  generationTool="mcl" variableNamingConvention="structured" numberOfEventIndicators="0">
+  generationTool="mcl" variableNamingConvention="structured" numberOfEventIndicators="{n_indicators(model)}">
   <ModelExchange modelIdentifier="{ident}" canNotUseMemoryManagementFunctions="true">
     <SourceFiles>
 {files}

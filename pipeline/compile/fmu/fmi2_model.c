@@ -18,6 +18,7 @@
 #define NX @NX@
 #define NV @NV@
 #define HAS_LOOP @HAS_LOOP@
+#define NZ @NZ@
 #define RES_TOL @RES_TOL@
 #define GUID "@GUID@"
 
@@ -120,7 +121,7 @@ static void work_size(casadi_int* sz_arg, casadi_int* sz_res, casadi_int* sz_iw,
 #define GROW(name) F(name##_work)(&a, &r, &i, &w); \
     if (a > *sz_arg) *sz_arg = a; if (r > *sz_res) *sz_res = r; \
     if (i > *sz_iw) *sz_iw = i; if (w > *sz_w) *sz_w = w;
-    GROW(ode) GROW(out) GROW(alg_res) GROW(init) GROW(probe)
+    GROW(ode) GROW(out) GROW(alg_res) GROW(init) GROW(probe) GROW(zero)
 #undef GROW
 }
 
@@ -293,8 +294,16 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real dx[], size_t nx) {
 }
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t nz) {
-    (void)c; (void)z;
-    return nz == 0 ? fmi2OK : fmi2Error;
+    /* the relations on the states (lhs - rhs): the importer's solver locates their zeros */
+    Model* m = (Model*)c;
+    if (nz != NZ) return fmi2Error;
+    if (NZ == 0) return fmi2OK;
+    if (!m->x_valid && initial_state(m) != fmi2OK) return fmi2Error;
+    if (call(m, F(zero), m->x, m->u, m->p, &m->t, z)) {
+        logmsg(m, fmi2Error, "event indicators failed at t = %g", m->t);
+        return fmi2Error;
+    }
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
