@@ -201,6 +201,7 @@ class _StateEvents:
         self.zero, self.nx = ode.zero, nx
         self._dae = (xa, fa, P, T, iopts)
         self.hop_int = None        # built at the first event (most runs have none)
+        self.maps: dict = {}
         self.count = 0
 
     def hop(self, x, p, ta, tb):
@@ -221,9 +222,11 @@ class _StateEvents:
     def crossed(self, traj, idx, t_int, p, u_at) -> bool:
         """Whether any relation changes sign between the points of this chunk (one mapped call)."""
         cols = np.r_[idx[0] - 1, idx]
-        G = np.array(self.zero.map(len(cols))(traj[: self.nx, cols], np.column_stack([u_at(t_int[c]) for c in cols])
-                                                 if len(u_at(0.0)) else np.zeros((0, len(cols))),
-                                                 np.repeat(np.asarray(p)[:, None], len(cols), 1), t_int[cols][None]))
+        if len(cols) not in self.maps:            # chunks have a few sizes: map each once
+            self.maps[len(cols)] = self.zero.map(len(cols))
+        U = np.column_stack([u_at(t_int[c]) for c in cols])
+        G = np.array(self.maps[len(cols)](traj[: self.nx, cols], U, np.repeat(np.asarray(p)[:, None], len(cols), 1),
+                                          t_int[cols][None]))
         return bool(np.any(np.sign(G[:, 1:]) * np.sign(G[:, :-1]) < 0))
 
     def correct(self, traj, idx, t_int, p, u_at, max_events: int = 2000):

@@ -14,6 +14,7 @@ Third parties add templates through the ``mcl_templates`` hook.
 from __future__ import annotations
 
 import ast
+import functools
 import re
 from dataclasses import dataclass
 
@@ -73,6 +74,13 @@ _FUNCTIONS = {"tanh": np.tanh, "sinh": np.sinh, "cosh": np.cosh, "exp": np.exp, 
 _BINOPS = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide, ast.Pow: np.power}
 
 
+@functools.lru_cache(maxsize=1024)
+def _tree(text: str) -> ast.expr:
+    """The parsed body of an expression term (``^`` as power), parsed once per text: laws are
+    evaluated point by point when their curves are solved."""
+    return ast.parse(text.replace("^", "**"), mode="eval").body
+
+
 @dataclass(frozen=True)
 class Expression:
     """A term that is not a monomial: an arithmetic expression of v, i, dv, di, numbers and
@@ -115,7 +123,7 @@ class Expression:
 
     def modelica(self) -> str:
         """The text, in parentheses where a coefficient in front would bind wrongly (a sum)."""
-        body = ast.parse(self.text.replace("^", "**"), mode="eval").body
+        body = _tree(self.text)
         loose = isinstance(body, ast.UnaryOp) or (isinstance(body, ast.BinOp) and isinstance(body.op, (ast.Add, ast.Sub)))
         return f"({self.text})" if loose else self.text
 
@@ -132,12 +140,11 @@ class Expression:
             return _FUNCTIONS[node.func.id](ev(node.args[0]))
 
         with np.errstate(all="ignore"):
-            return ev(ast.parse(self.text.replace("^", "**"), mode="eval").body)
+            return ev(_tree(self.text))
 
     @property
     def variables(self) -> set[str]:
-        tree = ast.parse(self.text.replace("^", "**"), mode="eval")
-        return {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id in VARIABLES}
+        return {n.id for n in ast.walk(_tree(self.text)) if isinstance(n, ast.Name) and n.id in VARIABLES}
 
     @property
     def degree(self) -> int:
@@ -342,18 +349,16 @@ class PolynomialTemplate(Template):
         k = len(self.lhs)
         return f"{self._side(names[:k], self.lhs)} = {self._side(names[k:], self.rhs)}"
 
-    def features(self, env: dict) -> np.ndarray:
-        """Signed features phi with G = phi @ w (lhs positive, rhs negative): columns per term."""
-        env = self._env(env)
+    def features(self, env: dict, w=None) -> np.ndarray:
+        """Signed features phi with G = phi @ w (lhs positive, rhs negative): columns per term,
+        with the scales taken from ``w`` (default: their start values)."""
+        env = self._env(env, w)
         cols = [m.value(env) for m in self.lhs] + [-m.value(env) for m in self.rhs]
         return np.column_stack([np.broadcast_to(c, np.shape(env["v"])) for c in cols])
 
     def residual(self, w, env: dict) -> np.ndarray:
         w = np.asarray(w, dtype=float)
-        n = len(self.terms)
-        env = self._env(env, w)
-        cols = [m.value(env) for m in self.lhs] + [-m.value(env) for m in self.rhs]
-        return np.column_stack([np.broadcast_to(c, np.shape(env["v"])) for c in cols]) @ w[:n]
+        return self.features(env, w) @ w[:len(self.terms)]
 
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
         rename = {"v": across, "i": flow, "dv": f"der({across})", "di": f"der({flow})"}

@@ -63,28 +63,23 @@ def test_unsupported_constructs_are_refused_not_miscompiled(tmp_path, body, cons
     assert err.value.where == f"{f.resolve()}:{line_of(f, needle)}"
 
 
-def test_real_input_connectors_and_algorithms_compile(tmp_path):
-    """What the pymoca front end refused, rumoca translates: connector inputs, algorithm sections."""
-    f = write(tmp_path, "  connector RealInput = input Real;\n  model M\n    RealInput u;\n    output Real y;\n"
-                        "    Real x(start=0, fixed=true);\n    Real z;\n  equation\n    der(x) = -x + u;\n"
-                        "  algorithm\n    z := 2 * x;\n  equation\n    y = z;\n  end M;\n")
+@pytest.mark.parametrize("source,truth", [
+    # what the pymoca front end refused, rumoca translates: connector inputs, algorithm sections
+    ("  connector RealInput = input Real;\n  model M\n    RealInput u;\n    output Real y;\n"
+     "    Real x(start=0, fixed=true);\n    Real z;\n  equation\n    der(x) = -x + u;\n"
+     "  algorithm\n    z := 2 * x;\n  equation\n    y = z;\n  end M;\n", lambda t: 2 * (1 - np.exp(-t))),
+    # pymoca drops `input` when the type is derived (DESIGN.md); the front end restores it
+    ('  type Voltage = Real(unit="V");\n  model M\n    input Voltage u;\n'
+     "    output Real y;\n    Real x(start=0, fixed=true);\n  equation\n"
+     "    der(x) = u - x;\n    y = x;\n  end M;\n", lambda t: 1 - np.exp(-t)),
+], ids=["real-input-connector-and-algorithm", "input-of-a-derived-type"])
+def test_inputs_compile_with_their_causality(tmp_path, source, truth):
+    f = write(tmp_path, source)
     model = compile_model([f], "P.M")
     assert model.input_names == ["u"]
     t = np.linspace(0, 3, 301)
     res = simulate(model, series(t, u=np.ones_like(t)), options={"rtol": 1e-10, "atol": 1e-12})
-    assert np.allclose(res.output("y"), 2 * (1 - np.exp(-t)), atol=1e-8)
-
-
-def test_input_of_a_derived_type_keeps_its_causality(tmp_path):
-    """pymoca drops `input` when the type is derived (DESIGN.md); the front end restores it."""
-    f = write(tmp_path, '  type Voltage = Real(unit="V");\n  model M\n    input Voltage u;\n'
-                        "    output Real y;\n    Real x(start=0, fixed=true);\n  equation\n"
-                        "    der(x) = u - x;\n    y = x;\n  end M;\n")
-    model = compile_model([f], "P.M")
-    assert model.input_names == ["u"]
-    t = np.linspace(0, 3, 301)
-    res = simulate(model, series(t, u=np.ones_like(t)), options={"rtol": 1e-10, "atol": 1e-12})
-    assert np.allclose(res.output("y"), 1 - np.exp(-t), atol=1e-8)
+    assert np.allclose(res.output("y"), truth(t), atol=1e-8)
 
 
 def test_functions_in_packages_compile(tmp_path):

@@ -16,6 +16,7 @@ from ..data import as_timeseries
 from ..errors import ConfigError
 from ..progress import console
 from ..runfile import RunSpec
+from .families import family_of
 
 __all__ = ["Discovery"]
 
@@ -161,10 +162,9 @@ class Discovery:
         screening = self.report_.get("screening") or []
         if not screening:
             return []
-        fam = lambda t: t.get("family") or t.get("name", "?") if isinstance(t, dict) else str(t)
         comps = sorted({s["component"] for s in screening})
         lines = [f"tried: {len(screening)} law(s) on {len(comps)} component(s): " + "; ".join(
-            f"{c} ({', '.join(fam(s['template']) for s in screening if s['component'] == c)})" for c in comps)]
+            f"{c} ({', '.join(family_of(s['template']) for s in screening if s['component'] == c)})" for c in comps)]
         ranked = [c for c in self.report_.get("candidates", []) if c.get("score") is not None]
         crit = (self.cause_ or {}).get("evidence", {}).get("criterion", "").upper() or "score"
         if ranked:

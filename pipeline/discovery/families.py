@@ -22,8 +22,6 @@ readable law over that basis (:func:`distil`), which is fitted and pruned like t
 """
 from __future__ import annotations
 
-import re
-
 import numpy as np
 
 STATIC = {"name": "polynomial", "lhs": ["i"], "rhs": ["v", "v^2", "v^3"], "family": "static"}
@@ -36,6 +34,16 @@ FAMILIES = {"static": [STATIC, STORAGE], "rate": [RATE, STORAGE], "integral": [I
             "unknown": [STATIC, RATE, STORAGE]}
 #: the variable a role's law is a function of (for the law curve and the shape family)
 LAW_VARIABLE = {"static": "v", "rate": "dv", "integral": "i", "unknown": "v"}
+
+
+def spec_name(spec) -> str:
+    """The template name of a template spec (a name, or a dict with ``name``)."""
+    return spec if isinstance(spec, str) else spec.get("name", "?")
+
+
+def family_of(spec) -> str:
+    """The law family a spec was chosen as (discovery's own specs say so), else its template name."""
+    return (spec.get("family") if isinstance(spec, dict) else None) or spec_name(spec)
 
 
 def role_of(env: dict) -> str:
@@ -116,17 +124,6 @@ def _fit_scales(chosen, x, f, name):
         log_s = least_squares(lambda ls: solve(ls)[0], log_s, x_scale=1.0, diff_step=1e-6).x
     r, c = solve(log_s)
     return float(np.sqrt(np.mean(r**2))), dict(zip(shaped, np.exp(log_s))), c
-
-
-def distil(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3, tol: float = 2e-3,
-           refine_best: int = 6) -> tuple[list[str], np.ndarray]:
-    """The sparsest law of :func:`distillations` that follows the curve within ``tol`` of its
-    range (the last, richest one if none does). Returns (terms with their scales' values, c)."""
-    laws = distillations(x, f, name, max_terms, refine_best)
-    scale = float(np.ptp(np.asarray(f, float)[np.isfinite(f)])) or 1.0
-    law = next((law for law in laws if law["err"] < tol * scale), laws[-1])
-    text = lambda t: re.sub(r"\bs\d+\b", lambda m: f"{law['scales'][m.group(0)]:.4g}", t)
-    return [text(t) for t in law["terms"]], law["c"]
 
 
 def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,

@@ -51,6 +51,7 @@ class FitOutcome:
     simulations: int
     path: list = field(default_factory=list)
     visited: list = field(default_factory=list)
+    result: object = None       # the simulation of the result on the training data, if made
 
 
 class CandidateFitter:
@@ -131,7 +132,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         H_inv = np.linalg.pinv(S.T @ S)
         idx = np.flatnonzero(active)[1:]
         est = w[idx] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
-        est = np.where(idx < (n_terms or len(names)), est, np.inf)  # a scale is not a term
+        est = np.where(idx < n_terms, est, np.inf)                  # a scale is not a term
         k = idx[int(np.argmin(est))]
         trial = active.copy()
         trial[k] = False
@@ -152,7 +153,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     if final.ok:
         rss = rss_of(residual(data, model, final))
         score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
-    return w, active, rss, score, sims, path, visited
+    return w, active, rss, score, sims, path, visited, final
 
 
 def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: str, template):
@@ -169,6 +170,6 @@ def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: s
     r = residual(data, model, res)
     rss = rss_of(r)
     score = criterion_of(criterion).score(rss, int(np.isfinite(r).sum()), int(active.sum()) - 1, len(names) - 1)
-    return w * active, active, rss, score, sims, path, []
+    return w * active, active, rss, score, sims, path, [], res
 
 

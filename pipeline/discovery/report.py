@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from ..plots import axis_label
+from .families import family_of
 
 
 def _png(fig) -> str:
@@ -143,7 +144,7 @@ def _feasibility_figure(plt, cause):
 def _ranking_figure(plt, report, cands):
     crit = ((report.get("cause") or {}).get("evidence", {}).get("criterion") or "bic").upper()
     fig, ax = plt.subplots(figsize=(7, 0.4 * len(cands) + 1.5))
-    labels = [f"{c['component']} ({c.get('family') or _template_name(c['template'])})" for c in cands]
+    labels = [f"{c['component']} ({c.get('family') or family_of(c['template'])})" for c in cands]
     scores = [c["score"] - cands[0]["score"] for c in cands]
     colours = ["tab:green"] + ["tab:gray"] * (len(cands) - 1)   # the winner first, drawn at the top
     ax.barh(labels[::-1], scores[::-1], color=colours[::-1])
@@ -153,10 +154,6 @@ def _ranking_figure(plt, report, cands):
         ax.legend(fontsize=8)
     ax.set_xlabel(f"{crit} above the best candidate (lower is better)")
     return fig
-
-
-def _template_name(t) -> str:
-    return t.get("name", "?") if isinstance(t, dict) else str(t)
 
 
 def _summary_rows(report) -> str:
@@ -185,8 +182,7 @@ def _tried_rows(report) -> str:
     for s in report.get("screening", []):
         status = (s.get("not_applicable") and "not applicable" or s.get("reason") and f"failed: {s['reason']}"
                   or s.get("not_fitted") or "fitted")
-        fam = s["template"].get("family") or _template_name(s["template"]) if isinstance(s["template"], dict) \
-            else s["template"]
+        fam = family_of(s["template"])
         rows.append(f"<tr><td>{html.escape(s['component'])}</td><td>{html.escape(str(fam))}</td>"
                     f"<td>{_g(s.get('predicted_rss'))}</td><td>{html.escape(str(status))[:140]}</td></tr>")
     if not rows:

@@ -30,11 +30,12 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..progress import log
+from ..simulation import prepare_inputs
 from ..errors import ConfigError, MclError, ModelicaError
 from ..executor import TaskFailed
 from ..stats import criterion as criterion_of, noise_estimate, rms, rss as rss_of
 from .fitters import FIT_OPTIONS, residual
-from .families import distillations, families, role_of
+from .families import distillations, families, role_of, spec_name
 from .extend import explain
 
 
@@ -58,7 +59,7 @@ def probe(model, result, inputs: TimeSeries, params: dict, names: list[str]) -> 
     """Values of named model variables along a simulation, (N, len(names))."""
     ode = model.ode
     N = len(result.time)
-    inputs = inputs.select(ode.u_names).filled() if ode.u_names else inputs
+    inputs = prepare_inputs(model, inputs)
     u = np.array([np.interp(result.time, inputs.time, inputs.column(n)) for n in ode.u_names]).reshape(-1, N)
     p = model.parameter_vector(params)
     vals = np.array(ode.probe.map(N)(result.states.T, u, np.repeat(p[:, None], N, 1), result.time[None]))
@@ -156,12 +157,12 @@ def _candidate_task(ctx, item):
     """Executor task: one candidate component with one template, fitted and pruned."""
     from ..api import simulate
 
+    from ..api import registry
+
     train, validate, criterion = ctx.train, ctx.validate, ctx.criterion
     comp_name, _, tpl_spec = item
     template, w0, tm, model = _candidate_model(ctx, item)
     comp = ctx.graph.components[comp_name]
-    from ..api import registry
-
     # the shape stage (a network, then distilled laws with fitted scales) always simulates: it
     # refines the best law and is not stopped for being behind it; a network has many
     # parameters and one chance, so it gets three fits' budget
@@ -170,17 +171,17 @@ def _candidate_task(ctx, item):
     fit = fitter.fit(model, train, tm.parameter_names, w0, template, criterion,
                      ctx.budget * (3 if item.index == NEURAL_INDEX else 1), give_up=None if shape else ctx.give_up,
                      prune=bool(getattr(template, "terms", None)))
-    w, active, rss, score, sims, path, visited = (fit.w, fit.active, fit.rss, fit.score, fit.simulations,
-                                                  fit.path, fit.visited)
+    w, active = fit.w, fit.active
     params = dict(zip(tm.parameter_names, w))
     out = {"component": comp_name, "class": comp.cls, "template": tpl_spec,
            "family": getattr(template, "family", "") or template.name, "law_variable": template.law_variable,
            "w0": w0.tolist(),
-           "w": w.tolist(), "active": active.tolist(), "rss": rss, "score": score,
-           "simulations": sims, "pruning": path, "equation": template.equation(w * active),
-           "visited": visited,
+           "w": w.tolist(), "active": active.tolist(), "rss": fit.rss, "score": fit.score,
+           "simulations": fit.simulations, "pruning": fit.path, "equation": template.equation(w * active),
+           "visited": fit.visited,
            "terms": [str(m) for m in getattr(template, "terms", [])]}
-    res = simulate(model, train, params)
+    # the fitter's own simulation of the result on the training data, where it made one
+    res = fit.result if fit.result is not None else simulate(model, train, params)
     out["train_rms"] = rms(residual(train, model, res)) if res.ok else None
     if validate is not None:
         rv = simulate(model, validate, params)
@@ -210,13 +211,8 @@ class Context:
     def give_up(self, reachable_rss: float) -> bool:
         """A fit stops when even its Gauss-Newton model cannot come within a factor of 10 of the
         RSS of a candidate already fitted (n ln 10 in any criterion: it cannot win)."""
-        if not self.best_file:
-            return False
-        try:
-            best = json.loads(Path(self.best_file).read_text())["rss"]
-        except (OSError, ValueError, KeyError):
-            return False
-        return reachable_rss > 10.0 * best
+        best = _best_rss(Path(self.best_file)) if self.best_file else None
+        return best is not None and reachable_rss > 10.0 * best
 
 
 def context(graph, train, validate, spec, part, models) -> Context:
@@ -261,7 +257,7 @@ NEURAL_INDEX, SHAPE_INDEX = 100, 101
 def _shapes(fit: _Batch, cands: list[dict], sigma: float) -> list[dict]:
     """Non-polynomial shapes for the most promising component: a neural law in the variable of
     its best polynomial law, fitted to the data, then distilled into a sparse readable law over
-    tanh, sinh, |x| x, x/sqrt(1 + x^2), exp and polynomial terms (:func:`families.distil`) and
+    tanh, sinh, |x| x, x/sqrt(1 + x^2), exp and polynomial terms (:func:`families.distillations`) and
     fitted and pruned like any candidate. Skipped when the polynomial law already fits to the
     noise, or when it is not a law of one variable."""
     done = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
@@ -295,15 +291,20 @@ def _shapes(fit: _Batch, cands: list[dict], sigma: float) -> list[dict]:
     return out + fit(items)
 
 
+def _best_rss(path: Path) -> float | None:
+    """The least RSS of the finished candidates (None before the first finishes)."""
+    try:
+        return json.loads(path.read_text())["rss"]
+    except (OSError, ValueError, KeyError):
+        return None
+
+
 def _note_best(path: Path, result: dict, rundir) -> None:
     """Keep the least RSS of the finished candidates where running fits can read it."""
     rss = result.get("rss")
     if rss is None or result.get("failed"):
         return
-    try:
-        best = json.loads(path.read_text())["rss"]
-    except (OSError, ValueError, KeyError):
-        best = None
+    best = _best_rss(path)
     if best is None or rss < best:
         rundir.write_json(path.name, {"rss": rss, "component": result["component"]})
 
@@ -326,10 +327,6 @@ def _helps(after, before: float, margin: float = 0.02) -> bool:
 
 def _fmt(x) -> str:
     return "failed" if x is None else f"{x:.4g}"
-
-
-def _template_name(spec) -> str:
-    return spec if isinstance(spec, str) else spec.get("name", "?")
 
 
 def _screen(items, models, reg, spec, ctx) -> list[dict]:
@@ -431,7 +428,7 @@ def _decide(report: dict, spec, resid, val0):
         return None, None
     best = ranked[0]
     if val0 is not None and not _helps(best.get("validation_rms"), val0):
-        report["no_cause"] = (f"the best candidate, {best['component']} ({_template_name(best['template'])}), "
+        report["no_cause"] = (f"the best candidate, {best['component']} ({spec_name(best['template'])}), "
                               f"does not improve the validation data (RMS {val0:.4g} -> "
                               f"{_fmt(best.get('validation_rms'))})")
         return None, None
@@ -491,7 +488,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         report["failed"] = _failures(screening, cands)
         for f in report["failed"]:
             log.warning("      %s with %s could not be evaluated (%s): %s", f["component"],
-                        _template_name(f["template"]), f["stage"], f["reason"])
+                        spec_name(f["template"]), f["stage"], f["reason"])
         best, delta = _decide(report, spec, resid, val0)
         if best is not None:
             report["cause"], extended_y, ext_val = explain(best, delta, graph, spec, part, train, validate,
