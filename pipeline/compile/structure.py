@@ -53,6 +53,8 @@ class Ode:
     nonlinear_blocks: int
     time_events: tuple = ()      # the solvers restart at these instants
     zero: ca.Function | None = None   # -> zero-crossing functions: a sign change is a state event
+    start: ca.Function | None = None       # p -> the states' start values s
+    init_start: ca.Function | None = None  # (u, p, t, s) -> x0 from start values s (FMU starts)
 
 
 def reduce_index(dae: Dae):
@@ -197,15 +199,17 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     x_names = semi_state_names(xs, dae)
     # der() of the original states, for initial equations such as der(x) = 0 (steady state)
     dXI = ca.mtimes(ca.Function("dxi", [xs, zs, up, t], [ca.jacobian(x_impl, xs)])(X, Z, UP, T), xdot)
-    init = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI)
+    start, init_start = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI)
+    init = ca.Function("init", [U, P, T], [init_start(U, P, T, start(P))], ["u", "p", "t"], ["x0"])
     # SX evaluates faster than the MX call graph, where there is no Newton or QR solve in it
-    ode, out, alg_res, drift, probe, init, checks = map(expanded, (ode, out, alg_res, drift, probe, init, checks))
+    ode, out, alg_res, drift, probe, init, checks, start, init_start = map(
+        expanded, (ode, out, alg_res, drift, probe, init, checks, start, init_start))
     return Ode(
         x_names=x_names, u_names=list(dae.u_names), p_names=list(dae.p_names),
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
         ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe, checks=checks,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
-        time_events=tuple(dae.time_events), zero=crossings,
+        time_events=tuple(dae.time_events), zero=crossings, start=start, init_start=init_start,
     )
 
 
@@ -236,8 +240,9 @@ def semi_state_names(xs: ca.SX, dae: Dae) -> list[str]:
 
 
 def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
-    """(u, p, t) -> consistent x0: invariants + initial equations (der() of a state is its
-    right-hand side) + chosen start values."""
+    """(p -> start values s, (u, p, t, s) -> consistent x0): invariants + initial equations
+    (der() of a state is its right-hand side) + chosen start values (s is an argument, so an FMU
+    can take a state's start value from its user)."""
     nx = xs.numel()
     init_res = ca.Function("ires", [dae.x, dae.dx, dae.z, dae.u, dae.p, dae.t], [dae.init_residual])
     hard = ca.vertcat(inv, init_res(XI, dXI, ZI, U, P, T)) if dae.init_residual.numel() else inv
@@ -267,18 +272,20 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
                         x_names[i])
     if rank + len(pins) < nx:
         raise ModelicaError("cannot find a consistent initial state (singular initial system)")
+    S = ca.MX.sym("s", nx)
+    start = ca.Function("start", [P], [semi_start], ["p"], ["s"])
     residual = ca.vertcat(hard[rows] if rows else ca.MX(0, 1),
-                          X[pins] - semi_start[pins] if pins else ca.MX(0, 1))
+                          X[pins] - S[pins] if pins else ca.MX(0, 1))
     if not ca.depends_on(ca.jacobian(residual, X), X):
         # linear: one exact solve, no Newton iteration
-        Ab = ca.Function("Ab", [X, U, P, T], [ca.jacobian(residual, X), residual])
-        A, b = Ab(ca.DM.zeros(nx), U, P, T)
+        Ab = ca.Function("Ab", [X, U, P, T, S], [ca.jacobian(residual, X), residual])
+        A, b = Ab(ca.DM.zeros(nx), U, P, T, S)
         x0 = -ca.solve(A, b) if nx else ca.MX(0, 1)
-        return ca.Function("init", [U, P, T], [x0], ["u", "p", "t"], ["x0"])
-    G = ca.Function("G", [X, ca.vertcat(U, P, T)], [residual])
+        return start, ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
+    G = ca.Function("G", [X, ca.vertcat(U, P, T, S)], [residual])
     rf = ca.rootfinder("init_newton", "fast_newton", G, NEWTON_OPTS)
-    x0 = rf(semi_start, ca.vertcat(U, P, T))
-    return ca.Function("init", [U, P, T], [x0], ["u", "p", "t"], ["x0"])
+    x0 = rf(S, ca.vertcat(U, P, T, S))
+    return start, ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
 
 
 def _start_of(s, dae: Dae):
