@@ -27,11 +27,6 @@ class CompiledModel:
     name: str
     ode: Ode
     info: dict = field(default_factory=dict)
-    #: the DAE as compiled, before alias elimination (candidate laws are put into it) and the
-    #: component structure (:class:`mcl.compile.components.Structure`); None for a model loaded
-    #: from a file saved without them
-    dae: object = None
-    structure: object = None
 
     @property
     def input_names(self) -> list[str]:
@@ -75,7 +70,7 @@ class CompiledModel:
         checks = expanded(ca.Function("checks", args, [ca.vertcat(y_c, o.probe(*args)[idx]), res, drift],
                                        *io, ["y", "res", "drift"]))
         ode = dataclasses.replace(o, y_names=[*o.y_names, *extra], out=out, checks=checks)
-        return CompiledModel(self.name, ode, self.info, self.dae, self.structure)
+        return CompiledModel(self.name, ode, self.info)
 
     def save(self, directory) -> Path:
         """Write the functions (CasADi serialisation) and names to ``directory``."""
@@ -92,12 +87,6 @@ class CompiledModel:
                     u_start=o.u_start.tolist(), probe_names=o.probe_names, index=o.index,
                     nonlinear_blocks=o.nonlinear_blocks, time_events=list(o.time_events))
         (d / "model.json").write_text(json.dumps(meta, indent=1))
-        if self.dae is not None:
-            from .compile.saved import save_dae
-
-            save_dae(self.dae, d)
-        if self.structure is not None:
-            (d / "structure.json").write_text(json.dumps(self.structure.to_dict()))
         return d
 
     @classmethod
@@ -114,12 +103,7 @@ class CompiledModel:
                   u_start=np.array(meta["u_start"]), probe_names=meta["probe_names"],
                   index=meta["index"], nonlinear_blocks=meta["nonlinear_blocks"],
                   time_events=tuple(meta.get("time_events", ())), **funcs)
-        from .compile.components import Structure
-        from .compile.saved import load_dae
-
-        structure = (Structure.from_dict(json.loads((d / "structure.json").read_text()))
-                     if (d / "structure.json").is_file() else None)
-        return cls(meta["name"], ode, meta.get("info", {}), load_dae(d), structure)
+        return cls(meta["name"], ode, meta.get("info", {}))
 
 
 @dataclass
