@@ -1,0 +1,80 @@
+"""Make the split CSV files of the real benchmarks from the benchmarks' own files.
+
+    python examples/real/prepare.py SOURCE_DIR OUT_DIR
+
+SOURCE_DIR holds the files as the benchmarks distribute them (the paths each README names):
+``dataBenchmark.csv`` (cascaded tanks), ``SNLS80mV.csv`` (Silverbox), ``DATA_EMPS.mat`` and
+``DATA_EMPS_PULSES.mat`` (EMPS). OUT_DIR/<case>/ receives ``train.csv`` and one ``test*.csv`` per
+test split of the benchmark's own protocol (the split in each case's README), each with a header
+``time,u,y``: time in seconds from 0, u the measured input, y the measured output. Nothing is
+resampled; the Silverbox's test splits are the benchmark's index ranges. Files that are missing in
+SOURCE_DIR are skipped with a note.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+SILVERBOX_FS = 1e7 / 2 ** 14            # 610.35 Hz (Wigren and Schoukens 2013, eq. 12)
+
+
+def write(path: Path, u, y, dt: float) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    t = np.arange(len(u)) * dt
+    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="time,u,y", comments="",
+               fmt=["%.10g", "%.8g", "%.8g"])
+    print(f"{path}: {len(u)} samples")
+
+
+def cascaded_tanks(src: Path, out: Path) -> None:
+    import pandas as pd
+
+    d = pd.read_csv(src / "dataBenchmark.csv")
+    ts = float(d["Ts"].iloc[0])                                   # 4 s
+    write(out / "train.csv", d["uEst"], d["yEst"], ts)
+    write(out / "test.csv", d["uVal"], d["yVal"], ts)
+
+
+def silverbox(src: Path, out: Path) -> None:
+    import pandas as pd
+
+    d = pd.read_csv(src / "SNLS80mV.csv").iloc[:, :2].to_numpy(float)   # V1 (input), V2 (output)
+    u, y, dt = d[:, 0], d[:, 1], 1.0 / SILVERBOX_FS
+    s = 40650 + int((127400 - 40650) * 0.75)              # the benchmark's split: multisine 40650-127399
+    write(out / "train.csv", u[40650:s], y[40650:s], dt)
+    write(out / "test_multisine.csv", u[s:127400], y[s:127400], dt)
+    write(out / "test_arrow.csv", u[100:40575], y[100:40575], dt)
+
+
+def emps(src: Path, out: Path) -> None:
+    from scipy.io import loadmat
+
+    for name, file in [("train.csv", "DATA_EMPS.mat"), ("test.csv", "DATA_EMPS_PULSES.mat")]:
+        m = loadmat(src / file)
+        t = m["t"][:, 0]
+        write(out / name, m["vir"][:, 0] * float(m["gtau"][0, 0]), m["qm"][:, 0], float(t[1] - t[0]))
+
+
+CASES = {"cascaded_tanks": (cascaded_tanks, ["dataBenchmark.csv"]),
+         "silverbox": (silverbox, ["SNLS80mV.csv"]),
+         "emps": (emps, ["DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"])}
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) != 2:
+        print(__doc__.strip().splitlines()[2], file=sys.stderr)
+        return 2
+    src, out = map(Path, argv)
+    for case, (make, needs) in CASES.items():
+        missing = [f for f in needs if not (src / f).exists()]
+        if missing:
+            print(f"{case}: skipped ({', '.join(missing)} not in {src})")
+            continue
+        make(src, out / case)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
