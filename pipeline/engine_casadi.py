@@ -2,11 +2,22 @@
 
 The fitting loops' workhorse (../shared/DESIGN.md, section 4: 10-50x faster than the FMU route).
 Forward sensitivities integrate S' = (df/dx) S + df/dp alongside the state, so dy/dp is exact up
-to the solver tolerance. The horizon is integrated in chunks so a wall-clock limit can stop a run
-that crawls (some infeasible parameters make CVODES take tiny steps for ever).
+to the solver tolerance.
+
+The horizon is integrated in calls of CVODES over a few output points each; between calls the
+engine checks the wall-clock limit and the work budget (solver steps) and sizes the next call so
+that even a call that crawls cannot overrun them by much: its points and its steps per point are
+bounded by what is left, at the step rate measured so far.
+
+Hybrid models (:class:`~mcl.compile.structure.Ode` with ``discrete`` > 0) carry their discrete
+variables at the end of the state vector with a zero derivative; at an event (a relation changing
+sign, located between two points; a time event; a clock tick) the ``update`` function is iterated
+until the discrete values stop changing (Modelica's event iteration), then the solver restarts.
 """
 from __future__ import annotations
 
+import logging
+import math
 from collections import OrderedDict
 
 import casadi as ca
@@ -16,10 +27,18 @@ from .data import TimeSeries
 from .errors import DataError
 from .model import CompiledModel
 from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
-                       quiet_native_output)
+                         quiet_native_output)
+
+log = logging.getLogger(__name__)
 
 N_CHUNKS = 10
 _CACHE_SIZE = 16
+_INTEGRATORS = 64         # integrators kept per plan (built on demand: a few ms each)
+DETECTION_POINTS = 400    # at least this many points over the horizon where relations are checked
+MAX_EVENT_ITERATIONS = 100
+MAX_EVENTS = 100000
+#: a call of the solver may use this share of the wall time still left
+CALL_SHARE = 0.4
 
 
 class CasadiEngine(Engine):
@@ -68,6 +87,61 @@ def _check_grid(t_out, u: TimeSeries):
                         f"[{u.time[0]:g}, {u.time[-1]:g}]", where=u.source)
 
 
+class _Stop(Exception):
+    """A simulation ends early: its reason is the failed result's."""
+
+
+class _Budget:
+    """Wall time and solver steps: what is spent, and how big the next call may be."""
+
+    def __init__(self, opts: SimulationOptions, clock: Stopwatch):
+        self.opts, self.clock = opts, clock
+        self.steps = 0
+        self.rate = None          # seconds per step, measured
+        self.guessed = False      # rate is a guess made before any call
+
+    def record(self, steps: int, seconds: float):
+        self.steps += int(steps)
+        if steps > 0:
+            r = seconds / steps
+            self.rate = r if self.rate is None or self.guessed else max(r, 0.5 * self.rate)
+            self.guessed = False
+
+    def check(self, t: float):
+        if self.clock.expired:
+            raise _Stop(f"time limit of {self.opts.time_limit:g} s exceeded at t = {t:g}")
+        if self.opts.max_work is not None and self.steps >= self.opts.max_work:
+            raise _Stop(f"work budget of {self.opts.max_work} solver steps exceeded at t = {t:g}")
+
+    def call_size(self, n_points: int, share: float = CALL_SHARE) -> tuple[int, int, str | None]:
+        """(points, steps per point, the bound that limited them) for the next call of at most
+        ``n_points`` points: the worst case of a call (every point using its steps) stays
+        within ``share`` of the time left and within the steps left."""
+        cap = self.opts.max_steps
+        allowed, bound = math.inf, None
+        if self.rate is not None:
+            allowed, bound = share * max(self.opts.time_limit - self.clock.elapsed, 0.0) / self.rate, "time"
+        if self.opts.max_work is not None and self.opts.max_work - self.steps < allowed:
+            allowed, bound = max(self.opts.max_work - self.steps, 1), "work"
+        if n_points * cap <= allowed:
+            return n_points, cap, None
+        per_point = max(int(allowed // n_points), 1)
+        if per_point >= 256:          # fewer steps per point: most calls need few
+            return n_points, _pow2(min(per_point, cap)), bound
+        n = max(1, int(allowed // min(cap, 4096)))
+        n = min(n_points, 1 << (n.bit_length() - 1))
+        return n, _pow2(max(min(int(allowed // n), cap), 16)), bound
+
+    def reason(self, bound: str | None, t: float) -> str:
+        if bound == "work":
+            return f"work budget of {self.opts.max_work} solver steps exceeded at t = {t:g}"
+        return f"time limit of {self.opts.time_limit:g} s exceeded at t = {t:g}"
+
+
+def _pow2(n: int) -> int:
+    return 1 << max(int(n), 1).bit_length() - 1
+
+
 class _Plan:
     """Integrators and output maps for one (model, input, grid, sensitivity) combination."""
 
@@ -90,25 +164,47 @@ class _Plan:
             S = ca.MX.sym("S", nx, ns)
             dS = ca.mtimes(ca.jacobian(f, X), S) + ca.jacobian(f, P)[:, sel]
             xa, fa = ca.vertcat(X, ca.vec(S)), ca.vertcat(f, ca.vec(dS))
-        dae = {"x": xa, "p": P, "t": T, "ode": fa}
-        iopts = {"reltol": opts.rtol, "abstol": opts.atol, "max_num_steps": opts.max_steps,
-                 "disable_internal_warnings": True, "show_eval_warnings": False}
-        self.events = _StateEvents(ode, xa, fa, P, T, Ut, nx, iopts) if ode.zero is not None else None
-        # the integration grid: the output times and the model's time events, a restart at each
+        self.na = xa.numel()
+        empty = ca.MX.sym("z", 0, 1), ca.MX.sym("u", 0, 1)
+        # one oracle for every integrator: its derivatives are built once, so an integrator
+        # over any grid costs milliseconds
+        self.oracle = ca.Function("dae", [T, xa, empty[0], P, empty[1]], [fa, ca.MX(0, 1), ca.MX(0, 1), ca.MX(0, 1)],
+                                  ca.dyn_in(), ca.dyn_out())
+        self.iopts = {"reltol": opts.rtol, "abstol": opts.atol,
+                      "disable_internal_warnings": True, "show_eval_warnings": False}
+        self._integrators: OrderedDict = OrderedDict()
+        tau, t0, h = ca.MX.sym("tau"), ca.MX.sym("t0"), ca.MX.sym("h")
+        PH = ca.vertcat(P, t0, h)
+        self.hop_oracle = ca.Function("hop", [tau, xa, empty[0], PH, empty[1]],
+                                      [ca.substitute(fa, T, t0 + tau * h) * h, ca.MX(0, 1), ca.MX(0, 1), ca.MX(0, 1)],
+                                      ca.dyn_in(), ca.dyn_out())
+        self.hybrid = _Hybrid(ode, t_out) if (ode.zero is not None or getattr(ode, "discrete", 0)) else None
+        # the integration grid: output times, time events and clock ticks (a restart at each),
+        # and where relations are watched, enough points to see their sign changes
         events = [te for te in ode.time_events if t_out[0] < te < t_out[-1]]
-        self.t_int = np.union1d(t_out, events)
-        self.out_idx = np.searchsorted(self.t_int, t_out)
-        starts = [int(np.searchsorted(self.t_int, te)) for te in events]
-        pieces = np.split(np.arange(1, len(self.t_int)), [s for s in starts])
-        chunks = [c for piece in pieces if len(piece)
-                  for c in np.array_split(piece, min(N_CHUNKS, len(piece)))]
-        if nx == 0:  # purely algebraic model: nothing to integrate, outputs evaluated below
-            chunks = []
-        self.chunks = []
-        for k, idx in enumerate(chunks):
-            t0 = self.t_int[idx[0] - 1]
-            integ = ca.integrator(f"I{k}", "cvodes", dae, t0, self.t_int[idx].tolist(), iopts)
-            self.chunks.append((idx, integ))
+        ticks = self.hybrid.ticks(t_out[0], t_out[-1]) if self.hybrid else {}
+        t_int = np.union1d(np.union1d(t_out, events), sorted(ticks))
+        if ode.zero is not None and len(t_int) - 1 < DETECTION_POINTS:
+            k = int(math.ceil(DETECTION_POINTS / (len(t_int) - 1)))
+            t_int = np.union1d(t_int, (t_int[:-1, None] + np.diff(t_int)[:, None] * np.arange(1, k) / k).ravel())
+        self.t_int = t_int
+        self.out_idx = np.searchsorted(t_int, t_out)
+        self.tick_at = {int(np.searchsorted(t_int, te)): clocks for te, clocks in ticks.items()}
+        self.time_event_at = {int(np.searchsorted(t_int, te)) for te in events}
+        restarts = sorted({int(np.searchsorted(t_int, te)) for te in events} | set(self.tick_at))
+        pieces = np.split(np.arange(1, len(t_int)), restarts)
+        chunks = []
+        for piece in pieces:
+            if not len(piece):
+                continue
+            # a small first call measures the step rate before the big ones are sized
+            head = piece[: max(1, len(piece) // (4 * N_CHUNKS))] if not chunks else piece[:0]
+            if len(head):
+                chunks.append(head)
+            rest = piece[len(head):]
+            if len(rest):
+                chunks += list(np.array_split(rest, min(N_CHUNKS, len(rest))))
+        self.chunks = [] if nx == 0 else chunks   # purely algebraic: nothing to integrate
         N = len(t_out)
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
                           (("x", nx), ("u", len(ode.u_names)), ("p", npar), ("t", 1)))
@@ -122,14 +218,89 @@ class _Plan:
             self.dx0 = ca.Function("dx0", [Us, Ps, Ts], [x0, ca.jacobian(x0, Ps)[:, sel]])
         self.nx, self.ns = nx, ns
         self.u_at = (lambda t: np.array([np.interp(t, u.time, u.values[:, j]) for j in range(len(u.names))]))
+        self.zero_maps: dict = {}
 
+    # -- integrators -----------------------------------------------------------------------
+    def integrator(self, t0: float, grid: np.ndarray, steps: int):
+        key = (float(t0), grid.tobytes(), steps)
+        if key not in self._integrators:
+            self._integrators[key] = ca.integrator("I", "cvodes", self.oracle, float(t0), grid.tolist(),
+                                                   {**self.iopts, "max_num_steps": steps})
+            if len(self._integrators) > _INTEGRATORS:
+                self._integrators.popitem(last=False)
+        self._integrators.move_to_end(key)
+        return self._integrators[key]
+
+    def hop(self, x, p, ta, tb, budget: _Budget, steps: int | None = None):
+        """The state at ``tb`` from ``x`` at ``ta``: one fresh integration (a restart)."""
+        if tb <= ta:
+            return np.asarray(x, float)
+        steps = steps or budget.call_size(1, 1.0)[1]
+        key = ("hop", steps)
+        if key not in self._integrators:
+            self._integrators[key] = ca.integrator("hop", "cvodes", self.hop_oracle, 0.0, [1.0],
+                                                   {**self.iopts, "max_num_steps": steps})
+        integ = self._integrators[key]
+        clock = Stopwatch(0)
+        try:
+            xf = integ(x0=x, p=np.concatenate([p, [ta, tb - ta]]))["xf"]
+        finally:
+            budget.record(_nsteps(integ), clock.elapsed)
+        return np.array(xf).ravel()
+
+    def advance(self, x, t0, idx, p, budget: _Budget, traj):
+        """Integrate from ``x`` at ``t0`` over the grid points ``idx``, filling ``traj``; each
+        call sized by the budget. A call that runs out of its reduced steps ends the run."""
+        pos, failed = 0, None
+        while pos < len(idx):
+            budget.check(t0)
+            # after a call that ran out of its reduced steps: again only with more steps,
+            # sized with all that is left
+            n, steps, bound = budget.call_size(len(idx) - pos, CALL_SHARE if failed is None else 1.0)
+            if failed is not None and steps <= failed:
+                raise _Stop(budget.reason(bound, t0))
+            sub = idx[pos:pos + n]
+            integ = self.integrator(t0, self.t_int[sub], steps)
+            clock = Stopwatch(0)
+            try:
+                xf = np.array(integ(x0=x, p=p)["xf"])
+            except RuntimeError as exc:
+                budget.record(_nsteps(integ) or steps, clock.elapsed)   # its steps, the rate measured
+                if bound is not None and "TOO_MUCH_WORK" in str(exc):
+                    failed = steps
+                    continue
+                raise _Stop(f"solver error before t = {self.t_int[sub[-1]]:g}: {_last_line(exc)}") from None
+            failed = None
+            budget.record(_nsteps(integ), clock.elapsed)
+            traj[:, sub] = xf
+            if not np.all(np.isfinite(xf)):
+                bad = sub[np.argmax(~np.all(np.isfinite(xf), axis=0))]
+                raise _Stop(f"non-finite state at t = {self.t_int[bad]:g}")
+            x, t0, pos = xf[:, -1], self.t_int[sub[-1]], pos + n
+
+    def step_cost(self, x, u, p, t) -> float:
+        """A first guess of the seconds per solver step (before any call has measured it): a
+        step evaluates the right-hand side a few times and now and then its Jacobian."""
+        f = self.model.ode.ode
+        best = math.inf
+        for _ in range(3):
+            clock = Stopwatch(0)
+            f(x[: self.nx], u, p, t)
+            best = min(best, clock.elapsed)
+        return max(40 * best, 2e-6)
+
+    # -- a run -------------------------------------------------------------------------------
     def run(self, p: np.ndarray, opts: SimulationOptions) -> SimulationResult:
         ode, t_out, N = self.model.ode, self.t_out, len(self.t_out)
         clock = Stopwatch(opts.time_limit)
+        budget = _Budget(opts, clock)
+        self.opts_max_steps = opts.max_steps
         names = ode.y_names
 
         def fail(reason):
-            return SimulationResult.failed(reason, t_out, names, "casadi", clock.elapsed)
+            res = SimulationResult.failed(reason, t_out, names, "casadi", clock.elapsed)
+            res.steps = budget.steps
+            return res
 
         u0 = self.u_out[:, 0]
         try:
@@ -142,27 +313,24 @@ class _Plan:
             return fail(f"initialisation failed: {_last_line(exc)}")
         if not np.all(np.isfinite(xa)):
             return fail("initialisation gave non-finite values")
+        budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
         t_int = self.t_int
-        if self.events is not None:
-            self.events.count = 0
         traj = np.full((len(xa), len(t_int)), np.nan)
-        traj[:, 0] = xa
-        for idx, integ in self.chunks:
-            if clock.expired:
-                return fail(f"time limit of {opts.time_limit:g} s exceeded at t = {t_int[idx[0] - 1]:g}")
-            try:
-                xf = np.array(integ(x0=traj[:, idx[0] - 1], p=p)["xf"])
-            except RuntimeError as exc:
-                return fail(f"solver error before t = {t_int[idx[-1]]:g}: {_last_line(exc)}")
-            traj[:, idx] = xf
-            if not np.all(np.isfinite(xf)):
-                bad = idx[np.argmax(~np.all(np.isfinite(xf), axis=0))]
-                return fail(f"non-finite state at t = {t_int[bad]:g}")
-            if self.events is not None and self.events.crossed(traj, idx, t_int, p, self.u_at):
-                try:
-                    self.events.correct(traj, idx, t_int, p, self.u_at)
-                except RuntimeError as exc:
-                    return fail(f"solver error after a state event before t = {t_int[idx[-1]]:g}: {_last_line(exc)}")
+        hybrid = self.hybrid
+        try:
+            if hybrid is not None:
+                hybrid.reset()
+                xa = hybrid.initial(self, xa, p, t_int[0])
+            traj[:, 0] = xa
+            for idx in self.chunks:
+                if hybrid is None:
+                    self.advance(traj[:, idx[0] - 1], t_int[idx[0] - 1], idx, p, budget, traj)
+                else:
+                    hybrid.advance(self, idx, p, budget, traj)
+        except _Stop as stop:
+            return fail(str(stop))
+        except RuntimeError as exc:
+            return fail(f"solver error: {_last_line(exc)}")
         traj = traj[:, self.out_idx]
         X = traj[: self.nx]
         P = np.repeat(p[:, None], N, axis=1)
@@ -172,8 +340,11 @@ class _Plan:
             return fail(f"evaluating the outputs failed: {_last_line(exc)}")
         result = SimulationResult(t_out.copy(), y.T, list(names), seconds=clock.elapsed,
                                   engine="casadi", states=X.T)
+        result.steps = budget.steps
         scale = 1.0 + (np.max(np.abs(X)) if X.size else 0.0)
         reason = _check(y, res.ravel(), drift.ravel(), t_out, scale, opts)
+        if reason is None and hybrid is not None:
+            reason = hybrid.asserts(X, self.u_out, P, t_out)
         if reason:
             result.ok, result.reason = False, reason
         if self.ns:
@@ -185,87 +356,195 @@ class _Plan:
         return result
 
 
-class _StateEvents:
-    """State events: where a relation on the states changes sign between two output points, the
-    crossing is located (Illinois regula falsi on the relation along the solution) and the
-    solver restarted there and at every later point of the chunk (CVODES's own root-finding is
-    not reachable through CasADi's integrator). A relation that switches and switches back
-    between two output points is not seen: the solver's error control is all that handles it.
+def _nsteps(integ) -> int:
+    try:
+        return int(integ.stats().get("nsteps", 0))
+    except RuntimeError:
+        return 0
 
-    One integrator over normalised time tau in [0, 1] with (p, t0, h) as parameters, so any
-    interval is one call. Sensitivities are carried through unchanged across an event: their jump
-    (f+ - f-) dt*/dp is left out (a Gauss-Newton step only needs them roughly).
+
+class _Hybrid:
+    """Events of one plan: relations watched between grid points, time events and clock ticks,
+    and the event iteration of a hybrid model's discrete variables.
+
+    A relation that changes sign between two points is located by Illinois regula falsi on the
+    relation along the solution (each trial a restart from the left point), the state taken just
+    past it, and the discrete variables iterated to a fixed point; a relation that switches and
+    switches back between two points is not seen. Sensitivities are carried through unchanged
+    across an event (their jump is left out: a Gauss-Newton step only needs them roughly).
     """
 
-    def __init__(self, ode, xa, fa, P, T, Ut, nx, iopts):
-        self.zero, self.nx = ode.zero, nx
-        self._dae = (xa, fa, P, T, iopts)
-        self.hop_int = None        # built at the first event (most runs have none)
+    def __init__(self, ode, t_out):
+        self.ode = ode
+        self.zero = ode.zero
+        self.nd = getattr(ode, "discrete", 0) or 0
+        self.update = getattr(ode, "update", None)
+        info = getattr(ode, "events", None) or {}
+        self.clocks = [tuple(c) for c in info.get("clocks", [])]
+        self.flag_names = info.get("flags", ["initial", "terminal"])
+        self.assert_info = info.get("asserts", [])
+        self.assert_fun = getattr(ode, "asserts", None)
+        self.count = 0
         self.maps: dict = {}
+
+    def reset(self):
         self.count = 0
 
-    def hop(self, x, p, ta, tb):
-        """The state at tb from x at ta: one fresh integration (a restart)."""
-        if tb <= ta:
-            return np.asarray(x, float)
-        if self.hop_int is None:
-            xa, fa, P, T, iopts = self._dae
-            tau, t0, h = ca.MX.sym("tau"), ca.MX.sym("t0"), ca.MX.sym("h")
-            f = ca.substitute(fa, T, t0 + tau * h) * h
-            self.hop_int = ca.integrator("hop", "cvodes", {"x": xa, "p": ca.vertcat(P, t0, h), "t": tau, "ode": f},
-                                         0.0, [1.0], iopts)
-        return np.array(self.hop_int(x0=x, p=np.concatenate([p, [ta, tb - ta]]))["xf"]).ravel()
+    def ticks(self, t0, t1) -> dict:
+        """Clock tick instants in [t0, t1] -> the clocks ticking there."""
+        out: dict = {}
+        for k, (start, period) in enumerate(self.clocks):
+            if period <= 0:
+                continue
+            first = max(0, math.ceil((t0 - start) / period - 1e-9))
+            n = int(math.floor((t1 - start) / period + 1e-9)) - first + 1
+            for i in range(first, first + max(n, 0)):
+                t = start + i * period
+                if t0 - 1e-12 <= t <= t1 + 1e-12:
+                    out.setdefault(min(max(t, t0), t1), []).append(k)
+        return out
 
-    def g(self, x, p, t, u_at):
-        return np.array(self.zero(x[: self.nx], u_at(t), p, t)).ravel()
+    def flags(self, initial=False, terminal=False, clocks=()):
+        f = np.zeros(2 + len(self.clocks))
+        f[0], f[1] = float(initial), float(terminal)
+        for k in clocks:
+            f[2 + k] = 1.0
+        return f
 
-    def crossed(self, traj, idx, t_int, p, u_at) -> bool:
-        """Whether any relation changes sign between the points of this chunk (one mapped call)."""
-        cols = np.r_[idx[0] - 1, idx]
-        if len(cols) not in self.maps:            # chunks have a few sizes: map each once
-            self.maps[len(cols)] = self.zero.map(len(cols))
-        U = np.column_stack([u_at(t_int[c]) for c in cols])
-        G = np.array(self.maps[len(cols)](traj[: self.nx, cols], U, np.repeat(np.asarray(p)[:, None], len(cols), 1),
-                                          t_int[cols][None]))
-        return bool(np.any(np.sign(G[:, 1:]) * np.sign(G[:, :-1]) < 0))
+    # -- event iteration ---------------------------------------------------------------------
+    def iterate(self, plan, x, p, t, flags):
+        """Modelica's event iteration: update until the discrete values (and states reinit'ed)
+        no longer change, pre() taking the last values each time they settle."""
+        if self.update is None:
+            return x
+        nx = plan.nx
+        xa = np.asarray(x, float).copy()
+        cur = xa[:nx].copy()
+        pre = cur.copy()
+        u = plan.u_at(t)
+        for _ in range(MAX_EVENT_ITERATIONS):
+            new = np.array(self.update(cur, u, p, t, pre, flags)).ravel()
+            if not np.all(np.isfinite(new)):
+                raise _Stop(f"event iteration gave non-finite values at t = {t:g}")
+            if np.array_equal(new, cur):
+                if np.array_equal(cur, pre):
+                    xa[:nx] = cur
+                    return xa
+                pre = cur.copy()
+            cur = new
+        raise _Stop(f"event iteration did not converge at t = {t:g} (discrete variables keep changing)")
 
-    def correct(self, traj, idx, t_int, p, u_at, max_events: int = 2000):
-        """Check each interval of this chunk for a sign change of a relation; from the first one
-        on, every point is integrated again from the located crossing(s) (restarts). Beyond
-        ``max_events`` in one simulation (a chattering switch) the solver steps through."""
-        g_prev = self.g(traj[:, idx[0] - 1], p, t_int[idx[0] - 1], u_at)
-        restarted = False
-        for j in idx:
-            ta, tb, x_a = t_int[j - 1], t_int[j], traj[:, j - 1]
-            x_b = self.hop(x_a, p, ta, tb) if restarted else traj[:, j]
-            g_b = self.g(x_b, p, tb, u_at)
-            g_a = g_prev
-            while self.count < max_events:
-                flips = np.flatnonzero(np.sign(g_a) * np.sign(g_b) < 0)
-                if not flips.size:
-                    break
-                self.count += 1
-                ta, x_a = self.locate(x_a, ta, tb, p, u_at, flips, g_a)
-                g_a = self.g(x_a, p, ta, u_at)
-                x_b = self.hop(x_a, p, ta, tb)          # the solver restarted past the crossing
-                g_b = self.g(x_b, p, tb, u_at)
-                restarted = True
-            traj[:, j] = x_b
-            g_prev = g_b
+    def initial(self, plan, x, p, t0):
+        """The initial event iteration (initial() true), then the clocks ticking at t0."""
+        if self.update is None:
+            return x
+        x = self.iterate(plan, x, p, t0, self.flags(initial=True))
+        x = self.after_init(plan, x, p, t0)
+        clocks = plan.tick_at.get(0, [])
+        if clocks:
+            x = self.iterate(plan, x, p, t0, self.flags(clocks=clocks))
+            x = self.iterate(plan, x, p, t0, self.flags())
+        return x
 
-    def locate(self, xa, ta, tb, p, u_at, flips, g_a):
-        """The earliest crossing of the relations ``flips`` in (ta, tb) and the state just past it."""
+    def after_init(self, plan, x, p, t0):
+        """The continuous initial state again with the discrete values the iteration found."""
+        init_d = getattr(self.ode, "init_discrete", None)
+        if init_d is None or not self.nd:
+            return x
+        nx = plan.nx
+        u = plan.u_at(t0)
+        for _ in range(MAX_EVENT_ITERATIONS):
+            x0 = np.array(init_d(u, p, t0, x[nx - self.nd:nx])).ravel()
+            new = x.copy()
+            new[:nx] = x0
+            new = self.iterate(plan, new, p, t0, self.flags(initial=True))
+            if np.array_equal(new[nx - self.nd:nx], x[nx - self.nd:nx]):
+                return new
+            x = new
+        raise _Stop("initialisation did not settle: discrete and continuous initial values keep changing")
+
+    # -- integration with events ---------------------------------------------------------------
+    def g(self, plan, x, p, t):
+        return np.array(self.zero(x[: plan.nx], plan.u_at(t), p, t)).ravel()
+
+    def signs(self, plan, cols, traj, p):
+        if self.zero is None:
+            return None
+        n = len(cols)
+        if n not in self.maps:
+            self.maps[n] = self.zero.map(n)
+        t = plan.t_int[cols]
+        U = np.column_stack([plan.u_at(tc) for tc in t]) if plan.u.names else np.zeros((0, n))
+        return np.array(self.maps[n](traj[: plan.nx, cols], U, np.repeat(np.asarray(p)[:, None], n, 1), t[None]))
+
+    def advance(self, plan, idx, p, budget, traj):
+        """Integrate over the chunk ``idx`` with events: after each call the relations are
+        compared point to point; at the first sign change the crossing is located, the event
+        handled and the rest of the chunk integrated again from there."""
+        t_int = plan.t_int
+        t0, x0 = t_int[idx[0] - 1], traj[:, idx[0] - 1]
+        pos = 0
+        while pos < len(idx):
+            rest = idx[pos:]
+            plan.advance(x0, t0, rest, p, budget, traj)
+            crossing = None
+            if self.zero is not None:
+                cols = np.r_[rest[0] - 1, rest]
+                G = self.signs(plan, cols, traj, p)
+                G0 = self.g(plan, x0, p, t0)      # at the restart point, not the grid point
+                G = np.column_stack([G0, G[:, 1:]])
+                flip = np.sign(G[:, 1:]) * np.sign(G[:, :-1]) < 0
+                hits = np.flatnonzero(flip.any(axis=0))
+                if hits.size and self.count < MAX_EVENTS:
+                    j = hits[0]
+                    ta = t0 if j == 0 else t_int[rest[j - 1]]
+                    xa = x0 if j == 0 else traj[:, rest[j - 1]]
+                    crossing = (j, ta, xa, np.flatnonzero(flip[:, j]), G[:, j])
+            if crossing is None:
+                self.at_point(plan, rest[-1], p, traj)
+                return
+            j, ta, xa, rels, g_a = crossing
+            tb = t_int[rest[j]]
+            self.count += 1
+            t_star, x_star = self.locate(plan, xa, ta, tb, p, rels, g_a, budget)
+            x_star = self.iterate(plan, x_star, p, t_star, self.flags())
+            if t_star >= tb:          # located at the grid point itself
+                traj[:, rest[j]] = x_star
+                self.at_point(plan, rest[j], p, traj)
+                pos += j + 1
+                t0, x0 = tb, traj[:, rest[j]]
+            else:
+                pos += j
+                t0, x0 = t_star, x_star
+
+    def at_point(self, plan, k, p, traj):
+        """A time event or clock ticks at grid point ``k``: the event iteration there (with the
+        ticks, then once more without: a sampled condition is true only at its instant); at
+        the last point, the one of terminal()."""
+        if self.update is None:
+            return
+        k, t = int(k), plan.t_int[k]
+        clocks = plan.tick_at.get(k)
+        if clocks:
+            traj[:, k] = self.iterate(plan, traj[:, k], p, t, self.flags(clocks=clocks))
+        if clocks or k in plan.time_event_at:
+            traj[:, k] = self.iterate(plan, traj[:, k], p, t, self.flags())
+        if k == len(plan.t_int) - 1:
+            traj[:, k] = self.iterate(plan, traj[:, k], p, t, self.flags(terminal=True))
+
+    def locate(self, plan, xa, ta, tb, p, flips, g_a, budget):
+        """The earliest crossing of the relations ``flips`` in (ta, tb] and the state just past it."""
         best_t = tb
         for r in flips:
             lo, hi, g_lo = ta, tb, g_a[r]
-            g_hi = self.g(self.hop(xa, p, ta, hi), p, hi, u_at)[r]
+            g_hi = self.g(plan, plan.hop(xa, p, ta, hi, budget), p, hi)[r]
             side = 0
             for _ in range(60):
                 if hi - lo <= 1e-12 * max(1.0, abs(hi)):
                     break
                 t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo) if g_hi != g_lo else 0.5 * (lo + hi)
                 t = min(max(t, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-                g_t = self.g(self.hop(xa, p, ta, t), p, t, u_at)[r]
+                g_t = self.g(plan, plan.hop(xa, p, ta, t, budget), p, t)[r]
                 if np.sign(g_t) == np.sign(g_lo):
                     lo, g_lo = t, g_t
                     g_hi = g_hi / 2 if side == -1 else g_hi      # Illinois
@@ -274,9 +553,26 @@ class _StateEvents:
                     hi, g_hi = t, g_t
                     g_lo = g_lo / 2 if side == 1 else g_lo
                     side = 1
-            if hi < best_t:
-                best_t = hi
-        return best_t, self.hop(xa, p, ta, best_t)   # hi: just past the crossing
+            best_t = min(best_t, hi)
+        return best_t, plan.hop(xa, p, ta, best_t, budget)   # hi: just past the crossing
+
+    # -- asserts ---------------------------------------------------------------------------------
+    def asserts(self, X, U, P, t) -> str | None:
+        """The first assert of level error violated at an output point fails the run; those of
+        level warning are logged once each."""
+        if self.assert_fun is None or not self.assert_info:
+            return None
+        n = X.shape[1]
+        V = np.array(self.assert_fun.map(n)(X, U, P, t[None, :]))
+        for i, (level, message) in enumerate(self.assert_info):
+            bad = np.flatnonzero(V[i] > 0.5)
+            if not bad.size:
+                continue
+            if level == "warning":
+                log.warning("assert at t = %g: %s", t[bad[0]], message)
+                continue
+            return f"assertion failed at t = {t[bad[0]]:g}: {message}"
+        return None
 
 
 def _check(y, res, drift, t, scale, opts) -> str | None:

@@ -8,6 +8,7 @@ detection needs every one of these checks).
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import sys
 import time as _time
@@ -16,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .data import TimeSeries
-from .errors import DataError
+from .errors import ConfigError
 
 
 @dataclass
@@ -25,19 +26,48 @@ class SimulationOptions:
 
     rtol: float = 1e-6
     atol: float = 1e-8
-    time_limit: float = 60.0        # wall-clock seconds for one simulation
-    max_steps: int = 20000          # solver steps between two output chunks
+    time_limit: float = 60.0        # wall-clock seconds for one simulation, checked during the integration
+    max_steps: int = 20000          # solver steps between two output points
+    max_work: int | None = None     # solver steps in all (None: no bound); beyond it the run fails
     residual_tol: float = 1e-6      # algebraic loops: max |g| accepted (relative to scale)
     drift_tol: float = 1e-3         # invariants of index reduction: max |I| accepted
     fmu_substeps: int = 4           # FMU engine: communication steps per output interval
 
+    def __post_init__(self):
+        _check_options(vars(self), lambda name: name)
+
     @classmethod
-    def from_dict(cls, d: dict | None) -> "SimulationOptions":
+    def from_dict(cls, d: dict | None, option=lambda name: name) -> "SimulationOptions":
+        """Options from a mapping; ``option`` turns a field name into the name the user wrote
+        (``--time-limit`` on the command line) for the error messages."""
         d = dict(d or {})
         unknown = set(d) - set(cls.__dataclass_fields__)
         if unknown:
-            raise DataError(f"unknown simulation option(s): {', '.join(sorted(unknown))}")
+            raise ConfigError(f"unknown simulation option(s): {', '.join(sorted(unknown))} "
+                              f"(known: {', '.join(cls.__dataclass_fields__)})")
+        _check_options({**{f: getattr(cls, f) for f in cls.__dataclass_fields__}, **d}, option)
         return cls(**d)
+
+
+#: option -> (lowest, highest), both excluded; whole numbers where the default is an int
+_LIMITS = {"rtol": (0.0, 1.0), "atol": (0.0, math.inf), "time_limit": (0.0, math.inf),
+           "max_steps": (0, math.inf), "max_work": (0, math.inf), "residual_tol": (0.0, math.inf), "drift_tol": (0.0, math.inf),
+           "fmu_substeps": (0, 10_000)}
+
+
+def _check_options(values: dict, option) -> None:
+    """Every option a finite number in its range, else a ConfigError naming ``option(name)``."""
+    for name, (lo, hi) in _LIMITS.items():
+        value = values.get(name)
+        if value is None and name == "max_work":        # no bound
+            continue
+        integer = isinstance(lo, int)
+        ok = (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+              and math.isfinite(value) and lo < value < hi and (not integer or float(value).is_integer()))
+        if not ok:
+            kind = "a whole number" if integer else "a finite number"
+            rng = f"greater than {lo:g}" + ("" if hi == math.inf else f" and less than {hi:g}")
+            raise ConfigError(f"{option(name)} = {value!r}: must be {kind} {rng}")
 
 
 @dataclass
@@ -54,6 +84,7 @@ class SimulationResult:
     sensitivities: np.ndarray | None = None
     sensitivity_names: list[str] = field(default_factory=list)
     states: np.ndarray | None = None
+    steps: int = 0                  # solver steps taken (the work done; summed over all calls)
 
     def output(self, name: str) -> np.ndarray:
         return self.outputs[:, self.output_names.index(name)]

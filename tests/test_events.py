@@ -30,7 +30,7 @@ def test_a_state_event_is_located_and_the_solution_is_exact(tmp_path):
     res = engine.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
     assert res.ok, res.reason
     plan = next(iter(engine._plans.values()))
-    assert plan.events.count == 1
+    assert plan.hybrid.count == 1
     x = np.where(t < 0.5, 0.5 - t, -3 * (t - 0.5))
     y = np.where(t < 0.5, 0.5 * t - t**2 / 2, 0.125 - 1.5 * (t - 0.5) ** 2)
     assert np.max(np.abs(res.states[:, 0] - x)) < 1e-6

@@ -1,0 +1,55 @@
+"""The in-process engine reports its work (solver steps) and stops a run that exceeds its work
+budget or its wall-clock limit during the integration, not only between output chunks."""
+import numpy as np
+import pytest
+
+from mcl import compile_model, simulate
+from mcl.data import TimeSeries
+
+# x chatters around 0 (noEvent: no event to restart at), so the solver crawls once it is there
+CRAWL = """
+model Crawl
+  Real x(start = 1, fixed = true);
+  Real y(start = 0, fixed = true);
+  output Real o;
+equation
+  der(x) = if noEvent(x > 0) then -1 - 100*y^2 else 1 + 100*y^2;
+  der(y) = 1;
+  o = x;
+end Crawl;
+"""
+
+
+@pytest.fixture(scope="module")
+def crawl(tmp_path_factory):
+    d = tmp_path_factory.mktemp("crawl")
+    (d / "Crawl.mo").write_text(CRAWL)
+    return compile_model([d / "Crawl.mo"], "Crawl")
+
+
+def _none(t):
+    return TimeSeries(t, np.zeros((len(t), 0)), [])
+
+
+def test_a_run_reports_its_solver_steps(crawl):
+    t = np.linspace(0, 0.2, 11)             # before x reaches 0 (t = 0.29): a smooth run
+    res = simulate(crawl, _none(t))
+    assert res.ok, res.reason
+    assert res.steps > 0
+    assert np.allclose(res.output("o"), 1 - t - 100 * t**3 / 3, atol=1e-5)
+    more = simulate(crawl, _none(t), options={"rtol": 1e-10, "atol": 1e-12})
+    assert more.steps > res.steps            # a tighter tolerance is more work
+
+
+def test_a_run_beyond_its_work_budget_fails_saying_so(crawl):
+    t = np.linspace(0, 1000, 11)
+    res = simulate(crawl, _none(t), options={"max_work": 5000, "max_steps": 10**7})
+    assert not res.ok and "work budget of 5000 solver steps" in res.reason
+
+
+def test_the_time_limit_stops_a_crawling_integration(crawl):
+    """One output interval needs millions of steps: the limit is enforced inside it."""
+    t = np.linspace(0, 1000, 3)
+    res = simulate(crawl, _none(t), options={"time_limit": 1.0, "max_steps": 10**8, "rtol": 1e-10,
+                                             "atol": 1e-12})
+    assert not res.ok and "time limit of 1 s exceeded" in res.reason
