@@ -36,7 +36,7 @@ def test_a_run_reports_its_solver_steps(crawl):
     res = simulate(crawl, _none(t))
     assert res.ok, res.reason
     assert res.steps > 0
-    assert np.allclose(res.output("o"), 1 - t - 100 * t**3 / 3, atol=1e-5)
+    assert np.allclose(res.output("o"), 1 - t - 100 * t**3 / 3, atol=1e-4)
     more = simulate(crawl, _none(t), options={"rtol": 1e-10, "atol": 1e-12})
     assert more.steps > res.steps            # a tighter tolerance is more work
 
