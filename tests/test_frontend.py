@@ -118,3 +118,14 @@ def test_product_and_div_follow_modelica_for_negative_values(tmp_path):
     model = compile_model([f], "P.M")
     res = simulate(model, series(np.linspace(0, 1, 3)))
     assert np.allclose(res.output("y1"), -3.0) and np.allclose(res.output("y2"), -3.0)
+
+
+def test_a_fifo_named_as_a_source_is_refused_at_once(tmp_path):
+    """Reading a FIFO would wait for a writer for ever: it is refused before anything is read."""
+    import os
+
+    fifo = tmp_path / "M.mo"
+    os.mkfifo(fifo)
+    with pytest.raises(ModelicaError, match="not a regular file") as err:
+        compile_model([fifo], "M")
+    assert err.value.where == str(fifo)

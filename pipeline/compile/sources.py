@@ -13,6 +13,9 @@ def checked(paths) -> list[Path]:
     for p in given:
         if not p.exists():
             raise ModelicaError("no such file or directory", where=str(p))
+        if not (p.is_file() or p.is_dir()):     # reading a FIFO would wait for a writer for ever
+            raise ModelicaError("not a regular file (a FIFO, socket or device): not a Modelica source",
+                                where=str(p))
         if p.is_file() and p.suffix != ".mo":
             raise ModelicaError("not a Modelica source (.mo) file", where=str(p))
     return given
@@ -23,7 +26,7 @@ def expand(paths) -> list[Path]:
     files: list[Path] = []
     for p in paths:
         if p.is_dir():
-            found = sorted(p.rglob("*.mo"))
+            found = [f for f in sorted(p.rglob("*.mo")) if f.is_file()]   # no FIFO inside either
             if not found:
                 raise ModelicaError("directory holds no .mo files", where=str(p))
             files.extend(found)
