@@ -175,3 +175,32 @@ def test_two_outputs_combine():
     assert not ok.significant and len(ok.details["outputs"]) == 2
     r[:, 1] += 0.02                                          # an offset on the small output
     assert misfit_significance(r, [given_noise(1.0), given_noise(0.01)]).significant
+
+
+def _real(case: str):
+    """A real benchmark's training split (examples/real), or skip when the data are not beside
+    the checkout (they are third-party files kept in ../shared/real or $MCL_REAL_DATA)."""
+    import os
+    from pathlib import Path
+
+    for root in (os.environ.get("MCL_REAL_DATA"), Path(__file__).resolve().parents[2] / "shared" / "real"):
+        path = Path(root) / case / "train.csv" if root else None
+        if path is not None and path.exists():
+            return np.loadtxt(path, delimiter=",", skiprows=1, max_rows=8192).T
+    pytest.skip(f"real benchmark data '{case}' not found (../shared/real or MCL_REAL_DATA)")
+
+
+def test_silverbox_misfit_of_a_linear_model_is_significant():
+    """The measured electronic Duffing oscillator at 9 samples per period: the second differences
+    took its curvature for 11 mV of noise; the linear model's misfit is far above the true noise."""
+    from scipy.signal import lfilter
+
+    t, u, y = _real("silverbox")
+    second_difference = 1.4826 * np.median(np.abs(np.diff(y, 2))) / np.sqrt(6)
+    est = estimate_noise(y, t)
+    assert second_difference > 5e-3 and est.sigma < 1e-3, est.method
+    X = np.column_stack([y[1:-1], y[:-2], u[2:], u[1:-1], u[:-2]])        # ARX(2, 3) with u_k
+    a1, a2, *b = np.linalg.lstsq(X, y[2:], rcond=None)[0]
+    simulated = lfilter(b, [1.0, -a1, -a2], u)                              # run free from rest
+    res = misfit_significance((y - simulated)[200:], est, t[200:], n_params=5)
+    assert res.significant and res.rms > 10 * est.sigma, res.reason
