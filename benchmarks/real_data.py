@@ -65,14 +65,14 @@ CASES = {
         "cascaded_tanks", EXAMPLES / "cascaded_tanks" / "CascadedTanks.mo", "CascadedTanks.Tanks",
         free={"kp": 4.5e-6, "R1": 2e4, "R2": 2e4, "h_op": 0.1}, states={"h1_0": 0.13, "h2_0": 0.13},
         state_scale={"h1_0": 0.05, "h2_0": 0.05}, window=5, tests=("test.csv",), unit=(1.0, "V"),
-        good="0.3-0.5 V (examples/real/cascaded_tanks/README.md)",
+        good="0.34-0.45 V, linear 0.76 V (examples/real/cascaded_tanks/README.md)",
         initial=_tanks_initial),
     "silverbox": Case(
         "silverbox", EXAMPLES / "silverbox" / "Silverbox.mo", "Silverbox.Oscillator",
         free={"kf": 150.0, "S.c": 2e5, "D.d": 40.0}, states={"s0": 0.0, "v0": 0.0},
         state_scale={"s0": 5e-5, "v0": 0.02}, window=50, tests=("test_multisine.csv", "test_arrow.csv"),
         unit=(1e3, "mV"), train_samples=16384, direct=True,
-        good="0.3-1 mV, to be confirmed (examples/real/silverbox/README.md)",
+        good="0.3-1.5 mV on the arrow, linear 13.5 mV (examples/real/silverbox/README.md)",
         initial=_silverbox_initial),
 }
 
