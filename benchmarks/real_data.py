@@ -60,6 +60,10 @@ def _silverbox_initial(y0: float) -> dict:
     return {"s0": y0 / 1000.0, "v0": 0.0}
 
 
+def _emps_initial(y0: float) -> dict:
+    return {"s0": y0, "v0": 0.0}
+
+
 CASES = {
     "cascaded_tanks": Case(
         "cascaded_tanks", EXAMPLES / "cascaded_tanks" / "CascadedTanks.mo", "CascadedTanks.Tanks",
@@ -74,6 +78,11 @@ CASES = {
         unit=(1e3, "mV"), train_samples=16384, direct=True,
         good="0.3-1.5 mV on the arrow, linear 13.5 mV (examples/real/silverbox/README.md)",
         initial=_silverbox_initial),
+    "emps": Case(
+        "emps", EXAMPLES / "emps" / "Emps.mo", "Emps.Axis",
+        free={"M.m": 100.0, "F.d": 200.0}, states={"s0": 0.0, "v0": 0.0},
+        state_scale={"s0": 1e-3, "v0": 1e-3}, window=20, tests=("test.csv",), unit=(1e3, "mm"),
+        train_samples=None, good="see examples/real/emps/README.md", initial=_emps_initial),
 }
 
 
@@ -351,8 +360,7 @@ def table(results: dict) -> str:
     for name, r in results.items():
         factor, unit = CASES[name].unit[0], r["unit"]
         tests = list(next(iter(r["methods"].values()))["test_rms"])
-        unit_label = "mV" if factor == 1e3 else unit
-        head = f"{name} (simulation RMS on the test splits in {unit_label}; good models: {r['good_models']})"
+        head = f"{name} (simulation RMS on the test splits in {unit}; good models: {r['good_models']})"
         lines += [head, f"  {'method':32s}" + "".join(f"{t:>20s}" for t in tests) + f"{'CPU s':>10s}"]
         for method, m in r["methods"].items():
             cells = "".join(f"{_cell(v, factor):>20s}" for v in m["test_rms"].values())
