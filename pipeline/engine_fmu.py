@@ -3,12 +3,16 @@
 The child process is what makes "a simulation can never hang or crash the caller" true for
 foreign binaries: a time limit kills it, and a segfault becomes a failed result.
 
-FMI 2.0 Model Exchange FMUs without events are integrated here with SciPy's LSODA, the input
+FMI 2.0 Co-Simulation FMUs that interpolate their inputs (mcl's own, among others) are stepped
+here from one input sample or output time to the next, each step given the input's value and the
+slope of its next segment (``fmi2SetRealInputDerivatives``): the FMU then sees the measured input
+exactly as the in-process engine does, linear between samples, events handled inside it.
+FMI 2.0 Model Exchange FMUs without events are integrated with SciPy's LSODA, the input
 interpolated linearly at every right-hand-side evaluation: FMPy's own loop sets inputs once per
 communication interval and CVode steps past the interval end on the old input (a first-order
-lag, ../shared/DESIGN.md, section 5). Every other FMU (events, Co-Simulation, FMI 3.0) goes
-through ``fmpy.simulate_fmu``, with the input sampled at interval midpoints (the hold then acts
-like the midpoint rule) and ``fmu_substeps`` intervals per output interval.
+lag, ../shared/DESIGN.md, section 5). Every other FMU (events, other Co-Simulation FMUs, FMI
+3.0) goes through ``fmpy.simulate_fmu``, with the input sampled at interval midpoints (the hold
+then acts like the midpoint rule) and ``fmu_substeps`` intervals per output interval.
 """
 from __future__ import annotations
 
@@ -116,9 +120,64 @@ def _simulate(job: dict, messages: list[str]) -> np.ndarray:
         unzipdir = safe_extract(job["path"], tmp)
         md = read_model_description(unzipdir, validate=False)
         job = {**job, "path": unzipdir}
+        cs = md.coSimulation
+        if (md.fmiVersion == "2.0" and cs is not None and cs.canInterpolateInputs
+                and cs.canHandleVariableCommunicationStepSize):
+            return _simulate_cs2(job, md, logger)
         if md.fmiVersion == "2.0" and md.modelExchange is not None and not md.numberOfEventIndicators:
             return _simulate_me2(job, md, logger)
         return _simulate_fmpy(job, logger)
+
+
+def _simulate_cs2(job: dict, md, logger) -> np.ndarray:
+    """Step an FMI 2.0 Co-Simulation FMU through every input sample and output time, with the
+    input's value and the slope of its next segment at each communication point."""
+    from ctypes import c_double, c_int, c_uint
+
+    from fmpy import instantiate_fmu
+
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    t_out, u_t, u_v = job["t_out"], job["u_time"], job["u_values"]
+    nu, ny = len(job["u_names"]), len(job["outputs"])
+    t0, t_end = float(t_out[0]), float(t_out[-1])
+    inner = u_t[(u_t > t0) & (u_t < t_end)] if nu else np.zeros(0)
+    grid = np.union1d(t_out, inner)
+    u_grid = np.column_stack([np.interp(grid, u_t, u_v[:, j]) for j in range(nu)]) if nu else None
+    slopes = np.diff(u_grid, axis=0) / np.diff(grid)[:, None] if nu else None
+    out_at = np.searchsorted(grid, t_out)
+    u_vr, y_vr = (c_uint * nu)(*[vr[n] for n in job["u_names"]]), (c_uint * ny)(*[vr[n] for n in job["outputs"]])
+    u_val, du_val, y_val = (c_double * nu)(), (c_double * nu)(), (c_double * ny)()
+    order = (c_int * nu)(*([1] * nu))
+    y = np.empty((len(t_out), ny))
+    fmu = instantiate_fmu(job["path"], md, "CoSimulation", logger=logger)
+    try:
+        fmu.setupExperiment(tolerance=job["rtol"], startTime=t0, stopTime=t_end)
+        params = {k: v for k, v in job["start_values"].items() if k in vr}
+        if params:
+            fmu.setReal([vr[k] for k in params], list(params.values()))
+        fmu.enterInitializationMode()
+        if nu:
+            u_val[:] = u_grid[0]
+            fmu.fmi2SetReal(fmu.component, u_vr, nu, u_val)
+        fmu.exitInitializationMode()
+        k_out = 0
+        for k in range(len(grid)):
+            if k_out < len(t_out) and out_at[k_out] == k and ny:
+                fmu.fmi2GetReal(fmu.component, y_vr, ny, y_val)
+            while k_out < len(t_out) and out_at[k_out] == k:   # an output time may repeat
+                y[k_out] = y_val
+                k_out += 1
+            if k + 1 == len(grid):
+                break
+            if nu:
+                u_val[:], du_val[:] = u_grid[k], slopes[k]
+                fmu.fmi2SetReal(fmu.component, u_vr, nu, u_val)
+                fmu.fmi2SetRealInputDerivatives(fmu.component, u_vr, nu, order, du_val)
+            fmu.fmi2DoStep(fmu.component, float(grid[k]), float(grid[k + 1] - grid[k]), 1)
+        fmu.terminate()
+    finally:
+        fmu.freeInstance()
+    return y
 
 
 def _simulate_me2(job: dict, md, logger) -> np.ndarray:

@@ -1,1 +1,1 @@
-"""FMU export (FMI 2.0 Model Exchange) of compiled models."""
+"""FMU export (FMI 2.0 Model Exchange and Co-Simulation) of compiled models."""

@@ -1,8 +1,13 @@
-"""Compiled model -> FMI 2.0 Model Exchange FMU that ``fmpy validate`` accepts.
+"""Compiled model -> FMI 2.0 FMU (Model Exchange and Co-Simulation) that ``fmpy validate`` accepts.
 
-CasADi generates C for the model's functions; a short hand-written FMI 2 wrapper
-(``fmi2_model.c``) calls them with work arrays sized from ``*_work`` (fixed sizes segfault:
-../shared/DESIGN.md, section 5). The FMU carries its sources, so other platforms can rebuild it.
+CasADi generates C for the model's functions, and for Co-Simulation the Jacobian of the ODE
+with its time derivative along the inputs; a hand-written FMI 2 wrapper (``fmi2_model.c``) calls
+them with work arrays sized from ``*_work`` (fixed sizes segfault: ../shared/DESIGN.md, section
+5) and integrates Co-Simulation steps with an embedded stiff solver (RODAS4) that takes the
+inputs as continuous signals. Importers that can do both get Co-Simulation by default (FMPy
+does), which is the accurate choice at coarse communication intervals: Model Exchange importers
+hold the inputs between their communication points. The FMU carries its sources, so other
+platforms can rebuild it.
 """
 from __future__ import annotations
 
@@ -21,9 +26,10 @@ import numpy as np
 
 from ...errors import CompileError, ConfigError
 from ...model import CompiledModel
+from .experiment import Experiment, for_model
 
 _HERE = Path(__file__).parent
-FUNCTIONS = ("ode", "out", "alg_res", "init", "probe", "zero")
+FUNCTIONS = ("ode", "out", "alg_res", "init", "start", "probe", "zero", "step")
 
 
 def model_identifier(name: str) -> str:
@@ -54,8 +60,49 @@ def _probe_variables(model: CompiledModel):
     return [(i, n) for i, n in enumerate(o.probe_names) if n not in taken]
 
 
+def start_functions(model: CompiledModel) -> tuple[ca.Function, ca.Function]:
+    """(p -> the states' start values s, (u, p, t, s) -> x0). A model saved before start values
+    were an argument of its initialiser gets an initialiser that ignores them (none settable)."""
+    o = model.ode
+    if o.start is not None and o.init_start is not None:
+        return o.start, o.init_start
+    U, P, T = o.init.mx_in()
+    S = ca.MX.sym("s", len(o.x_names))
+    return (ca.Function("start", [P], [ca.MX.zeros(len(o.x_names))], ["p"], ["s"]),
+            ca.Function("init_start", [U, P, T, S], [o.init(U, P, T)], ["u", "p", "t", "s"], ["x0"]))
+
+
+def settable_starts(model: CompiledModel) -> tuple[list[bool], np.ndarray]:
+    """Which states start at their start value (a pinned initial condition, not a guess or a
+    value fixed by constraints), and the nominal start values: x0_i = s_i exactly, so the row
+    of dx0/ds is the unit vector."""
+    o = model.ode
+    start, init_start = start_functions(model)
+    s0 = np.array(start(o.p_values), dtype=float).ravel()
+    if not len(o.x_names):
+        return [], s0
+    U, P, T, S = init_start.mx_in()
+    jac = ca.Function("dx0ds", [U, P, T, S], [ca.jacobian(init_start(U, P, T, S), S)])
+    try:
+        J = np.array(jac(o.u_start, o.p_values, 0.0, s0), dtype=float)
+    except RuntimeError:
+        return [False] * len(o.x_names), s0
+    eye = np.eye(len(o.x_names))
+    return [bool(np.all(np.abs(J[i] - eye[i]) < 1e-9)) for i in range(len(o.x_names))], s0
+
+
+def _step_function(o) -> ca.Function:
+    """(x, u, p, t, du) -> (f, df/dx dense, df/dt + df/du du): what a Rosenbrock step needs."""
+    X, U, P, T = o.ode.mx_in()
+    DU = ca.MX.sym("du", U.numel())
+    f = o.ode(X, U, P, T)
+    ft = ca.jacobian(f, T) + (ca.mtimes(ca.jacobian(f, U), DU) if U.numel() else 0)
+    return ca.Function("step", [X, U, P, T, DU], [f, ca.densify(ca.jacobian(f, X)), ca.densify(ft)],
+                       ["x", "u", "p", "t", "du"], ["f", "J", "ft"])
+
+
 def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
-                     residual_tol: float = 1e-6) -> list[Path]:
+                     residual_tol: float = 1e-6, tolerance: float = 1e-6) -> list[Path]:
     """Write the C sources of the FMU into ``build``; returns the files to compile."""
     o = model.ode
     prefix = f"{ident}_"
@@ -68,7 +115,10 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     zero = o.zero
     if zero is None:     # no state events: an empty indicator function keeps the C code uniform
         zero = ca.Function("zero", o.out.mx_in(), [ca.MX(0, 1)], ["x", "u", "p", "t"], ["out"])
-    funcs = dict(ode=o.ode, out=o.out, alg_res=o.alg_res, init=o.init, probe=probe, zero=zero)
+    start, init_start = start_functions(model)
+    settable, _ = settable_starts(model)
+    funcs = dict(ode=o.ode, out=o.out, alg_res=o.alg_res, init=init_start, start=start, probe=probe,
+                 zero=zero, step=_step_function(o))
     cg = ca.CodeGenerator("mcl_funcs.c", {"with_header": True})
     for key in FUNCTIONS:
         cg.add(_renamed(funcs[key], prefix + key))
@@ -76,8 +126,9 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     template = (_HERE / "fmi2_model.c").read_text()
     values = dict(NP=len(o.p_names), NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
                   NV=len(probe_vars), HAS_LOOP=int(o.nonlinear_blocks > 0),
-                  RES_TOL=repr(residual_tol), GUID=guid, PREFIX=prefix,
+                  RES_TOL=repr(residual_tol), TOL=repr(float(tolerance)), GUID=guid, PREFIX=prefix,
                   P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start),
+                  X_SETTABLE=", ".join(str(int(b)) for b in settable) or "0",
                   N_EVENTS=len(o.time_events), EVENTS=_fmt(np.asarray(o.time_events, float)),
                   NZ=n_indicators(model))
     source = re.sub(r"@(\w+)@", lambda m: str(values[m.group(1)]), template)
@@ -92,17 +143,38 @@ def n_indicators(model: CompiledModel) -> int:
     return 0 if model.ode.zero is None else int(model.ode.zero.size1_out(0))
 
 
-def model_description(model: CompiledModel, ident: str, guid: str, sources: list[str]) -> str:
-    """modelDescription.xml: parameters tunable, inputs, outputs, states, derivatives, probes."""
+def derivative_unit(unit: str | None) -> str | None:
+    """The unit of der(x) for x in ``unit`` (Modelica unit syntax: V -> V/s, m/s -> m/s2)."""
+    if not unit:
+        return None
+    if unit == "1":
+        return "1/s"
+    if "/" not in unit:
+        return f"{unit}/s"
+    num, den = unit.split("/", 1)
+    power = re.fullmatch(r"s(\d*)", den)
+    if power:
+        return f"{num}/s{int(power.group(1) or 1) + 1}"
+    return f"{num}/({den}.s)" if not den.startswith("(") else None
+
+
+def model_description(model: CompiledModel, ident: str, guid: str, sources: list[str],
+                      experiment: Experiment | None = None, units: dict | None = None,
+                      descriptions: dict | None = None) -> str:
+    """modelDescription.xml: Model Exchange and Co-Simulation; parameters tunable, inputs,
+    outputs, states (their start values settable where they are initial conditions),
+    derivatives, probes; the model's units and descriptions, completed by ``units`` and
+    ``descriptions`` (names of learned parameters, say)."""
     o = model.ode
     rows, outputs, derivs, initial = [], [], [], []
-    units, descriptions = model.info.get("units", {}), model.info.get("descriptions", {})
+    units = {**model.info.get("units", {}), **(units or {})}
+    descriptions = {**model.info.get("descriptions", {}), **(descriptions or {})}
     used_units = set()
 
-    def var(name, attrs, real="<Real/>", desc=""):
+    def var(name, attrs, real="<Real/>", unit=None, desc=""):
         desc = desc or descriptions.get(name, "")
-        unit = units.get(name)
-        if unit and "derivative=" not in real:
+        unit = unit or units.get(name)
+        if unit:
             used_units.add(unit)
             real = real.replace("/>", f" unit={quoteattr(unit)}/>")
         d = f" description={quoteattr(desc)}" if desc else ""
@@ -110,19 +182,25 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
                     f"\n      {real}\n    </ScalarVariable>")
         return len(rows)  # 1-based index
 
+    local = 'causality="local" variability="continuous"'
     for n, v in zip(o.p_names, o.p_values):
         var(n, 'causality="parameter" variability="tunable" initial="exact"', f'<Real start="{float(v)!r}"/>')
     for n, v in zip(o.u_names, o.u_start):
         var(n, 'causality="input" variability="continuous"', f'<Real start="{float(v)!r}"/>')
     for n in o.y_names:
         outputs.append(var(n, 'causality="output" variability="continuous" initial="calculated"'))
-    states = [var(n, 'causality="local" variability="continuous" initial="calculated"') for n in o.x_names]
+    settable, s0 = settable_starts(model)
+    states = [var(n, f'{local} initial="exact"', f'<Real start="{float(v)!r}"/>') if exact
+              else var(n, f'{local} initial="calculated"')
+              for n, exact, v in zip(o.x_names, settable, s0)]
     for n, s in zip(o.x_names, states):
-        derivs.append(var(f"der({n})", 'causality="local" variability="continuous" initial="calculated"',
-                          f'<Real derivative="{s}"/>'))
+        desc = f"time derivative of {n}" + (f" ({descriptions[n]})" if descriptions.get(n) else "")
+        derivs.append(var(f"der({n})", f'{local} initial="calculated"', f'<Real derivative="{s}"/>',
+                          unit=derivative_unit(units.get(n)), desc=desc))
     for _, n in _probe_variables(model):
-        var(n, 'causality="local" variability="continuous" initial="calculated"')
-    initial = sorted(outputs + states + derivs)
+        var(n, f'{local} initial="calculated"')
+    initial = sorted(outputs + [i for i, exact in zip(states, settable) if not exact] + derivs)
+
     def section(tag, idx):  # an empty section is invalid FMI 2.0: leave it out
         if not idx:
             return ""
@@ -132,19 +210,26 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
     files = "\n".join(f'      <File name="{s}"/>' for s in sources)
     unit_defs = ("  <UnitDefinitions>\n" + "\n".join(f"    <Unit name={quoteattr(u)}/>" for u in sorted(used_units))
                  + "\n  </UnitDefinitions>\n") if used_units else ""
+    common = 'canNotUseMemoryManagementFunctions="true" canGetAndSetFMUstate="true" canSerializeFMUstate="true"'
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName={quoteattr(model.name)} guid="{guid}"
   generationTool="mcl" variableNamingConvention="structured" numberOfEventIndicators="{n_indicators(model)}">
-  <ModelExchange modelIdentifier="{ident}" canNotUseMemoryManagementFunctions="true">
+  <ModelExchange modelIdentifier="{ident}" {common}>
     <SourceFiles>
 {files}
     </SourceFiles>
   </ModelExchange>
+  <CoSimulation modelIdentifier="{ident}" {common}
+    canHandleVariableCommunicationStepSize="true" canInterpolateInputs="true" maxOutputDerivativeOrder="0">
+    <SourceFiles>
+{files}
+    </SourceFiles>
+  </CoSimulation>
 {unit_defs}  <LogCategories>
     <Category name="logStatusError"/>
     <Category name="logAll"/>
   </LogCategories>
-  <ModelVariables>
+{experiment.xml() if experiment else ""}  <ModelVariables>
 {chr(10).join(rows)}
   </ModelVariables>
   <ModelStructure>
@@ -153,14 +238,27 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
 """
 
 
-def build_fmu(model: CompiledModel, out_path, validate: bool = True) -> Path:
-    """Write ``out_path`` (.fmu); raises CompileError if gcc or FMPy validation fails."""
+def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experiment=None,
+              units: dict | None = None, descriptions: dict | None = None) -> Path:
+    """Write ``out_path`` (.fmu, Model Exchange and Co-Simulation); raises CompileError if gcc or
+    FMPy validation fails.
+
+    ``experiment``: the DefaultExperiment: data (a TimeSeries: its span and sampling interval),
+    an :class:`~mcl.compile.fmu.experiment.Experiment` or a dict (start, stop, step,
+    tolerance); default: the class's ``experiment`` annotation, else an estimate from the
+    model's time scales.
+    ``units`` / ``descriptions``: {variable name: text} added to (or replacing) what the model
+    declares, e.g. for the coefficients of a learned law.
+    """
     out_path = Path(out_path)
     ident = model_identifier(model.name)
     guid = "{" + str(uuid.uuid4()) + "}"
+    experiment = Experiment.of(experiment) or for_model(model)
+    _check_names(model, units, "units")
+    _check_names(model, descriptions, "descriptions")
     with tempfile.TemporaryDirectory(prefix="mcl-fmu-") as tmp:
         build = Path(tmp)
-        c_files = generate_sources(model, build, ident, guid)
+        c_files = generate_sources(model, build, ident, guid, tolerance=experiment.tolerance)
         so = build / f"{ident}.so"
         cmd = ["gcc", "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-I{build}",
                *map(str, c_files), "-o", str(so), "-lm"]
@@ -171,7 +269,8 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True) -> Path:
         if proc.returncode:
             raise CompileError(f"gcc failed: {proc.stderr.strip().splitlines()[-1] if proc.stderr else ''}")
         sources = sorted(p.name for p in build.iterdir() if p.suffix in (".c", ".h"))
-        xml = model_description(model, ident, guid, [s for s in sources if s.endswith(".c")])
+        xml = model_description(model, ident, guid, [s for s in sources if s.endswith(".c")],
+                                experiment, units, descriptions)
         if out_path.is_dir():
             raise ConfigError("the FMU to write is an existing directory", where=str(out_path))
         out_path.parent.mkdir(parents=True, exist_ok=True)
@@ -192,6 +291,15 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True) -> Path:
         finally:
             staged.unlink(missing_ok=True)
     return out_path
+
+
+def _check_names(model: CompiledModel, given: dict | None, what: str) -> None:
+    o = model.ode
+    known = {*o.p_names, *o.u_names, *o.y_names, *o.x_names, *(f"der({n})" for n in o.x_names),
+             *(n for _, n in _probe_variables(model))}
+    unknown = sorted(set(given or ()) - known)
+    if unknown:
+        raise ConfigError(f"{what} for variables the model does not have: {', '.join(unknown)}")
 
 
 def validate_fmu(path) -> list[str]:
