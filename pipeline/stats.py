@@ -159,10 +159,12 @@ def _divided_difference_weights(t: np.ndarray, k: int, idx: np.ndarray) -> np.nd
 
 
 def _spectral_estimate(y: np.ndarray, t: np.ndarray):
-    """sigma from the quietest of eight bands of the Welch spectrum (Hann, linear detrend) on a
-    uniform grid, with its relative standard error; None off a uniform grid or below 128 samples.
-    White noise has the flat one-sided density 2 sigma^2 / fs; a band's median, corrected for the
-    median of a chi-square, estimates it; the quietest band is the one freest of signal."""
+    """sigma from the quietest of eight bands of the Welch spectrum (Hann, linear detrend) up to
+    0.4 fs on a uniform grid, with its relative standard error; None off a uniform grid or below
+    128 samples. White noise has the flat one-sided density 2 sigma^2 / fs; a band's median,
+    corrected for the median of a chi-square, estimates it; the quietest band is the one freest of
+    signal. Above 0.4 fs an acquisition's anti-alias filter damps the noise itself, which would
+    read too low there."""
     from scipy.signal import welch
     from scipy.stats import chi2
 
@@ -171,8 +173,8 @@ def _spectral_estimate(y: np.ndarray, t: np.ndarray):
     if len(y) < 128 or not np.all(np.abs(dt - h) <= 1e-6 * h):
         return None
     nper = int(min(256, 2 ** np.floor(np.log2(len(y) // 4))))
-    _, P = welch(y, fs=1.0, window="hann", nperseg=nper, detrend="linear", scaling="density")
-    P = P[2:-1]                                            # away from DC and its leakage, and Nyquist
+    f, P = welch(y, fs=1.0, window="hann", nperseg=nper, detrend="linear", scaling="density")
+    P = P[2:][f[2:] <= 0.4]      # away from DC's leakage, and from the band an anti-alias filter damps
     segments = (len(y) - nper // 2) // (nper // 2)
     dof = max(2.0, 2 * 0.9 * segments)                     # Hann at 50% overlap: ~0.9 of independent
     bands = np.array_split(P, 8)
