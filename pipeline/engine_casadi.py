@@ -417,20 +417,27 @@ class _Hybrid:
         no longer change, pre() taking the last values each time they settle."""
         if self.update is None:
             return x
-        nx = plan.nx
+        nx, nc = plan.nx, plan.nx - self.nd
         xa = np.asarray(x, float).copy()
         cur = xa[:nx].copy()
         pre = cur.copy()
         u = plan.u_at(t)
+        reinit = None         # the states a reinit() sets, applied once the iteration settles
         for _ in range(MAX_EVENT_ITERATIONS):
             new = np.array(self.update(cur, u, p, t, pre, flags)).ravel()
             if not np.all(np.isfinite(new)):
                 raise _Stop(f"event iteration gave non-finite values at t = {t:g}")
+            if not np.array_equal(new[:nc], cur[:nc]):
+                reinit = new[:nc].copy()
+            new[:nc] = cur[:nc]
             if np.array_equal(new, cur):
                 if np.array_equal(cur, pre):
-                    xa[:nx] = cur
-                    return xa
+                    if reinit is None:
+                        xa[:nx] = cur
+                        return xa
+                    cur[:nc], reinit = reinit, None     # then settle again with the new states
                 pre = cur.copy()
+                continue
             cur = new
         raise _Stop(f"event iteration did not converge at t = {t:g} (discrete variables keep changing)")
 
@@ -456,7 +463,7 @@ class _Hybrid:
         for _ in range(MAX_EVENT_ITERATIONS):
             x0 = np.array(init_d(u, p, t0, x[nx - self.nd:nx])).ravel()
             new = x.copy()
-            new[:nx] = x0
+            new[:nx - self.nd] = x0
             new = self.iterate(plan, new, p, t0, self.flags(initial=True))
             if np.array_equal(new[nx - self.nd:nx], x[nx - self.nd:nx]):
                 return new
@@ -493,7 +500,8 @@ class _Hybrid:
                 G = self.signs(plan, cols, traj, p)
                 G0 = self.g(plan, x0, p, t0)      # at the restart point, not the grid point
                 G = np.column_stack([G0, G[:, 1:]])
-                flip = np.sign(G[:, 1:]) * np.sign(G[:, :-1]) < 0
+                # a relation changes when its sign does; reaching exactly 0 counts (T < 18 at 18)
+                flip = np.sign(G[:, 1:]) != np.sign(G[:, :-1])
                 hits = np.flatnonzero(flip.any(axis=0))
                 if hits.size and self.count < MAX_EVENTS:
                     j = hits[0]

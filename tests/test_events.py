@@ -3,10 +3,12 @@ the solver restarted there. Exact solutions derived by hand."""
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from mcl import compile_model
 from mcl.data import TimeSeries
 from mcl.engine_casadi import CasadiEngine
+from mcl.simulation import SimulationOptions
 
 KINK = """
 model Kink "x falls at rate 1 while positive, at rate 3 once negative; y integrates x"
@@ -60,3 +62,127 @@ def test_the_fmu_carries_the_event_indicators(tmp_path):
     assert res.ok, res.reason
     y = np.where(t < 0.5, 0.5 * t - t**2 / 2, 0.125 - 1.5 * (t - 0.5) ** 2)
     assert np.max(np.abs(res.output("out") - y)) < 1e-4
+
+
+# -- hybrid models: when, pre, reinit, discrete variables, sample, asserts -------------------
+
+BALL = """
+model Ball
+  parameter Real e = 0.8;
+  Real h(start = 1, fixed = true);
+  Real v(start = 0, fixed = true);
+  Integer n(start = 0, fixed = true) "bounces";
+  discrete Real vimp(start = 0, fixed = true) "speed at the last impact";
+equation
+  der(h) = v;
+  der(v) = -9.81;
+  when h < 0 then
+    reinit(v, -e * pre(v));
+    n = pre(n) + 1;
+    vimp = v;
+  end when;
+end Ball;
+"""
+
+
+def _ball_truth(t, e=0.8, g=9.81):
+    """Height, bounce count and impact speed of the ball, bounce by bounce."""
+    t_k, v_k = np.sqrt(2 / g), np.sqrt(2 * g)          # first impact and the speed then
+    starts, speeds = [0.0], [0.0]
+    while t_k < t[-1] + 1:
+        starts.append(t_k)
+        speeds.append(e * v_k)
+        v_k *= e
+        t_k += 2 * v_k / g
+    k = np.searchsorted(starts, t, side="right") - 1
+    s, v0 = np.array(starts)[k], np.array(speeds)[k]
+    h = np.where(k == 0, 1 - g * t**2 / 2, v0 * (t - s) - g * (t - s) ** 2 / 2)
+    return h, k, np.where(k == 0, 0.0, -np.array(speeds)[k] / e)
+
+
+def test_a_bouncing_ball_reinitialises_at_each_impact(tmp_path):
+    (tmp_path / "Ball.mo").write_text(BALL)
+    model = compile_model([tmp_path / "Ball.mo"], "Ball")
+    assert model.ode.discrete == 3                   # n, vimp and the memory of h < 0
+    t = np.linspace(0, 3, 301)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []),
+                                  options=None)
+    assert res.ok, res.reason
+    h, n, vimp = _ball_truth(t)
+    names = model.ode.x_names
+    assert np.max(np.abs(res.states[:, names.index("h")] - h)) < 1e-4
+    assert np.array_equal(res.states[:, names.index("n")], n)
+    # the when-clause sees v before the reinit (MLS 8.3.6)
+    assert np.allclose(res.states[:, names.index("vimp")], vimp, atol=1e-4)
+
+
+HYSTERESIS = """
+model Hysteresis "a two-point controller: heat until 22, cool until 18"
+  Real T(start = 20, fixed = true);
+  Boolean on(start = true, fixed = true);
+  output Real y;
+  Integer k(start = 0, fixed = true);
+  discrete Real s(start = 0, fixed = true);
+equation
+  der(T) = if on then 2 else -1;
+  on = not pre(on) and T < 18 or pre(on) and T < 22;
+  y = if on then 1 else 0;
+  when sample(0, 0.25) then
+    s = T;
+  end when;
+  when {initial(), edge(on)} then
+    k = pre(k) + 1;
+  end when;
+  assert(T < 21, "too warm", AssertionLevel.warning);
+end Hysteresis;
+"""
+
+
+def test_a_hysteresis_controller_switches_where_it_should(tmp_path, caplog):
+    (tmp_path / "H.mo").write_text(HYSTERESIS)
+    model = compile_model([tmp_path / "H.mo"], "Hysteresis")
+    assert model.ode.events["clocks"] == [[0.0, 0.25]]
+    t = np.linspace(0, 10, 201)
+    with caplog.at_level("WARNING", logger="mcl"):
+        res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    # heats 20 -> 22 (1 s), cools 22 -> 18 (4 s), heats 18 -> 22 (2 s), cools (4 s) ...
+    switches = [1.0, 5.0, 7.0]
+    T = np.interp(t, [0, 1, 5, 7, 11], [20, 22, 18, 22, 18])
+    names = model.ode.x_names
+    assert np.max(np.abs(res.states[:, names.index("T")] - T)) < 1e-5
+    on = (t < 1) | ((t >= 5) & (t < 7))
+    away = np.min(np.abs(t[:, None] - np.array(switches)[None]), axis=1) > 1e-6
+    assert np.array_equal(res.output("y")[away] > 0.5, on[away])
+    # k: 1 at initialisation, then one per rising edge of on (at t = 5)
+    assert np.array_equal(res.states[away, names.index("k")], np.where(t >= 5, 2, 1)[away])
+    # s holds T sampled at the last tick of 0.25
+    ticks = np.floor(t / 0.25 + 1e-9) * 0.25
+    assert np.allclose(res.states[:, names.index("s")], np.interp(ticks, [0, 1, 5, 7, 11], [20, 22, 18, 22, 18]),
+                       atol=1e-5)
+    assert any("too warm" in r.getMessage() for r in caplog.records)     # level warning: logged only
+
+
+def test_an_assert_that_fires_fails_the_run_with_its_message(tmp_path):
+    (tmp_path / "A.mo").write_text("model A\n  Real x(start = 0, fixed = true);\nequation\n  der(x) = 1;\n"
+                                   "  assert(x < 0.45, \"x left its range\");\nend A;\n")
+    model = compile_model([tmp_path / "A.mo"], "A")
+    t = np.linspace(0, 1, 11)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert not res.ok
+    assert "x left its range" in res.reason and "t = 0.5" in res.reason and "A.mo:5" in res.reason
+
+
+@pytest.mark.slow
+def test_a_5000_term_sum_compiles(tmp_path):
+    """rumoca recurses as deep as the sum nests (it runs with a large stack); the translation
+    is iterative."""
+    terms = " + ".join(f"{i % 7 + 1}*x" for i in range(5000))
+    (tmp_path / "S.mo").write_text(f"model S\n  Real x(start = 1, fixed = true);\n  output Real y;\nequation\n"
+                                   f"  der(x) = -x;\n  y = {terms};\nend S;\n")
+    model = compile_model([tmp_path / "S.mo"], "S")
+    t = np.linspace(0, 1, 11)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []),
+                                  options=SimulationOptions(rtol=1e-10, atol=1e-12))
+    total = sum(i % 7 + 1 for i in range(5000))
+    assert res.ok and np.allclose(res.output("y"), total * np.exp(-t), rtol=1e-5)

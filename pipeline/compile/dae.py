@@ -50,6 +50,27 @@ class Dae:
     #: zero-crossing functions: lhs - rhs of each relation on the unknowns in the equations
     #: (outside noEvent); where one changes sign the equations switch: a state event
     relations: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    # -- the hybrid part (empty for a continuous model) ----------------------------------
+    #: discrete variables held between events (discrete Real, Integer, Boolean; then one
+    #: memory per condition whose rising edge fires a when-clause), their names and starts
+    d: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    d_names: list[str] = field(default_factory=list)
+    d_start: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    #: symbols of pre(d), pre(x) and of the flags [initial(), terminal(), tick of each clock]
+    d_pre: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    x_pre: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    flags: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    #: at an event: the new d (in x, z, u, p, t, d, d_pre, x_pre, flags) and the states after
+    #: reinit(); the continuous equations read d as held values (pre(d) = d between events)
+    d_update: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    x_reinit: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    clocks: list = field(default_factory=list)          # (start, period) of each sample() clock
+    asserts: ca.SX = field(default_factory=lambda: ca.SX(0, 1))   # 1 where an assert is violated
+    assert_info: list = field(default_factory=list)     # (level "error"|"warning", message) of each
+
+    @property
+    def hybrid(self) -> bool:
+        return self.d.numel() > 0 or self.asserts.numel() > 0
 
 
 def check_balance(residual: ca.SX, nx: int, nz: int, name: str) -> None:
@@ -198,6 +219,7 @@ def eliminate_aliases(dae: Dae, passes: int = 20) -> Dae:
     States are never removed; every eliminated name stays readable through ``exprs``."""
     residual, z, z_names, z_start = dae.residual, dae.z, list(dae.z_names), dae.z_start
     init_residual, exprs, relations = dae.init_residual, dict(dae.exprs), dae.relations
+    d_update, x_reinit, asserts = dae.d_update, dae.x_reinit, dae.asserts
     for _ in range(passes):
         w = ca.vertcat(dae.x, z)
         nx = dae.x.numel()
@@ -241,12 +263,13 @@ def eliminate_aliases(dae: Dae, passes: int = 20) -> Dae:
         residual = ca.substitute(residual[keep_rows], old, new) if keep_rows else ca.SX(0, 1)
         init_residual = ca.substitute(init_residual, old, new)
         relations = ca.substitute(relations, old, new)
+        d_update, x_reinit, asserts = (ca.substitute(e, old, new) for e in (d_update, x_reinit, asserts))
         exprs = {n: ca.substitute(v, old, new) if ca.depends_on(v, old) else v for n, v in exprs.items()}
         z_start = z_start[keep] if keep else ca.SX(0, 1)
         z = ca.vertcat(*[z[j] for j in keep]) if keep else ca.SX(0, 1)
         z_names = [z_names[j] for j in keep]
-    return Dae(x=dae.x, dx=dae.dx, z=z, u=dae.u, p=dae.p, t=dae.t, residual=residual,
-               init_residual=init_residual, x_names=dae.x_names, z_names=z_names, u_names=dae.u_names,
-               p_names=dae.p_names, p_values=dae.p_values, x_start=dae.x_start, x_fixed=dae.x_fixed,
-               z_start=z_start, u_start=dae.u_start, outputs=dae.outputs, exprs=exprs, units=dae.units,
-               descriptions=dae.descriptions, time_events=dae.time_events, relations=relations)
+    import dataclasses
+
+    return dataclasses.replace(dae, z=z, residual=residual, init_residual=init_residual, z_names=z_names,
+                               z_start=z_start, exprs=exprs, relations=relations, d_update=d_update,
+                               x_reinit=x_reinit, asserts=asserts)

@@ -116,6 +116,27 @@ class _Front:
 
 
 VIRTUAL = "/mcl-source"
+#: rumoca's parser and passes recurse as deep as the source nests (a 5000-term sum): they run
+#: in one thread of their own with a large stack (rumoca's objects may not change thread)
+RUMOCA_STACK = 1 << 29
+_RUMOCA_POOL = None
+
+
+def in_rumoca_thread(fn, *args):
+    """``fn(*args)`` in the thread that owns every rumoca object of this process."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    global _RUMOCA_POOL
+    if _RUMOCA_POOL is None:
+        old = threading.stack_size(RUMOCA_STACK)
+        try:
+            pool = ThreadPoolExecutor(1, thread_name_prefix="rumoca")
+            pool.submit(lambda: None).result()      # the thread starts now, with the large stack
+        finally:
+            threading.stack_size(old)
+        _RUMOCA_POOL = pool
+    return _RUMOCA_POOL.submit(fn, *args).result()
 
 
 def virtual_name(path: Path, digest: str) -> str:
@@ -127,6 +148,12 @@ _FRONTS: dict[tuple, _Front] = {}
 
 
 def _front(roots) -> _Front:
+    """The session for ``roots`` (called in the rumoca thread). The sessions live as long as the
+    process: the table is never freed, so no session is dropped by another thread at exit."""
+    if not _FRONTS:
+        import ctypes
+
+        ctypes.pythonapi.Py_IncRef(ctypes.py_object(_FRONTS))
     key = tuple(roots)
     if key not in _FRONTS:
         _FRONTS[key] = _Front(list(roots))
@@ -223,8 +250,17 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
             raise ModelicaError(f"class '{model}' not found: no source and no library on the path "
                                 f"defines '{top}'", where=str(paths[0]) if paths else None)
     real = prep.virtual
+
+    def work():
+        compiled = _front(prep.roots).compile(prep.docs, model)
+        ir = compiled.to_dict("dae")
+        # the flat stage names each equation's origin (a component's own equation, a flow
+        # sum, a connection) and each variable's flow prefix: the model's component structure
+        ir["flat"] = compiled.to_dict("flat")
+        return ir
+
     try:
-        ir = _front(prep.roots).compile(prep.docs, model).to_dict("dae")
+        ir = in_rumoca_thread(work)
     except rumoca.RumocaError as exc:
         raise _located_error(exc, model, prep.files, real) from None
     located = Located({f[0]: (real.get(f[1], f[1]), f[2]) for f in ir.get("source_map", {}).get("files", [])})
@@ -256,10 +292,23 @@ def _located_error(exc, model: str, files: list[Path], real: dict | None = None)
     detail = next((ln.lstrip("×").strip() for ln in lines if ln.startswith("×")), None)
     detail = detail or (lines[0].split(": ", 1)[-1] if lines else type(exc).__name__)
     detail = re.sub(rf"^{re.escape(model)} (could not be compiled|failed in \w+):?\s*", "", detail)
-    syntax = _syntax_error(files)
-    if syntax is not None:
-        return syntax
+    import rumoca
+
+    if isinstance(exc, rumoca.ParseError) or re.search(r"parse|unexpected", text, re.I):
+        # the syntax error of the file rumoca names (all the user's files when it names none)
+        named = [f for f in files if str(f) in text] or files
+        syntax = _syntax_error(named)
+        if syntax is not None:
+            return syntax
     where = f"{m[1]}:{m[2]}" if m else None
+    if where is None:                   # a function rumoca cannot lower: its offending statement
+        fn = re.search(r"`([\w.]+)` (contains|does not have|requires)", detail)
+        if fn:
+            where = _in_function(files, fn.group(1).split(".")[-1], r"\b(while|for|return|break)\b")
+            if where is not None:
+                return UnsupportedConstruct(f"unsupported in {model}: a statement of function {fn.group(1)} the "
+                                            f"front end cannot translate (a while-loop, a loop whose bounds are "
+                                            f"not constant, a return in a loop: {detail})", where=where)
     for rx, cls, words, place in _KNOWN:
         hit = re.search(rx, text)
         if not hit:
@@ -276,13 +325,32 @@ def _located_error(exc, model: str, files: list[Path], real: dict | None = None)
     return cls(f"cannot compile {model}: {detail}", where=where)
 
 
+def _in_function(files: list[Path], name: str, pattern: str) -> str | None:
+    """``file:line`` of the first line matching ``pattern`` in function ``name`` of the user's
+    files (of its header when none does)."""
+    for f in files:
+        lines = f.read_text(errors="replace").splitlines()
+        head = next((n for n, ln in enumerate(lines) if re.search(rf"\bfunction\s+{re.escape(name)}\b", ln)), None)
+        if head is None:
+            continue
+        for n in range(head, len(lines)):
+            code = lines[n].split("//", 1)[0]
+            if re.search(pattern, code):
+                return f"{f}:{n + 1}"
+            if re.search(rf"\bend\s+{re.escape(name)}\s*;", code):
+                break
+        return f"{f}:{head + 1}"
+    return None
+
+
 def _syntax_error(files: list[Path]) -> ModelicaError | None:
     """The first syntax error in the user's files, with file:line:column (rumoca's validator)."""
     import rumoca
 
     for f in files:
         try:
-            diags = rumoca.validate_source(f.read_text(encoding="utf-8", errors="replace"), filename=str(f))
+            diags = in_rumoca_thread(lambda text, name: rumoca.validate_source(text, filename=name),
+                                     f.read_text(encoding="utf-8", errors="replace"), str(f))
         except Exception:  # noqa: BLE001 - the validator is a help for the message, never a failure
             continue
         for d in diags:
@@ -291,8 +359,26 @@ def _syntax_error(files: list[Path]) -> ModelicaError | None:
                 line, col = (inner[1], inner[2]) if inner else (d.line, d.column)
                 what = next((ln.strip().lstrip("×").strip() for ln in (d.message or "").splitlines()
                              if ln.strip().startswith("×")), "unexpected input")
+                line, col, what = _statement_end(f, int(line), int(col), what)
                 return ModelicaError(f"syntax error: {what}", where=f"{f}:{line}:{col}")
     return None
+
+
+def _statement_end(f: Path, line: int, col: int, what: str) -> tuple[int, int, str]:
+    """An unexpected token that opens its line most often means the statement before it was not
+    ended (a missing ';'): the error is then placed at the end of that statement's last line."""
+    lines = f.read_text(errors="replace").splitlines()
+    if not 1 <= line <= len(lines) or lines[line - 1][: max(col - 1, 0)].strip():
+        return line, col, what
+    prev = line - 1
+    while prev >= 1 and not lines[prev - 1].split("//", 1)[0].strip():
+        prev -= 1
+    if prev < 1:
+        return line, col, what
+    code = lines[prev - 1].split("//", 1)[0].rstrip()
+    if code.endswith((";", "then", "loop", "else", "equation", "algorithm", "protected", "public")):
+        return line, col, what
+    return prev, len(code) + 1, f"{what} (is a ';' missing at the end of this line?)"
 
 
 def _missing_class(model: str, files: list[Path]) -> ModelicaError | None:
@@ -308,10 +394,12 @@ def _missing_class(model: str, files: list[Path]) -> ModelicaError | None:
 
 
 class _Translator:
-    """The IR's expression DAG as CasADi SX, node by node (children come before parents)."""
+    """The IR's expression DAG as CasADi SX. Nodes are translated without recursion (an explicit
+    stack, children before parents), so a 5000-term sum or a long binding chain has no depth
+    limit; a function call interprets the function's body in its own context."""
 
-    def __init__(self, storage: dict, model: str):
-        self.st, self.model = storage, model
+    def __init__(self, storage: dict, model: str, located: "Located | None" = None):
+        self.st, self.model, self.located = storage, model, located
         expr = storage["expressions"]
         self.nodes, self.operand_list = expr["nodes"], expr["operands"]
         self.subscripts = expr.get("subscripts", [])
@@ -325,8 +413,11 @@ class _Translator:
         self.functions = storage.get("functions", [])
         self.cache: dict[int, ca.SX] = {}
         self.coord = None   # set by the caller: (kind, index) -> SX
-        self.relations: list[ca.SX] = []   # lhs - rhs of <, <=, >, >= outside noEvent()
-        self.no_event = 0
+        # relations that generate events (rumoca lists them; those inside noEvent() it does not)
+        self.event_nodes = {r["relation"]["expression"] for r in storage.get("relations", [])
+                            if isinstance(r, dict) and "relation" in r}
+        self.relations: list[ca.SX] = []   # lhs - rhs of the event-generating relations met
+        self.span = None                   # provenance of what is being translated (for errors)
 
     def operands(self, k: int) -> list[int]:
         body = self.nodes[k][next(iter(self.nodes[k]))]
@@ -334,11 +425,46 @@ class _Translator:
         return self.operand_list[self.offsets[k]: self.offsets[k] + n]
 
     def refuse(self, what: str):
-        raise UnsupportedConstruct(f"unsupported in {self.model}: {what}")
+        where = self.located.span(self.span) if self.located is not None else None
+        raise UnsupportedConstruct(f"unsupported in {self.model}: {what}", where=where)
 
-    def sx(self, k: int, bound: dict | None = None) -> ca.SX:
-        if bound is None and k in self.cache:
-            return self.cache[k]
+    def children(self, k: int) -> list[int]:
+        node = self.nodes[k]
+        if isinstance(node, str):
+            return []
+        kind = next(iter(node))
+        body = node[kind]
+        if kind == "unary":
+            return [body["operand"]]
+        if kind == "binary":
+            return [body["lhs"], body["rhs"]]
+        if kind in ("conditional", "builtin", "call", "array"):
+            return self.operands(k)
+        if kind == "index":
+            subs = self.subscripts[self.sub_offsets[k]: self.sub_offsets[k] + body["subscript_count"]]
+            return [body["base"]] + [n for s in subs for sk, n in s["kind"].items() if sk == "index"]
+        if kind == "field":
+            return [body["base"]]
+        return []
+
+    def sx(self, root: int, bound: dict | None = None) -> ca.SX:
+        """Node ``root`` as SX; ``bound`` is a function call's context (its values are not cached)."""
+        done = self.cache if bound is None else {}
+        if root in done:
+            return done[root]
+        stack = [(root, False)]
+        while stack:
+            k, ready = stack.pop()
+            if k in done:
+                continue
+            if not ready:
+                stack.append((k, True))
+                stack.extend((c, False) for c in self.children(k) if c not in done)
+                continue
+            done[k] = self.build(k, done, bound)
+        return done[root]
+
+    def build(self, k: int, done: dict, bound) -> ca.SX:
         node = self.nodes[k]
         kind = node if isinstance(node, str) else next(iter(node))
         body = None if isinstance(node, str) else node[kind]
@@ -346,78 +472,73 @@ class _Translator:
             (lk, value), = body.items()
             if lk == "string":
                 self.refuse(f"a string value ({value!r}) in an equation")
-            out = ca.SX(float(value))
-        elif kind == "coordinate":
+            return ca.SX(float(value))
+        if kind == "coordinate":
             if body == "time":
-                out = self.coord("time", 0)
-            else:
-                (ck, idx), = body.items()
-                if ck == "binder":
-                    try:
-                        out = ca.SX(bound["binders"][(idx["domain"], idx["ordinal"])])
-                    except (TypeError, KeyError):
-                        self.refuse("a for-loop index outside its loop")
-                elif ck == "function_parameter":
-                    ordinal = idx["ordinal"] if isinstance(idx, dict) else idx
-                    if bound is None or ordinal not in bound["params"]:
-                        self.refuse("a function parameter outside a function call")
-                    out = bound["params"][ordinal]
-                else:
-                    out = self.coord(ck, idx)
-        elif kind == "unary":
+                return self.coord("time", 0)
+            (ck, idx), = body.items()
+            if ck == "binder":
+                try:
+                    return ca.SX(bound["binders"][(idx["domain"], idx["ordinal"])])
+                except (TypeError, KeyError):
+                    self.refuse("a for-loop index outside its loop")
+            if ck == "function_parameter":
+                ordinal = idx["ordinal"] if isinstance(idx, dict) else idx
+                if bound is None or ordinal not in bound["params"]:
+                    self.refuse("a function parameter outside a function call")
+                return bound["params"][ordinal]
+            return self.coord(ck, idx)
+        if kind == "unary":
             op = body["operator"]
             if op not in _UNARY:
                 self.refuse(f"unary operator '{op}'")
-            out = _UNARY[op](self.sx(body["operand"], bound))
-        elif kind == "binary":
+            return _UNARY[op](done[body["operand"]])
+        if kind == "binary":
             op = body["operator"]
             if op not in _BINARY:
                 self.refuse(f"operator '{op}'")
-            lhs, rhs = self.sx(body["lhs"], bound), self.sx(body["rhs"], bound)
+            lhs, rhs = done[body["lhs"]], done[body["rhs"]]
             out = _BINARY[op](lhs, rhs)
-            if op in _RELATIONS and bound is None and not self.no_event and lhs.numel() == rhs.numel() == 1:
+            if op in _RELATIONS and bound is None and k in self.event_nodes and lhs.numel() == rhs.numel() == 1:
                 self.relations.append(lhs - rhs)
-        elif kind == "conditional":
-            ops = [self.sx(o, bound) for o in self.operands(k)]
+            return out
+        if kind == "conditional":
+            ops = [done[o] for o in self.operands(k)]
             out = ops[-1]   # if c1 then a1 elseif c2 then a2 ... else b
             for j in range(len(ops) - 3, -1, -2):
                 out = ca.if_else(ops[j], ops[j + 1], out)
-        elif kind == "builtin":
-            quiet = str(body["builtin"]).split(".")[-1] in ("noEvent", "no_event", "smooth")
-            self.no_event += quiet
+            return out
+        if kind == "builtin":
+            return self.call_builtin(body["builtin"], [done[o] for o in self.operands(k)])
+        if kind == "call":
+            return self.call_function(body, [done[o] for o in self.operands(k)])
+        if kind == "array":
+            return ca.vertcat(*[ca.vec(done[o]) for o in self.operands(k)])
+        if kind == "index":
+            return self.element(k, body, done)
+        if kind == "function_value":
             try:
-                out = self.call_builtin(body["builtin"], [self.sx(o, bound) for o in self.operands(k)])
-            finally:
-                self.no_event -= quiet
-        elif kind == "call":
-            out = self.call_function(body, [self.sx(o, bound) for o in self.operands(k)])
-        elif kind == "array":
-            out = ca.vertcat(*[ca.vec(self.sx(o, bound)) for o in self.operands(k)])
-        elif kind == "index":
-            out = self.element(k, body, bound)
-        elif kind == "function_value":
-            try:
-                out = bound["values"][body["value"]][body["definition_ordinal"]]
+                return bound["values"][body["value"]][body["definition_ordinal"]]
             except (TypeError, KeyError, IndexError):
                 self.refuse("a function variable read before it is assigned")
-        else:
-            self.refuse(f"expression node '{kind}'")
-        if bound is None:
-            self.cache[k] = out
-        return out
+        self.refuse(f"expression node '{kind}'")
 
-    def element(self, k: int, body: dict, bound):
-        """``a[i]`` (1-based, constant subscripts) of a vector (arrays are held flattened)."""
-        base = self.sx(body["base"], bound)
+    def element(self, k: int, body: dict, done: dict):
+        """``a[i]`` (1-based) of a vector (arrays are held flattened); a subscript that is not a
+        constant selects among the elements with a conditional."""
+        base = done[body["base"]]
         subs = self.subscripts[self.sub_offsets[k]: self.sub_offsets[k] + body["subscript_count"]]
         if len(subs) != 1:
             self.refuse("an array of more than one dimension subscripted")
         kind, node = next(iter(subs[0]["kind"].items()))
         if kind != "index":
             self.refuse(f"a '{kind}' subscript (slices are not translated)")
-        i = self.sx(node, bound)
+        i = done[node]
         if not i.is_constant():
-            self.refuse("a subscript that is not a constant")
+            out = ca.SX(0)      # the element whose index i is: a chain of conditionals
+            for j in range(base.numel() - 1, -1, -1):
+                out = ca.if_else(i == j + 1, base[j], out)
+            return out
         j = _int(i) - 1
         if not 0 <= j < base.numel():
             self.refuse(f"subscript {j + 1} outside an array of {base.numel()}")
@@ -489,20 +610,25 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     _refuse_events(st, located, model)
     dims = [list(st["value_types"][v["value_type"]]["dimensions"] or []) for v in variables]
     size = [int(np.prod(d)) if d else 1 for d in dims]
-    tr = _Translator(st, model)
+    tr = _Translator(st, model, located)
     role = [v["role"] for v in variables]
     attrs = [v["attributes"] for v in variables]
     # parameters computed during initialisation (fixed = false, no binding) become constant states
     init_params = {i for i, v in enumerate(variables) if role[i] == "parameter" and attrs[i]["binding"] is None
                    and attrs[i].get("fixed") in ([False], False)}
-    # discrete values defined at all times by one expression (a Boolean of parameters, a
-    # constant flag) are that expression; ones changed at events need events
+    # a discrete value defined at all times by one expression without pre() (a Boolean of
+    # parameters, x > 0) is that expression, evaluated live like a relation in an equation;
+    # the others (assigned in when-clauses, or reading pre()) are held between events
+    pre_read = _pre_reads(st)
     always = {}
     for owner in st.get("discrete_value_owners", []):
         branches = owner.get("branches", [])
         if len(branches) == 1 and branches[0].get("activation") == "always" and len(owner["targets"]) == 1:
-            always[owner["targets"][0]] = branches[0]["values"][0]["value"]
-    index = {"x": [], "z": [], "u": [], "p": [], "c": []}
+            node = branches[0]["values"][0]["value"]
+            target = owner["targets"][0]
+            if target not in pre_read and not _reads_pre(st, node):
+                always[target] = node
+    index = {"x": [], "z": [], "u": [], "p": [], "c": [], "d": []}
     for i, r in enumerate(role):
         if r == "discrete_value" and i in always:
             continue
@@ -516,20 +642,32 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             index["p"].append(i)
         elif r == "constant":
             index["c"].append(i)
+        elif r in ("discrete_value", "discrete_real"):
+            index["d"].append(i)
         else:
-            raise UnsupportedConstruct(f"unsupported in {model}: {r} variable {variables[i]['name']} "
-                                       "(discrete-time variables need events)",
+            raise UnsupportedConstruct(f"unsupported in {model}: {r} variable {variables[i]['name']}",
                                        where=located.span(variables[i].get("declaration", {}).get("span")))
     names = {k: [n for i in idx for n in _scalar_names(variables[i]["name"], dims[i])] for k, idx in index.items()}
     x, dx, z = (ca.SX.sym(s, len(names[k])) for s, k in (("x", "x"), ("dx", "x"), ("z", "z")))
     u, p_all, t = ca.SX.sym("u", len(names["u"])), ca.SX.sym("p_all", len(names["p"])), ca.SX.sym("t")
-    slot, der = {}, {}
-    for k, vec in (("x", x), ("z", z), ("u", u), ("p", p_all)):
+    # the hybrid part: discrete variables, then one memory per condition that triggers a
+    # when-clause (its value at the last event: a when-clause fires on its rising edge)
+    conditions = st.get("conditions", [])
+    memory = {c: k for k, c in enumerate(sorted(_triggers(st)))}
+    nd = len(names["d"]) + len(memory)
+    d, d_pre = ca.SX.sym("d", nd), ca.SX.sym("d_pre", nd)
+    x_pre = ca.SX.sym("x_pre", x.numel())
+    clocks = _clocks(st, located, model)
+    flags = ca.SX.sym("flags", 2 + len(clocks))      # initial(), terminal(), a tick of each clock
+    slot, der, pre_slot = {}, {}, {}
+    for k, vec, pre in (("x", x, x_pre), ("z", z, None), ("u", u, None), ("p", p_all, None), ("d", d, d_pre)):
         pos = 0
         for i in index[k]:
             slot[i] = vec[pos:pos + size[i]]
             if k == "x":
                 der[i] = dx[pos:pos + size[i]]
+            if pre is not None:
+                pre_slot[i] = pre[pos:pos + size[i]]
             pos += size[i]
 
     def coord(kind, i):
@@ -537,16 +675,25 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             return t
         if kind == "derivative":
             if i not in der:
-                raise UnsupportedConstruct(f"unsupported in {model}: der() of {variables[i]['name']}, "
-                                           "which is not a state")
+                tr.refuse(f"der() of {variables[i]['name']}, which is not a state")
             return der[i]
+        if kind == "terminal":
+            return flags[1]
+        if kind == "initial":
+            return flags[0]
+        if kind.startswith("pre_"):
+            if i in pre_slot:
+                return pre_slot[i]
+            if i in always:          # never changed at an event: pre() is the value
+                return tr.sx(always[i])
+            tr.refuse(f"pre() of {variables[i]['name']}")
         if i in slot:
             return slot[i]
         if i in always:
             return tr.sx(always[i])
         if role[i] == "constant":
             return tr.sx(attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"])
-        raise UnsupportedConstruct(f"unsupported in {model}: variable {variables[i]['name']} ({kind})")
+        tr.refuse(f"variable {variables[i]['name']} ({kind})")
 
     tr.coord = coord
     eqs = [_residual(op, tr, model) for op in st["continuous_equation_operations"]]
@@ -558,6 +705,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     init += [ca.vec(slot[i]) - ca.vec(tr.sx(attrs[i]["start"])) for i in index["z"]
              if attrs[i].get("fixed") in ([True], True) and attrs[i]["start"] is not None]
     init_residual = ca.vertcat(*init) if init else ca.SX(0, 1)
+    events = _Events(st, tr, conditions, memory, d, d_pre, flags, located, model)
+    d_update = events.discrete_update(index["d"], slot, pre_slot, size, variables)
+    x_reinit = events.reinit(x, index["x"], slot, variables)
+    asserts, assert_info = events.asserts()
 
     def value_of(i, key_order=("binding", "start")):
         node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)
@@ -572,8 +723,15 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     p_values = np.array([float(ca.evalf(values[j])) for j in free])
     p, resolved = resolve_parameters(values, p_all, free, model)
 
-    def bind(e):
-        return ca.substitute(e, p_all, resolved)
+    # between events pre(v) is v, initial() and terminal() are false (initial() true in the
+    # initial equations) and no clock ticks
+    held = ca.vertcat(d_pre, x_pre, flags)
+
+    def bind(e, initial=0.0):
+        e = ca.substitute(e, p_all, resolved)
+        if nd or x.numel():
+            e = ca.substitute(e, held, ca.vertcat(d, x, ca.SX([initial] + [0.0] * (flags.numel() - 1))))
+        return e
 
     def starts(k):
         return bind(ca.vertcat(*[value_of(i, ("start",)) for i in index[k]])) if index[k] else ca.SX(0, 1)
@@ -584,7 +742,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     u_start = np.array([float(ca.evalf(e)) if not ca.depends_on(e, p) else 0.0
                         for e in ca.vertsplit(u_start)]) if u_start.numel() else np.zeros(0)
     exprs: dict[str, ca.SX] = {}
-    for k, vec in (("x", x), ("z", z), ("u", u)):
+    for k, vec in (("x", x), ("z", z), ("u", u), ("d", d)):
         for j, n in enumerate(names[k]):
             exprs[n] = vec[j]
     for j, n in enumerate(names["p"]):
@@ -592,6 +750,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     for i in index["c"]:
         for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(ca.vec(coord("constant", i)))):
             exprs[n] = e
+    for i, node in always.items():
+        exprs.setdefault(variables[i]["name"], bind(ca.vec(tr.sx(node))[0]))
     top = [i for i, v in enumerate(variables) if attrs[i].get("causality") == "output" and "." not in v["name"]]
     outputs = [n for i in top for n in _scalar_names(variables[i]["name"], dims[i])]
     units = {v["name"]: v["attributes"]["unit"] for v in variables if v["attributes"].get("unit")}
@@ -601,11 +761,269 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     unknowns = ca.vertcat(x, dx, z)
     rel = [r for r in tr.relations if ca.depends_on(r, unknowns)]
     relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
-    return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=bind(residual), init_residual=bind(init_residual),
+    d_start = ca.vertcat(starts("d"), ca.SX.zeros(len(memory), 1)) if nd else ca.SX(0, 1)
+
+    def bind_event(e):            # pre(), initial() and the ticks stay symbols in the update
+        return ca.substitute(e, p_all, resolved)
+
+    return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=bind(residual), init_residual=bind(init_residual, 1.0),
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
-               time_events=_time_events(st), relations=relations)
+               time_events=_time_events(st), relations=relations,
+               d=d, d_names=names["d"] + [f"$when{c}" for c in sorted(memory)], d_start=d_start,
+               d_pre=d_pre, x_pre=x_pre, flags=flags,
+               d_update=bind_event(d_update) if nd else ca.SX(0, 1),
+               x_reinit=bind_event(x_reinit) if x.numel() else ca.SX(0, 1),
+               clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
+               assert_info=assert_info)
+
+
+def _reads_pre(st: dict, root: int) -> bool:
+    nodes = st["expressions"]["nodes"]
+    tr_ops = _OperandIndex(st)
+    stack, seen = [root], set()
+    while stack:
+        k = stack.pop()
+        if k in seen:
+            continue
+        seen.add(k)
+        node = nodes[k]
+        if isinstance(node, str):
+            continue
+        kind = next(iter(node))
+        body = node[kind]
+        if kind == "coordinate" and isinstance(body, dict) and next(iter(body)).startswith("pre_"):
+            return True
+        stack += tr_ops.children(k)
+    return False
+
+
+class _OperandIndex:
+    """Children of IR nodes (operands are stored in one table)."""
+
+    def __init__(self, st: dict):
+        self.tr = _Translator(st, "")
+
+    def children(self, k):
+        return self.tr.children(k)
+
+
+def _pre_reads(st: dict) -> set[int]:
+    """Variables whose pre() value is read somewhere: they must be held between events."""
+    out = set()
+    for node in st["expressions"]["nodes"]:
+        if isinstance(node, dict) and "coordinate" in node and isinstance(node["coordinate"], dict):
+            (ck, idx), = node["coordinate"].items()
+            if ck in ("pre_discrete_value", "pre_discrete_real") and isinstance(idx, int):
+                out.add(idx)
+    return out
+
+
+def _triggers(st: dict) -> set[int]:
+    """Conditions whose rising edge fires something (a when-clause, an action): each needs a
+    memory of its value at the last event."""
+    conds = st.get("conditions", [])
+    found = set()
+
+    def add(c):
+        node = conds[c]["node"]
+        if node == "always":
+            return
+        if isinstance(node, dict) and "any_rise" in node:
+            add(node["any_rise"]["lhs"])
+            add(node["any_rise"]["rhs"])
+            return
+        found.add(c)
+
+    acts = [b["activation"] for o in st.get("discrete_value_owners", []) for b in o.get("branches", [])]
+    acts += [e["activation"] for e in st.get("discrete_real_equations", [])]
+    acts += [{"when": {"trigger": a["trigger"], "guard": a["guard"]}} for a in st.get("event_actions", [])]
+    for a in acts:
+        if isinstance(a, dict) and "when" in a:
+            add(a["when"]["trigger"])
+    return found
+
+
+def _clocks(st: dict, located: Located, model: str) -> list[tuple[float, float]]:
+    """(start, period) of each periodic clock (``sample(start, interval)``)."""
+    out = []
+    for c in st.get("clocks", []):
+        kind = c.get("kind", {})
+        lat = kind.get("periodic", {}).get("lattice") if isinstance(kind, dict) else None
+        try:
+            period = lat["period"]["num"] / lat["period"]["den"]
+            phase = lat["phase"]["num"] / lat["phase"]["den"]
+        except (TypeError, KeyError, ZeroDivisionError):
+            raise UnsupportedConstruct(f"unsupported in {model}: a clock that is not periodic with a constant "
+                                       "period", where=located.span(c.get("provenance", {}).get("span"))) from None
+        out.append((phase, period))
+    for own in st.get("clock_ownerships", []):
+        if own.get("sampled"):
+            raise UnsupportedConstruct(f"unsupported in {model}: clocked (synchronous) equations",
+                                       where=located.span(own.get("provenance", {}).get("span")))
+    return out
+
+
+class _Events:
+    """The when-clauses, reinit() and assert() of the IR as expressions of the update at an
+    event: a discrete variable takes the value of its first active branch, else keeps pre()."""
+
+    def __init__(self, st, tr, conditions, memory, d, d_pre, flags, located, model):
+        self.st, self.tr, self.conds, self.memory = st, tr, conditions, memory
+        self.d, self.d_pre, self.flags = d, d_pre, flags
+        self.located, self.model = located, model
+        self.nvars = d.numel() - len(memory)
+        self._value: dict[int, ca.SX] = {}
+
+    def where(self, prov):
+        return self.located.span((prov or {}).get("span"))
+
+    def value(self, c: int) -> ca.SX:
+        """The Boolean value of condition ``c`` now."""
+        if c in self._value:
+            return self._value[c]
+        node = self.conds[c]["node"]
+        f = self.flags
+        if node == "always":
+            out = ca.SX(1)
+        elif node == "initial":
+            out = f[0]
+        elif node == "terminal":
+            out = f[1]
+        else:
+            kind, body = next(iter(node.items()))
+            if kind == "relation":
+                out = self.tr.sx(self.st["relations"][body]["relation"]["expression"])
+            elif kind == "not":
+                out = ca.logic_not(self.value(body))
+            elif kind in ("and", "or", "any_rise"):
+                op = ca.logic_and if kind == "and" else ca.logic_or
+                out = op(self.value(body["lhs"]), self.value(body["rhs"]))
+            elif kind == "clock":
+                out = f[2 + body]
+            elif kind == "discrete":
+                out = self.tr.sx(body)
+            else:
+                raise UnsupportedConstruct(f"unsupported in {self.model}: event condition '{kind}'",
+                                           where=self.where(self.conds[c].get("provenance")))
+        self._value[c] = out
+        return out
+
+    def fired(self, c: int) -> ca.SX:
+        """Whether the rising edge of condition ``c`` fires now; during initialisation only a
+        condition that holds initial() fires (a when-clause is otherwise not active then)."""
+        node = self.conds[c]["node"]
+        if node == "always":
+            return ca.SX(1)
+        if isinstance(node, dict) and "any_rise" in node:
+            return ca.logic_or(self.fired(node["any_rise"]["lhs"]), self.fired(node["any_rise"]["rhs"]))
+        now = self.value(c)
+        m = self.nvars + self.memory[c]
+        edge = ca.logic_and(now, ca.logic_not(self.d_pre[m]))
+        at_init = edge if ca.depends_on(now, self.flags[0]) else ca.SX(0)
+        return ca.if_else(self.flags[0], at_init, edge)
+
+    def active(self, activation) -> ca.SX:
+        if activation == "always":
+            return ca.SX(1)
+        if isinstance(activation, dict) and "when" in activation:
+            w = activation["when"]
+            if w["trigger"] == w["guard"]:
+                return self.fired(w["trigger"])
+            return ca.logic_and(self.fired(w["trigger"]), self.value(w["guard"]))
+        raise UnsupportedConstruct(f"unsupported in {self.model}: activation {activation!r}")
+
+    def discrete_update(self, held: list[int], slot, pre_slot, size, variables) -> ca.SX:
+        """The new value of every held discrete variable, then of every condition memory."""
+        branches: dict[int, list] = {i: [] for i in held}
+        for owner in self.st.get("discrete_value_owners", []):
+            for b in owner.get("branches", []):
+                for target, v in zip(owner["targets"], b["values"]):
+                    if target in branches:
+                        self.tr.span = (v.get("provenance") or {}).get("span")
+                        branches[target].append((self.active(b["activation"]), self.tr.sx(v["value"])))
+        for eq in self.st.get("discrete_real_equations", []):
+            self.tr.span = (eq.get("provenance") or {}).get("span")
+            target, value = self._solved(eq["residual"], slot, held, variables)
+            branches[target].append((self.active(eq["activation"]), value))
+        out = []
+        for i in held:
+            new = pre_slot[i]
+            for act, val in reversed(branches[i]):
+                new = ca.if_else(act, ca.vec(val) if val.numel() == size[i] else ca.repmat(val, size[i], 1), new)
+            out.append(ca.vec(new))
+        out += [ca.vec(self.value(c)) for c in sorted(self.memory)]
+        return ca.vertcat(*out) if out else ca.SX(0, 1)
+
+    def _solved(self, residual: int, slot, held, variables):
+        """(target, value) of a discrete equation ``target = value`` given as a residual."""
+        r = self.tr.sx(residual)
+        targets = [i for i in held if variables[i]["role"] == "discrete_real" and ca.depends_on(r, slot[i])]
+        node = self.st["expressions"]["nodes"][residual]
+        lhs = node.get("binary", {}).get("lhs") if isinstance(node, dict) else None
+        lhs_node = self.st["expressions"]["nodes"][lhs] if lhs is not None else None
+        if isinstance(lhs_node, dict) and isinstance(lhs_node.get("coordinate"), dict):
+            (ck, idx), = lhs_node["coordinate"].items()
+            if ck == "discrete_real" and idx in targets:
+                targets = [idx]
+        if len(targets) != 1:
+            self.tr.refuse("a discrete equation that does not define one discrete variable")
+        i = targets[0]
+        s = slot[i]
+        coef = ca.jacobian(r, s)
+        if ca.depends_on(coef, s) or coef.is_zero():
+            self.tr.refuse(f"a discrete equation not solvable for {variables[i]['name']}")
+        rest = ca.substitute(r, s, ca.SX.zeros(s.sparsity()))
+        return i, -ca.solve(coef, rest) if s.numel() > 1 else -rest / coef
+
+    def reinit(self, x, states: list[int], slot, variables) -> ca.SX:
+        """The states after the reinit() actions that fire (x itself where none does)."""
+        new = ca.SX(x)
+        offsets, pos = {}, 0
+        for i in states:
+            offsets[i] = pos
+            pos += slot[i].numel()
+        for a in self.st.get("event_actions", []):
+            kind, body = (next(iter(a["kind"].items())) if isinstance(a["kind"], dict) else (a["kind"], None))
+            if kind != "reinitialize":
+                continue
+            self.tr.span = (a.get("provenance") or {}).get("span")
+            i = body["state"]
+            if i not in offsets:
+                self.tr.refuse(f"reinit() of {variables[i]['name']}, which is not a state")
+            act = self.active({"when": {"trigger": a["trigger"], "guard": a["guard"]}})
+            val = ca.vec(self.tr.sx(body["value"]))
+            for j in range(slot[i].numel()):
+                k = offsets[i] + j
+                new[k] = ca.if_else(act, val[j] if val.numel() > 1 else val[0], new[k])
+        return new
+
+    def asserts(self):
+        """(1 where an assert is violated, [(level, message)])."""
+        out, info = [], []
+        for a in self.st.get("event_actions", []):
+            kind, body = (next(iter(a["kind"].items())) if isinstance(a["kind"], dict) else (a["kind"], None))
+            if kind == "reinitialize":
+                continue
+            self.tr.span = (a.get("provenance") or {}).get("span")
+            if kind == "assert":
+                level, violated = "error", self.active({"when": {"trigger": a["trigger"], "guard": a["guard"]}})
+            elif kind == "warning":
+                level, violated = "warning", ca.logic_not(self.tr.sx(body["condition"]))
+            else:
+                self.tr.refuse(f"event action '{kind}'")
+            out.append(ca.vec(violated)[0])
+            info.append((level, self._message(body.get("message"), a)))
+        return (ca.vertcat(*out) if out else ca.SX(0, 1)), info
+
+    def _message(self, node, action) -> str:
+        nodes = self.st["expressions"]["nodes"]
+        lit = nodes[node] if node is not None else None
+        text = lit.get("literal", {}).get("string") if isinstance(lit, dict) else None
+        where = self.where(action.get("provenance"))
+        text = text or "assert"
+        return f"{text} ({where})" if where else text
 
 
 def _time_events(st: dict) -> list[float]:
@@ -622,6 +1040,7 @@ def _time_events(st: dict) -> list[float]:
 def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
     """One equation's residual; a for-equation (``structured``) gives one row per index value."""
     kind = next(iter(op))
+    tr.span = ((op[kind].get("provenance") if isinstance(op[kind], dict) else None) or {}).get("span")
     if kind == "residual":
         return ca.vec(tr.sx(op[kind]["residual"]))
     if kind != "structured":
@@ -644,16 +1063,14 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
 
 
 def _refuse_events(st: dict, located: Located, model: str) -> None:
-    """Discrete-time behaviour (when, reinit, pre, sample, clocks, delays) has no ODE form here."""
+    """What the event handling does not cover: delays, clocked partitions' previous(), event
+    transactions, initial values of discrete variables given by initial equations."""
     for key, what, pattern in (
-            ("discrete_real_equations", "discrete-time equations (when, pre)", r"\b(when|pre)\b"),
-            ("model_event_transactions", "when-equation or reinit()", r"\b(when|reinit)\b"),
-            ("clocks", "clocked (synchronous) equations", r"\b(Clock|sample|hold)\s*\("),
-            ("delays", "delay()", r"\bdelay\s*\("), ("previous_values", "pre() / previous()", r"\b(pre|previous)\s*\(")):
+            ("model_event_transactions", "a when-statement this front end does not translate", r"\bwhen\b"),
+            ("delays", "delay()", r"\bdelay\s*\("), ("previous_values", "previous() of a clocked variable",
+                                                     r"\bprevious\s*\("),
+            ("initial_discrete_values", "an initial equation of a discrete variable", r"\bpre\s*\(")):
         if st.get(key):
-            raise UnsupportedConstruct(f"unsupported Modelica construct: {what}", where=located.find(pattern))
-    for action in st.get("event_actions", []):
-        kind = next(iter(action["kind"])) if isinstance(action["kind"], dict) else action["kind"]
-        if kind != "assert":
-            raise UnsupportedConstruct(f"unsupported Modelica construct: when-equation ({kind})",
-                                       where=located.find(r"\bwhen\b"))
+            entry = st[key][0] if isinstance(st[key][0], dict) else {}
+            where = located.span((entry.get("provenance") or {}).get("span")) or located.find(pattern)
+            raise UnsupportedConstruct(f"unsupported Modelica construct: {what}", where=where)

@@ -26,8 +26,9 @@ from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
 
-#: Largest linear block solved symbolically; larger ones go through a sparse QR at run time.
-SYMBOLIC_SOLVE_MAX = 8
+#: Largest linear block solved symbolically (an SX model evaluates and differentiates ~10x faster
+#: than one holding a run-time solver); larger ones go through a sparse QR at run time.
+SYMBOLIC_SOLVE_MAX = 40
 NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
 
 
@@ -55,6 +56,13 @@ class Ode:
     zero: ca.Function | None = None   # -> zero-crossing functions: a sign change is a state event
     start: ca.Function | None = None       # p -> the states' start values s
     init_start: ca.Function | None = None  # (u, p, t, s) -> x0 from start values s (FMU starts)
+    # -- hybrid models: the last ``discrete`` entries of x are discrete variables (and when-
+    # condition memories), with a zero derivative; they change only at events
+    discrete: int = 0
+    update: ca.Function | None = None      # (x, u, p, t, pre, flags) -> x: one event-iteration step
+    init_discrete: ca.Function | None = None   # (u, p, t, d) -> continuous x0 given the discrete d
+    asserts: ca.Function | None = None     # -> 1 where an assert is violated (see events["asserts"])
+    events: dict | None = None             # {"clocks": [[start, period]], "flags": [...], "asserts": [[level, msg]]}
 
 
 def reduce_index(dae: Dae):
@@ -146,7 +154,13 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
 
 
 def build_ode(dae: Dae, name: str = "model") -> Ode:
-    """Index reduction + causalisation + initialisation: the model's explicit ODE."""
+    """Index reduction + causalisation + initialisation: the model's explicit ODE (a pure
+    function of ``dae``; a hybrid model's discrete part included)."""
+    return _hybrid(dae, name) if dae.hybrid else _build(dae, name)
+
+
+def _build(dae: Dae, name: str = "model") -> Ode:
+    """The continuous model's ODE."""
     semi, state_to_orig, invariants, index = reduce_index(dae)
     xs, zs = semi["x"], semi["z"]
     up = semi["p"]
@@ -210,6 +224,99 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
         ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe, checks=checks,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
         time_events=tuple(dae.time_events), zero=crossings, start=start, init_start=init_start,
+    )
+
+
+def _hybrid(dae: Dae, name: str) -> Ode:
+    """A hybrid model's ODE: the discrete variables (and pre(), the flags) are parameters of the
+    continuous model while it is causalised; its functions then take them from the end of the
+    state vector. The update at an event and the asserts are read through the same solve of the
+    algebraic equations as every other variable (hidden entries of ``exprs``)."""
+    import dataclasses
+
+    nd, nx0, nf = dae.d.numel(), dae.x.numel(), dae.flags.numel()
+    extra = ca.vertcat(dae.d, dae.d_pre, dae.x_pre, dae.flags)
+    exprs = dict(dae.exprs)
+    hidden = {"update": [f"$update[{k}]" for k in range(dae.d_update.numel())],
+              "reinit": [f"$reinit[{k}]" for k in range(dae.x_reinit.numel())],
+              "assert": [f"$assert[{k}]" for k in range(dae.asserts.numel())]}
+    for key, e in (("update", dae.d_update), ("reinit", dae.x_reinit), ("assert", dae.asserts)):
+        exprs.update(zip(hidden[key], ca.vertsplit(e)))
+    d0 = np.array(ca.Function("d0", [dae.p], [dae.d_start])(dae.p_values)).ravel() if nd else np.zeros(0)
+    aug = dataclasses.replace(
+        dae, p=ca.vertcat(dae.p, extra), p_names=[*dae.p_names, *[f"${k}" for k in range(extra.numel())]],
+        p_values=np.concatenate([dae.p_values, d0, d0, np.zeros(nx0 + nf)]), exprs=exprs,
+        d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1),
+        flags=ca.SX(0, 1), d_update=ca.SX(0, 1), x_reinit=ca.SX(0, 1), asserts=ca.SX(0, 1))
+    inner = _build(aug, name)
+    nx = len(inner.x_names)
+    pos = {n: j for j, n in enumerate(inner.x_names)}
+    # reinit() and pre(x) of an original state: its place among the semi-explicit states
+    where = [pos.get(n) for n in dae.x_names]
+    for k, j in enumerate(where):
+        if j is None and not ca.is_equal(dae.x_reinit[k], dae.x[k]):
+            raise UnsupportedConstruct(f"model {name}: reinit() of {dae.x_names[k]}, a state index "
+                                       "reduction replaced")
+    X, D, U, P, T = (ca.MX.sym(n, k) for n, k in (("x", nx), ("d", nd), ("u", len(dae.u_names)),
+                                                  ("p", len(dae.p_names)), ("t", 1)))
+    XF = ca.vertcat(X, D)
+    PRE, FL = ca.MX.sym("pre", nx + nd), ca.MX.sym("flags", nf)
+
+    def orig(v):        # values of the original states from the semi-explicit ones
+        return ca.vertcat(*[v[j] if j is not None else ca.MX(0) for j in where]) if nx0 else ca.MX(0, 1)
+
+    PA = ca.vertcat(P, D, D, orig(X), ca.MX.zeros(nf))
+    names = inner.probe_names
+    idx = {key: [names.index(n) for n in hidden[key]] for key in hidden}
+    visible = [j for j, n in enumerate(names) if not n.startswith("$")]
+    args, io = [XF, U, P, T], ["x", "u", "p", "t"]
+
+    def mk(fname, outs, out_names=("out",)):
+        return expanded(ca.Function(fname, args, outs, io, list(out_names)))
+
+    ode = mk("ode", [ca.vertcat(inner.ode(X, U, PA, T), ca.MX.zeros(nd))])
+    probe_all = inner.probe(X, U, PA, T)
+    y, res, drift = inner.checks(X, U, PA, T)
+    update = None
+    reinits = [k for k in range(nx0) if not ca.is_equal(dae.x_reinit[k], dae.x[k])]
+    if nd or reinits:
+        PU = ca.vertcat(P, D, PRE[nx:] if nd else ca.MX(0, 1), orig(PRE[:nx]), FL)
+        after = inner.probe(X, U, PU, T)
+        x_new = [X[j] for j in range(nx)]
+        for k in reinits:
+            x_new[where[k]] = after[idx["reinit"][k]]
+        upd = ca.vertcat(*x_new, after[idx["update"]] if nd else ca.MX(0, 1))
+        update = expanded(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
+                                      ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
+    D0 = ca.Function("d0", [dae.p], [dae.d_start])(P) if nd else ca.MX(0, 1)
+    PA0 = ca.vertcat(P, D0, D0, ca.MX.zeros(nx0 + nf))
+    UPT = [U, P, T]
+    init = ca.Function("init", UPT, [ca.vertcat(inner.init(U, PA0, T), D0)], ["u", "p", "t"], ["x0"])
+    DI = ca.MX.sym("d", nd)
+    init_discrete = ca.Function("init_discrete", [U, P, T, DI],
+                                [inner.init(U, ca.vertcat(P, DI, DI, ca.MX.zeros(nx0 + nf)), T)],
+                                ["u", "p", "t", "d"], ["x0"])
+    S = ca.MX.sym("s", nx + nd)
+    SD = S[nx:] if nd else ca.MX(0, 1)       # (an empty slice of MX is 1x0)
+    start = ca.Function("start", [P], [ca.vertcat(inner.start(PA0), D0)], ["p"], ["s"]) if inner.start else None
+    init_start = (ca.Function("init_start", [U, P, T, S], [ca.vertcat(inner.init_start(
+        U, ca.vertcat(P, SD, SD, ca.MX.zeros(nx0 + nf)), T, S[:nx]), SD)],
+        ["u", "p", "t", "s"], ["x0"]) if inner.init_start else None)
+    zero = mk("zero", [inner.zero(X, U, PA, T)]) if inner.zero is not None else None
+    asserts = mk("asserts", [probe_all[idx["assert"]]]) if hidden["assert"] else None
+    return Ode(
+        x_names=[*inner.x_names, *dae.d_names], u_names=list(dae.u_names), p_names=list(dae.p_names),
+        y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
+        ode=ode, out=mk("out", [y]), alg_res=mk("alg_res", [res]), drift=mk("drift", [drift]),
+        init=expanded(init), probe=mk("probe", [probe_all[visible]]),
+        checks=mk("checks", [y, res, drift], ("y", "res", "drift")),
+        probe_names=[names[j] for j in visible], index=inner.index, nonlinear_blocks=inner.nonlinear_blocks,
+        time_events=tuple(dae.time_events), zero=zero,
+        start=expanded(start) if start is not None else None,
+        init_start=expanded(init_start) if init_start is not None else None,
+        discrete=nd, update=update, init_discrete=expanded(init_discrete), asserts=asserts,
+        events={"clocks": [list(c) for c in dae.clocks], "flags": ["initial", "terminal"] +
+                [f"tick{k}" for k in range(len(dae.clocks))], "asserts": [list(a) for a in dae.assert_info]},
     )
 
 
