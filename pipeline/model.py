@@ -17,7 +17,8 @@ import numpy as np
 from .errors import ConfigError, DataError, MclError
 from .compile.structure import Ode, expanded
 
-_FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks", "zero", "start", "init_start")
+_FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks", "zero", "start", "init_start",
+              "update", "init_discrete", "asserts")   # the last three: a hybrid model's
 
 
 @dataclass
@@ -85,7 +86,8 @@ class CompiledModel:
         meta = dict(name=self.name, info=self.info, x_names=o.x_names, u_names=o.u_names,
                     p_names=o.p_names, y_names=o.y_names, p_values=o.p_values.tolist(),
                     u_start=o.u_start.tolist(), probe_names=o.probe_names, index=o.index,
-                    nonlinear_blocks=o.nonlinear_blocks, time_events=list(o.time_events))
+                    nonlinear_blocks=o.nonlinear_blocks, time_events=list(o.time_events),
+                    discrete=o.discrete, events=o.events)
         (d / "model.json").write_text(json.dumps(meta, indent=1))
         return d
 
@@ -102,7 +104,8 @@ class CompiledModel:
                   y_names=meta["y_names"], p_values=np.array(meta["p_values"]),
                   u_start=np.array(meta["u_start"]), probe_names=meta["probe_names"],
                   index=meta["index"], nonlinear_blocks=meta["nonlinear_blocks"],
-                  time_events=tuple(meta.get("time_events", ())), **funcs)
+                  time_events=tuple(meta.get("time_events", ())), discrete=meta.get("discrete", 0),
+                  events=meta.get("events"), **funcs)
         return cls(meta["name"], ode, meta.get("info", {}))
 
 
