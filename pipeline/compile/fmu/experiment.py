@@ -40,7 +40,9 @@ class Experiment:
     def from_data(cls, time, tolerance: float = DEFAULT_TOLERANCE) -> "Experiment":
         """The span of a time grid and its typical (median) sampling interval."""
         t = np.asarray(time, dtype=float)
-        step = float(np.median(np.diff(t))) if len(t) > 1 else None
+        # 12 digits: 0.05 stays 0.05, not 0.04999999999, so importers that halve the number of
+        # points (FMPy keeps at most 1000) land on whole multiples of the data's interval
+        step = float(f"{np.median(np.diff(t)):.12g}") if len(t) > 1 else None
         return cls(float(t[0]), float(t[-1]), step, tolerance, "data")
 
     def xml(self) -> str:

@@ -24,7 +24,7 @@ from xml.sax.saxutils import quoteattr
 import casadi as ca
 import numpy as np
 
-from ...errors import CompileError, ConfigError
+from ...errors import CompileError, ConfigError, UnsupportedConstruct
 from ...model import CompiledModel
 from .experiment import Experiment, for_model
 
@@ -251,6 +251,10 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
     declares, e.g. for the coefficients of a learned law.
     """
     out_path = Path(out_path)
+    if getattr(model.ode, "discrete", 0) or getattr(model.ode, "update", None) is not None:
+        # the wrapper has no event iteration yet: discrete variables would stay at their start
+        raise UnsupportedConstruct(f"FMU export of {model.name}: discrete variables (when, pre, reinit, "
+                                   "sample) are not exported yet; mcl's own engine simulates the model")
     ident = model_identifier(model.name)
     guid = "{" + str(uuid.uuid4()) + "}"
     experiment = Experiment.of(experiment) or for_model(model)

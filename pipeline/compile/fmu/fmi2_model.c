@@ -7,8 +7,9 @@
  * Solving ODEs II, IV.7: a stiffly accurate, L-stable Rosenbrock method of order 4 with an
  * embedded order-3 error estimate) on the Jacobian CasADi generates, so stiff models need no
  * tiny steps. Inputs are continuous signals: over a step they follow the slope given by
- * fmi2SetRealInputDerivatives, else the slope of the last two communication points (limited so
- * that a jump or a turn in the input is held, not extrapolated). Time events end a solver step
+ * fmi2SetRealInputDerivatives, else the slope of the last two communication points (limited by
+ * the slope before, so that a jump or a turn in the input is held, not extrapolated; held over
+ * the first step, where there is no slope yet). Time events end a solver step
  * exactly; a sign change of an event indicator is located on the step's cubic Hermite
  * interpolant and the step is redone up to it, so no step straddles a kink.
  */
@@ -497,7 +498,7 @@ static void input_slopes(Model* m, double t) {
     State* s = &m->st;
     for (int j = 0; j < NU; j++) {
         double secant = s->n_hist >= 1 && t > s->t_prev ? (s->u[j] - s->u_prev[j]) / (t - s->t_prev) : 0;
-        m->slope[j] = s->du_set ? s->du[j] : s->n_hist >= 2 ? limited(secant, s->slope_prev[j]) : 0;
+        m->slope[j] = s->du_set ? s->du[j] : s->n_hist >= 2 ? limited(secant, s->slope_prev[j]) : secant;
         m->uc[j] = s->u[j];
         if (s->n_hist >= 1 && t > s->t_prev) s->slope_prev[j] = secant;
         s->u_prev[j] = s->u[j];
