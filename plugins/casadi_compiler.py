@@ -29,7 +29,7 @@ class CasadiCompiler(Compiler):
         from mcl.model import CompiledModel
 
         libraries = (options or {}).get("libraries", ())
-        prep = rumoca_frontend.prepare(sources, libraries)
+        prep = rumoca_frontend.prepare(sources, libraries, model)
         key = compile_cache.key_of(model=model, docs=sorted(h for h, _ in prep.docs.values()),
                                    libraries=compile_cache.library_fingerprint(prep.roots), compiler=self.name)
         cached = compile_cache.load(key)
