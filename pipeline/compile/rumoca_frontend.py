@@ -190,9 +190,11 @@ def documents(paths) -> tuple[dict[Path, tuple[str, set]], list[Path]]:
     return docs, files
 
 
-def library_roots(libraries=(), shadowed=()) -> list[str]:
+def library_roots(libraries=(), shadowed=(), used=None) -> list[str]:
     """One rumoca root: a directory of links to the libraries on the path, first entry winning,
-    less those the sources define themselves (``shadowed``: the user's copy is the one used)."""
+    less those the sources define themselves (``shadowed``: the user's copy is the one used);
+    with ``used`` (library paths), only those: rumoca parses every library of its root, so a
+    model that uses none of the MSL must not have it there (89 s and 1.75 GB otherwise)."""
     import hashlib
     import tempfile
 
@@ -200,6 +202,9 @@ def library_roots(libraries=(), shadowed=()) -> list[str]:
     from .library import available, library_path
 
     libs = {n: p.resolve() for n, p in available(library_path(libraries)).items() if n not in shadowed}
+    if used is not None:
+        keep = {Path(u).resolve() for u in used}
+        libs = {n: p for n, p in libs.items() if p in keep}
     key = hashlib.sha256(repr(sorted((n, str(p)) for n, p in libs.items())).encode()).hexdigest()[:16]
     base = base_dir() / "roots"
     root = base / key
@@ -232,16 +237,26 @@ class Prepared:
         return {virtual_name(p, h): str(p) for p, (h, _) in self.docs.items()}
 
 
-def prepare(paths, libraries=()) -> Prepared:
+def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
+    """The user's documents and the libraries the compile needs: those the sources (or the
+    ``model`` name) refer to, with the ones they use; every library on the path when neither
+    says (no sources and no model name)."""
+    from .library import library_path, needed
+
     docs, files = documents(paths)
-    return Prepared(docs, files, library_roots(libraries, shadowed={n for _, names in docs.values() for n in names}))
+    defined = {n for _, names in docs.values() for n in names}
+    used = None
+    if files or model:
+        texts = [f.read_text(encoding="utf-8", errors="replace") for f in files]
+        used = needed(texts, defined, model, library_path(libraries))
+    return Prepared(docs, files, library_roots(libraries, shadowed=defined, used=used))
 
 
 def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -> tuple[dict, Located]:
     """rumoca's DAE-stage IR of ``model`` and the text of the files it read."""
     import rumoca
 
-    prep = prepared or prepare(paths, libraries)
+    prep = prepared or prepare(paths, libraries, model)
     top = model.split(".")[0]
     if not any(top in names for _, names in prep.docs.values()):
         from .library import available, library_path
