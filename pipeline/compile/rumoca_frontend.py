@@ -460,6 +460,8 @@ class _Translator:
             return [body["base"]] + [n for s in subs for sk, n in s["kind"].items() if sk == "index"]
         if kind == "field":
             return [body["base"]]
+        if kind == "record":
+            return self.operands(k)
         return []
 
     def sx(self, root: int, bound: dict | None = None) -> ca.SX:
@@ -527,8 +529,10 @@ class _Translator:
             return self.call_builtin(body["builtin"], [done[o] for o in self.operands(k)])
         if kind == "call":
             return self.call_function(body, [done[o] for o in self.operands(k)])
-        if kind == "array":
+        if kind in ("array", "record"):      # a record: its fields flattened, in order
             return ca.vertcat(*[ca.vec(done[o]) for o in self.operands(k)])
+        if kind == "field":
+            return self.field(body, done)
         if kind == "index":
             return self.element(k, body, done)
         if kind == "function_value":
@@ -559,6 +563,32 @@ class _Translator:
             self.refuse(f"subscript {j + 1} outside an array of {base.numel()}")
         return base[j]
 
+    def size_of(self, vt: int) -> int:
+        """Number of scalars of a value type (a record's: all its fields')."""
+        t = self.st["value_types"][vt]
+        n = int(np.prod(t.get("dimensions") or [1]))
+        if t.get("scalar") == "record":
+            n *= sum(self.size_of(f["value_type"]) for f in t.get("record_fields", []))
+        return n
+
+    def field(self, body: dict, done: dict):
+        """Field ``body["field"]`` of a record value (a record-valued call or constructor)."""
+        base = self.nodes[body["base"]]
+        kind = next(iter(base)) if isinstance(base, dict) else base
+        if kind == "call":
+            vt = self.functions[base[kind]["function"]]["outputs"][base[kind].get("output", 0)]["value_type"]
+        elif kind == "record":
+            vt = base[kind]["value_type"]
+        else:
+            self.refuse(f"a record field of a '{kind}' expression")
+        fields = self.st["value_types"][vt].get("record_fields", [])
+        start = sum(self.size_of(f["value_type"]) for f in fields[: body["field"]])
+        n = self.size_of(fields[body["field"]]["value_type"])
+        value = ca.vec(done[body["base"]])
+        if value.numel() < start + n:
+            self.refuse("a record field outside its record")
+        return value[start:start + n]
+
     def call_builtin(self, name: str, args):
         short = name.split(".")[-1]
         if short not in _FUNCTIONS:
@@ -571,17 +601,17 @@ class _Translator:
     def call_function(self, body: dict, args):
         f = self.functions[body["function"]]
         ext = f.get("external")
-        if body.get("derivative") is not None or body.get("output", 0) != 0:
-            self.refuse(f"function {f['name']} (derivative or second output)")
+        if body.get("derivative") is not None:
+            self.refuse(f"function {f['name']} (its derivative)")
         bound = {"params": dict(enumerate(args)), "values": {}, "binders": {}}
         if ext and ext.get("language") == "builtin":
             actual = [self.sx(a["input"], bound) for a in ext.get("arguments", []) if "input" in a]
             return self.call_builtin(ext.get("symbol", f["name"]), actual)
         if ext:
             self.refuse(f"external function {f['name']} ({ext.get('language', '?')} code)")
-        return self.interpret(f, bound)
+        return self.interpret(f, bound, body.get("output", 0))
 
-    def interpret(self, f: dict, bound: dict):
+    def interpret(self, f: dict, bound: dict, output: int = 0):
         """An algorithmic function in its single-assignment form: each assignment defines a new
         value of its target; an if-statement's assignments are already conditional expressions."""
         values = bound["values"]
@@ -595,9 +625,9 @@ class _Translator:
                 self.refuse(f"a '{kind}' statement in function {f['name']} (loops are not translated)")
             for a in assignments:
                 values.setdefault(a["target"], []).append(self.sx(a["rhs"], bound))
-        if not values.get(0):
-            self.refuse(f"function {f['name']} assigns no output")
-        return values[0][-1]
+        if not values.get(output):
+            self.refuse(f"function {f['name']} assigns no value to its output {output + 1}")
+        return values[output][-1]
 
 
 def _scalar_names(name: str, dims: list[int]) -> list[str]:
@@ -777,6 +807,18 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     rel = [r for r in tr.relations if ca.depends_on(r, unknowns)]
     relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
     d_start = ca.vertcat(starts("d"), ca.SX.zeros(len(memory), 1)) if nd else ca.SX(0, 1)
+    # initial equations pre(v) = value: the value v's pre() has at initialisation
+    offsets, pos = {}, 0
+    for i in index["d"]:
+        offsets[i], pos = pos, pos + size[i]
+    for init_value in st.get("initial_discrete_values", []):
+        i = init_value["target"]
+        tr.span = (init_value.get("provenance") or {}).get("span")
+        if i not in offsets:
+            tr.refuse(f"an initial value of pre({variables[i]['name']}), which is not held between events")
+        v = ca.vec(bind(ca.vec(tr.sx(init_value["value"]))))
+        for j in range(size[i]):
+            d_start[offsets[i] + j] = v[j] if v.numel() > 1 else v[0]
 
     def bind_event(e):            # pre(), initial() and the ticks stay symbols in the update
         return ca.substitute(e, p_all, resolved)
@@ -1079,12 +1121,11 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
 
 def _refuse_events(st: dict, located: Located, model: str) -> None:
     """What the event handling does not cover: delays, clocked partitions' previous(), event
-    transactions, initial values of discrete variables given by initial equations."""
+    transactions."""
     for key, what, pattern in (
             ("model_event_transactions", "a when-statement this front end does not translate", r"\bwhen\b"),
             ("delays", "delay()", r"\bdelay\s*\("), ("previous_values", "previous() of a clocked variable",
-                                                     r"\bprevious\s*\("),
-            ("initial_discrete_values", "an initial equation of a discrete variable", r"\bpre\s*\(")):
+                                                     r"\bprevious\s*\(")):
         if st.get(key):
             entry = st[key][0] if isinstance(st[key][0], dict) else {}
             where = located.span((entry.get("provenance") or {}).get("span")) or located.find(pattern)
