@@ -3,8 +3,12 @@ the MSL's CauerLowPassAnalog (its own step source) the same way; first and cache
 
 rumoca (a Rust Modelica compiler on PyPI) is the baseline, measured in the same run. It takes no
 input tables, so the source voltage is a band-limited multisine written into a Modelica wrapper;
-our engines get the same signal sampled every 10 ms. The MSL part runs when the Modelica Standard
-Library is found (``--msl DIR``, default ../shared/msl).
+our engines get the same signal sampled every 10 ms. Wall-clock and CPU seconds (this process and
+its children: the FMU engine runs in one) are medians of ``--repeat`` runs. The FMU rows: mcl's
+FMU engine (Co-Simulation, the input's slope given at each sample), and FMPy's
+``simulate_fmu`` with its defaults at the input's interval as Co-Simulation (what FMPy picks)
+and as Model Exchange, each with its largest deviation from the in-process engine. The MSL part
+runs when the Modelica Standard Library is found (``--msl DIR``, default ../shared/msl).
 
     python benchmarks/simulate.py [--repeat 5] [--json PATH] [--msl DIR]
 """
@@ -12,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import statistics
 import tempfile
 import time
@@ -39,13 +44,32 @@ def wrapper_source(a, w, phi) -> str:
             f"end CauerBench;\n")
 
 
-def timed(fn, repeat):
-    times = []
+def cpu_seconds() -> float:
+    """CPU time of this process and of its children that have ended."""
+    child = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + child.ru_utime + child.ru_stime
+
+
+def timed(fn, repeat, cpu=False):
+    """Median wall-clock seconds of ``repeat`` calls; (wall, cpu) with ``cpu``."""
+    walls, cpus = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_seconds()
         fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(cpu_seconds() - c0)
+    return (statistics.median(walls), statistics.median(cpus)) if cpu else statistics.median(walls)
+
+
+def fmpy_defaults(path, t, u, fmi_type):
+    """FMPy as a user runs it: defaults, the input table, output at the input's interval."""
+    from fmpy import simulate_fmu
+
+    table = np.zeros(len(t), dtype=[("time", float), ("u", float)])
+    table["time"], table["u"] = t, u
+    res = simulate_fmu(str(path), input=table, output_interval=float(t[1] - t[0]), stop_time=float(t[-1]),
+                       fmi_type=fmi_type, output=["y"])
+    return np.interp(t, res["time"], res["y"])
 
 
 def main(argv=None):
@@ -74,24 +98,45 @@ def main(argv=None):
         session = rm.Session(roots=[str(LIB.parent)])
         ref = session.load(str(wrapper), model="CauerBench")
         cfg = rm.SimConfig(rtol=1e-6, atol=1e-8, dt=DT)
-        rumoca_s = timed(lambda: ref.simulate(t=(0.0, T_END), config=cfg), args.repeat)
+        rumoca_s = timed(lambda: ref.simulate(t=(0.0, T_END), config=cfg), args.repeat, cpu=True)
 
         model = compile_model([LIB], "MCL.Examples.CauerFilter")
-        fmu = FmuModel.read(build_fmu(model, Path(tmp) / "cauer.fmu"))
+        path = build_fmu(model, Path(tmp) / "cauer.fmu")
+        fmu = FmuModel.read(path)
         warm_engine = CasadiEngine()
-        warm_engine.simulate(model, u)  # builds the integrator once, as a fitting loop does
+        y_own = warm_engine.simulate(model, u).outputs[:, 0]  # builds the integrator once, as a fitting loop does
         rows = {
             "rumoca": rumoca_s,
-            "casadi (repeated, fitting loop)": timed(lambda: warm_engine.simulate(model, u), args.repeat),
+            "casadi (repeated, fitting loop)": timed(lambda: warm_engine.simulate(model, u), args.repeat, cpu=True),
             "casadi (first call, builds integrator)": timed(
-                lambda: CasadiEngine().simulate(model, u), args.repeat),
-            "fmu (FMPy, child process)": timed(lambda: simulate(fmu, u, options=opts), args.repeat),
+                lambda: CasadiEngine().simulate(model, u), args.repeat, cpu=True),
+            "fmu engine (CS, input slopes, child process)": timed(
+                lambda: simulate(fmu, u, options=opts), args.repeat, cpu=True),
+            "FMPy defaults, Co-Simulation": timed(
+                lambda: fmpy_defaults(path, t, u.values[:, 0], "CoSimulation"), args.repeat, cpu=True),
+            "FMPy defaults, Model Exchange": timed(
+                lambda: fmpy_defaults(path, t, u.values[:, 0], "ModelExchange"), args.repeat, cpu=True),
         }
+        scale = np.max(np.abs(y_own))
+        deviation = {
+            "fmu engine (CS, input slopes, child process)":
+                np.max(np.abs(simulate(fmu, u, options=opts).outputs[:, 0] - y_own)) / scale,
+            "FMPy defaults, Co-Simulation":
+                np.max(np.abs(fmpy_defaults(path, t, u.values[:, 0], "CoSimulation") - y_own)) / scale,
+            "FMPy defaults, Model Exchange":
+                np.max(np.abs(fmpy_defaults(path, t, u.values[:, 0], "ModelExchange") - y_own)) / scale,
+        }
+    base_wall, base_cpu = rumoca_s
+    own_cpu = rows["casadi (repeated, fitting loop)"][1]
     print(f"Cauer filter, {T_END:g} s, input sampled every {DT:g} s; median of {args.repeat} runs")
-    print(f"{'engine':42s} {'seconds':>9s} {'ratio to rumoca':>16s}")
-    for name, s in rows.items():
-        print(f"{name:42s} {s:9.3f} {s / rumoca_s:16.2f}")
-    out = {"rows": [{"engine": k, "seconds": v, "ratio": v / rumoca_s} for k, v in rows.items()]}
+    print(f"{'engine':46s} {'wall s':>8s} {'cpu s':>8s} {'cpu/rumoca':>11s} {'cpu/casadi':>11s} {'max dev':>9s}")
+    for name, (wall, cpu) in rows.items():
+        dev = f"{deviation[name]:9.1e}" if name in deviation else f"{'':9s}"
+        print(f"{name:46s} {wall:8.3f} {cpu:8.3f} {cpu / base_cpu:11.2f} {cpu / own_cpu:11.2f} {dev}")
+    out = {"rows": [{"engine": k, "seconds": w, "cpu_seconds": c, "ratio": w / base_wall,
+                     "cpu_ratio": c / base_cpu, "cpu_ratio_to_casadi": c / own_cpu,
+                     **({"max_relative_deviation": float(deviation[k])} if k in deviation else {})}
+                    for k, (w, c) in rows.items()]}
     if (args.msl / "Modelica" / "package.mo").is_file():
         out["msl"] = msl_rows(args.msl, args.repeat)
     if args.json:
