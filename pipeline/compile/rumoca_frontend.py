@@ -811,6 +811,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     offsets, pos = {}, 0
     for i in index["d"]:
         offsets[i], pos = pos, pos + size[i]
+    others = ca.vertcat(x, z, u, d, t)
+    for j in range(d_start.numel()):     # a start value read from a variable: the iteration sets it
+        if ca.depends_on(d_start[j], others):
+            d_start[j] = 0
     for init_value in st.get("initial_discrete_values", []):
         i = init_value["target"]
         tr.span = (init_value.get("provenance") or {}).get("span")
@@ -818,7 +822,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             tr.refuse(f"an initial value of pre({variables[i]['name']}), which is not held between events")
         v = ca.vec(bind(ca.vec(tr.sx(init_value["value"]))))
         for j in range(size[i]):
-            d_start[offsets[i] + j] = v[j] if v.numel() > 1 else v[0]
+            e = v[j] if v.numel() > 1 else v[0]
+            d_start[offsets[i] + j] = e if not ca.depends_on(e, others) else 0
 
     def bind_event(e):            # pre(), initial() and the ticks stay symbols in the update
         return ca.substitute(e, p_all, resolved)
