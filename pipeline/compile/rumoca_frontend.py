@@ -50,6 +50,7 @@ _FUNCTIONS = {
     "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.sign(a / b) * ca.floor(ca.fabs(a / b)),   # truncation toward zero
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
+    "identity": lambda n: ca.vec(ca.SX.eye(_int(n))),      # held flattened like every array
 }
 
 
