@@ -109,11 +109,13 @@ class FitProblem:
     """J(w) (eq. 3) for a compiled model whose free parameters ``parameters`` are w.
 
     ``data`` holds the model's inputs and the measured outputs (columns named like the model's).
+    ``sensitivity``: ``linearised`` (default; :mod:`mcl.sensitivity`) or ``integrator`` (the
+    engine integrates the sensitivity equations with the states: exact, several times dearer).
     """
 
     def __init__(self, model, data: TimeSeries, parameters: list[str], outputs=None,
                  fixed: dict | None = None, options=None, normalise: str | None = "start",
-                 engine=None, recorder: Recorder | None = None):
+                 engine=None, recorder: Recorder | None = None, sensitivity: str = "linearised"):
         from .engine_casadi import CasadiEngine
         from .simulation import SimulationOptions
 
@@ -139,6 +141,9 @@ class FitProblem:
             None if normalise == "start" else 1.0)
         self.engine = engine or CasadiEngine()
         self.recorder = recorder or Recorder()
+        from .sensitivity import SUBSTEPS
+
+        self.sensitivity, self.substeps, self._grid_checked = sensitivity, SUBSTEPS, False
 
     @property
     def scale(self) -> float:
@@ -161,9 +166,44 @@ class FitProblem:
         return {**self.fixed, **dict(zip(self.parameters, map(float, w)))}
 
     def simulate(self, w, gradient: bool = False):
+        if gradient and self.linearised:
+            return self._linearised(w)
         return self.engine.simulate(self.model, self.inputs, self.params(w), t_out=self.time,
                                     options=self.options,
                                     sensitivities=self.parameters if gradient else None)
+
+    @property
+    def linearised(self) -> bool:
+        """Sensitivities from the model linearised along the run (:mod:`mcl.sensitivity`): one
+        plain simulation on a finer grid, instead of the integrator carrying them (several)."""
+        from .model import CompiledModel
+
+        return isinstance(self.model, CompiledModel) and self.sensitivity == "linearised"
+
+    def _linearised(self, w):
+        import dataclasses
+
+        from .sensitivity import Linearisation, MAX_STEP, fine_grid
+
+        params = self.params(w)
+        while True:
+            fine, at = fine_grid(self.time, self.substeps)
+            res = self.engine.simulate(self.model, self.inputs, params, t_out=fine, options=self.options)
+            if not res.ok:
+                return dataclasses.replace(res, time=self.time, outputs=np.full((len(self.time), len(res.output_names)), np.nan))
+            lin = Linearisation(self.model, res.states, fine, self.inputs, self.model.parameter_vector(params),
+                                self.parameters)
+            if not self._grid_checked:       # dynamics fast against the data's sampling: a finer grid
+                self._grid_checked = True
+                h = float(np.max(np.diff(self.time)))
+                need = int(np.clip(np.ceil(lin.rate() * h / MAX_STEP), self.substeps, 24))
+                if need > self.substeps:
+                    self.substeps = need
+                    continue
+            out = dataclasses.replace(res, time=self.time, outputs=res.outputs[at], states=res.states[at])
+            out.sensitivities = lin.parameters(at)
+            out.sensitivity_names = list(self.parameters)
+            return out
 
     def evaluate(self, w, gradient: bool = False, tag: str = "") -> Evaluation:
         """Simulate at w (or replay a recorded run): J(w) and, if asked, grad J(w)."""
@@ -188,7 +228,8 @@ class FitProblem:
         if not res.ok:
             return None, None
         r = np.where(self.measured, self.y_meas - res.outputs[:, self.idx], 0.0)
-        return r, float(np.mean(np.sum(r**2, axis=1)))
+        with np.errstate(over="ignore"):
+            return r, float(np.mean(np.sum(r**2, axis=1)))
 
     def residuals(self, w):
         """Output residuals y_m - y(w) (N, ny) or None when the simulation fails."""
@@ -473,12 +514,14 @@ class LevenbergMarquardt:
     """
 
     def __init__(self, max_simulations: int = 150, axis: int | None = 0, damping: float = 1e-3,
-                 tol: float = 1e-10, feasibility=None, give_up=None):
+                 tol: float = 1e-10, feasibility=None, give_up=None, progress=None):
         self.max_simulations, self.axis, self.damping, self.tol = max_simulations, axis, damping, tol
         self.feasibility = feasibility
-        #: give_up(rss): True stops the fit, given the least residual sum of squares the
-        #: Gauss-Newton model at the current point can reach (discovery: another candidate is
-        #: already far better)
+        #: progress(cost): told the cost J of every better point reached
+        self.progress = progress
+        #: give_up(reachable, current): True stops the fit, given the least residual sum of
+        #: squares the Gauss-Newton model at the current point can reach and the current one
+        #: (discovery: another candidate is already better than this one can get)
         self.give_up = give_up
 
     def fit(self, problem: FitProblem, w0) -> FitResult:
@@ -492,6 +535,8 @@ class LevenbergMarquardt:
         current = self._step_data(problem, w) if ok else None
         if current is None:
             raise ConfigError("no start point of the fit simulates (tried around the given one)")
+        if self.progress:
+            self.progress(current[2])
         message = "budget reached"
         trusted = False
         while problem.recorder.simulations - start < self.max_simulations:
@@ -501,8 +546,9 @@ class LevenbergMarquardt:
             H = A.T @ A
             # give up only where the linear model has proven itself (the last step did at least a
             # quarter of what it predicted): from a poor start it can be far too pessimistic
-            if self.give_up is not None and trusted and self.give_up(float(r @ r - g @ np.linalg.pinv(H) @ g)):
-                message = "stopped: another candidate is already far better"
+            if self.give_up is not None and trusted and self.give_up(float(r @ r - g @ np.linalg.pinv(H) @ g),
+                                                                      float(r @ r)):
+                message = "stopped: it cannot beat another candidate"
                 break
             step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-30), g)
             # the Gauss-Newton model's predicted decrease: below tol, no step can pay for a
@@ -518,6 +564,8 @@ class LevenbergMarquardt:
                 rel = (cost - new[2]) / max(cost, 1e-300)
                 trusted = rel >= 0.25 * predicted
                 w, current, lam = trial, new, max(lam / 3, 1e-12)
+                if self.progress:
+                    self.progress(current[2])
                 if rel < self.tol or np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(w)):
                     message = "converged"
                     break

@@ -37,16 +37,33 @@ class CasadiCompiler(Compiler):
             return cached
         start = time.perf_counter()
         ir, located = rumoca_frontend.load_ir(sources, model, libraries, prepared=prep)
-        dae = eliminate_aliases(rumoca_frontend.to_dae(ir, located, model))
+        raw = rumoca_frontend.to_dae(ir, located, model)
+        dae = eliminate_aliases(raw)
         ode = structure.build_ode(dae, model)
+        components = _components(ir, located, model, prep.files, libraries)
         seconds = time.perf_counter() - start
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
                 "files_read": len(files), "units": dae.units, "descriptions": dae.descriptions,
                 "compile_seconds": seconds}
-        compiled = CompiledModel(model, ode, info)
+        compiled = CompiledModel(model, ode, info, dae=raw, structure=components)
         compile_cache.store(key, compiled, seconds)
         return compiled
+
+
+def _components(ir: dict, located, model: str, user_files, libraries):
+    """The model's component structure from the flat stage, with each component's class read
+    from its declaration (the user's files first, then the package the model is in)."""
+    from mcl.compile.components import declared_classes, structure_of
+
+    structure = structure_of(ir.get("flat") or {}, model)
+    user = {str(f): f.read_text(encoding="utf-8", errors="replace") for f in user_files}
+    top = model.split(".")[0]
+    rest = sorted(((p, t) for p, t in located.files.values() if p not in user), key=lambda pt: top not in pt[0])
+    classes = declared_classes(structure.components, model, {**user, **dict(rest)}, libraries)
+    for name, comp in structure.components.items():
+        comp.cls = classes.get(name, comp.cls)
+    return structure
 
 
 class PymocaCompiler(Compiler):

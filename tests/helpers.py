@@ -16,6 +16,16 @@ FAULTS = ROOT / "examples" / "faults" / "Faults.mo"      # systems with hidden f
 _compiled: dict = {}
 
 
+def msl_path() -> Path | None:
+    """The Modelica Standard Library: an entry of MODELICAPATH holding it, else ../shared/msl."""
+    import os
+
+    for entry in [*os.environ.get("MODELICAPATH", "").split(os.pathsep), str(ROOT.parent / "shared" / "msl")]:
+        if entry and (Path(entry) / "Modelica" / "package.mo").is_file():
+            return Path(entry)
+    return None
+
+
 def compiled(name: str, sources=None):
     """Compile once per test session (compiling is deterministic and the models are immutable)."""
     key = (name, tuple(map(str, sources or [LIB])))

@@ -70,8 +70,14 @@ def _uses(library: Path) -> set[str]:
         text = top.read_text(encoding="utf-8", errors="replace")
     except OSError:
         return set()
-    m = re.search(r"\buses\s*\((.*?)\)\s*[,)]", text, re.S)
-    return set(re.findall(r"\b([A-Za-z_]\w*)\s*\(\s*version", m.group(1))) if m else set()
+    m = re.search(r"\buses\s*\(", text)
+    if not m:
+        return set()
+    depth, k = 1, m.end()          # the annotation's balanced parentheses (each library has its own)
+    while k < len(text) and depth:
+        depth += {"(": 1, ")": -1}.get(text[k], 0)
+        k += 1
+    return set(re.findall(r"\b([A-Za-z_]\w*)\s*\(\s*version", text[m.end():k]))
 
 
 def needed(texts, defined: set[str], model: str | None, path) -> list[Path]:

@@ -62,7 +62,9 @@ class CandidateFitter:
     description = ""
 
     def fit(self, model, data: TimeSeries, names: list[str], w0, template, criterion: str, budget: int,
-            give_up=None, prune: bool = True) -> FitOutcome:
+            give_up=None, prune: bool = True, progress=None) -> FitOutcome:
+        """``give_up(reachable_rss, current_rss)`` stops a fit that cannot win; ``progress(rss)``
+        is told the RSS of each better point reached (so that other fits can compare)."""
         raise NotImplementedError
 
 
@@ -70,25 +72,26 @@ class SimulationFitter(CandidateFitter):
     name = "simulation"
     description = "Levenberg-Marquardt on simulations with sensitivities, then backward elimination"
 
-    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True):
+    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None):
         n_terms = len(getattr(template, "terms", names))
         return FitOutcome(*fit_and_prune(model, data, names, w0, budget, criterion, give_up=give_up,
-                                         prune=prune, n_terms=n_terms))
+                                         prune=prune, n_terms=n_terms, progress=progress))
 
 
 class FullDiscretisationFitter(CandidateFitter):
     name = "full-discretisation"
     description = "paper 004: least squares over states and parameters, stage-wise backward elimination"
 
-    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True):
+    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None):
         if not getattr(template, "terms", None) or getattr(template, "scales", None):
             # a network, or a law with fitted scales, has no terms to prune stage-wise by degree
-            return SimulationFitter().fit(model, data, names, w0, template, criterion, budget, give_up, prune)
+            return SimulationFitter().fit(model, data, names, w0, template, criterion, budget, give_up, prune,
+                                          progress)
         return FitOutcome(*refine_candidate(model, data, names, w0, criterion, template))
 
 
 def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str,
-                  give_up=None, prune: bool = True, n_terms: int | None = None):
+                  give_up=None, prune: bool = True, n_terms: int | None = None, progress=None):
     """LM fit of the template parameters, then backward elimination of terms (w1 anchors the
     scale; ``prune=False`` keeps every parameter: a network has no terms to remove). ``give_up``
     (see :class:`mcl.fit.LevenbergMarquardt`) stops a candidate that cannot win."""
@@ -98,15 +101,17 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     n_obs = int(np.isfinite(data.select([o for o in model.output_names if o in data.names]).values).sum())
     active = np.ones(len(names), bool)
 
-    def fit(active_mask, start):
+    def fit(active_mask, start, window=data, limit=budget):
         params = [n for n, on in zip(names, active_mask) if on]
         fixed = {n: 0.0 for n, on in zip(names, active_mask) if not on}
-        problem = FitProblem(model, data, params, fixed=fixed, options=FIT_OPTIONS)
-        res = LevenbergMarquardt(max_simulations=budget, tol=FIT_TOL, give_up=give_up).fit(
-            problem, np.asarray(start)[active_mask])
+        problem = FitProblem(model, window, params, fixed=fixed, options=FIT_OPTIONS)
+        whole = window is data      # only a fit to all the data compares with other candidates
+        report = None if progress is None or not whole else (lambda cost: progress(cost * len(data.time)))
+        res = LevenbergMarquardt(max_simulations=limit, tol=FIT_TOL, give_up=give_up if whole else None,
+                                 progress=report).fit(problem, np.asarray(start)[active_mask])
         w = np.zeros(len(names))
         w[active_mask] = res.w
-        rss = res.cost * len(data.time)   # J of eq. (3) is the mean over samples of the RSS
+        rss = res.cost * len(window.time)   # J of eq. (3) is the mean over samples of the RSS
         return w, rss, problem, res
 
     visited = []
@@ -117,9 +122,15 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
             full[active_mask] = e.w
             visited.append([*full.tolist(), bool(e.feasible)])
 
-    w, rss, problem, res = fit(active, w0)
-    record(problem, active)
-    sims, path = res.simulations, []
+    # continuation in the horizon: a law far from the nominal one moves resonances, and the fit
+    # to the whole record falls into the local minima that phase drift makes; fitted first to
+    # its first eighth, quarter and half, each start is close enough for the next
+    w, sims = np.asarray(w0, float), 0
+    for window in horizons(data):
+        w, rss, problem, res = fit(active, w, window, max(budget - sims, 5))
+        record(problem, active)
+        sims += res.simulations
+    path = []
     score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
     n_terms = n_terms or len(names)
@@ -154,6 +165,18 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         rss = rss_of(residual(data, model, final))
         score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
     return w, active, rss, score, sims, path, visited, final
+
+
+def horizons(data: TimeSeries, first: float = 1 / 8, min_samples: int = 50) -> list[TimeSeries]:
+    """The data's first eighth, quarter, half and all of it (windows shorter than
+    ``min_samples`` samples left out)."""
+    n, out, frac = len(data.time), [], first
+    while frac < 1:
+        k = int(n * frac)
+        if k >= min_samples:
+            out.append(TimeSeries(data.time[:k], data.values[:k], data.names, data.source))
+        frac *= 2
+    return [*out, data]
 
 
 def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: str, template):

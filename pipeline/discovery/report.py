@@ -157,16 +157,24 @@ def _ranking_figure(plt, report, cands):
 
 
 def _summary_rows(report) -> str:
-    m, g, cause = report["misfit"], report["gain"], report.get("cause")
+    m, g = report["misfit"], report["gain"]
+    causes = report.get("causes") or ([report["cause"]] if report.get("cause") else [])
     rows = [("misfit", f"{'significant' if m['significant'] else 'not significant'}: training RMS "
                        f"{_g(m['train_rms'])} vs noise {_g(m['noise_estimate'])}"),
-            ("where", ", ".join(f"{a:.3g}-{b:.3g} s" for a, b in m.get("where", [])) or "-"),
-            ("cause", cause["effect"] if cause else f"no convincing cause ({report.get('no_cause', 'none found')})")]
-    if cause:
+            ("where", ", ".join(f"{a:.3g}-{b:.3g} s" for a, b in sorted(m.get("where", []))) or "-")]
+    if not causes:
+        rows.append(("cause", f"no convincing cause ({report.get('no_cause', 'none found')})"))
+    for k, cause in enumerate(causes):
+        label = "cause" if len(causes) == 1 else f"cause {k + 1}"
         ev = cause["evidence"]
+        rows.append((label, cause["effect"]))
         rows.append(("evidence", f"{ev['strength']} (Δ{ev.get('criterion', 'bic').upper()} {ev['delta_to_next']:.3g} "
-                                 "to the next component or the nominal model)"))
+                                 "to the next component or the model without it)"))
         rows.append(("law", f"{cause['law']['equation']}  where {cause['law'].get('where', '')}"))
+        for e in cause.get("equivalents", []):
+            rows.append(("equivalent", f"{e['component']} ({e.get('class') or ''}): {e['reason']}"))
+        if cause.get("after"):
+            rows.append(("misfit left", f"training RMS {_g(cause['after']['train_rms'])}: {cause['after']['misfit_left']}"))
     rows.append(("not evaluated", "; ".join(f"{f['component']} ({f['stage']}: {f['reason']})"
                                             for f in report.get("failed", [])) or "-"))
     body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in rows)
@@ -213,13 +221,13 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
         figs.append(("Validation data (not used for fitting)",
                      _png(_outputs_figure(plt, validate.time, validate.select(outputs).values, validation[0],
                                           validation[1], outputs, units, sigma, "validation data"))))
-    cause = report.get("cause")
-    if cause:
+    for cause in report.get("causes") or ([report["cause"]] if report.get("cause") else []):
         figs.append((f"Learned law of {cause['component']} over the range the data visits", _png(_law_figure(plt, cause))))
         fig = _feasibility_figure(plt, cause)
         if fig is not None:
-            figs.append(("Feasibility map: parameter values visited while fitting", _png(fig)))
-    cands = [c for c in report.get("candidates", []) if c.get("score") is not None and math.isfinite(c["score"])]
+            figs.append((f"Feasibility map of {cause['component']}: parameter values visited while fitting", _png(fig)))
+    cands = [c for c in report.get("candidates", []) if c.get("score") is not None and math.isfinite(c["score"])
+             and c.get("round", 1) == 1]
     if cands:
         figs.append(("Candidate ranking", _png(_ranking_figure(plt, report, cands))))
     imgs = "".join(f"<h2>{html.escape(t)}</h2><img src='data:image/png;base64,{b}'/>" for t, b in figs)

@@ -1,0 +1,344 @@
+"""The component structure of a compiled model, read from the compiler's flat model.
+
+Discovery needs to know, for the model exactly as compiled, which component instances there
+are, their connectors with potential and flow variables, which parameters belong to them, and
+which connectors are joined (the nets): rumoca's flat stage gives all of it, whatever the source
+looked like (imports of every form, ``extends``, modifiers, conditional connectors that are off
+and therefore absent, replaceable components already redeclared). No second parser reads the
+user's files for this; only the class name a component was declared with is read from its
+declaration, for reports and the exported library.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import asdict, dataclass, field
+
+
+@dataclass(frozen=True)
+class Connector:
+    """A connector instance of a component: its class and its potential and flow variables
+    (names relative to the connector, e.g. ``v`` and ``i`` of a pin)."""
+
+    name: str
+    cls: str
+    potential: tuple[str, ...]
+    flow: tuple[str, ...]
+
+    @property
+    def simple(self) -> bool:
+        """One potential and one flow variable (paper 000's component template, Fig. 1)."""
+        return len(self.potential) == 1 and len(self.flow) == 1
+
+
+@dataclass
+class Component:
+    """A component instance (``R1``, ``sec[2].C``) of the compiled model."""
+
+    name: str
+    cls: str
+    connectors: list[Connector]
+    parameters: list[str] = field(default_factory=list)   # its own parameters, qualified names
+    inputs: list[str] = field(default_factory=list)       # its signal inputs and outputs
+    declaration: str = ""                                 # the declaration as written, if found
+
+    @property
+    def two_connector(self) -> bool:
+        """Two connectors of one kind (the same potential and flow variables: MSL's PositivePin
+        and NegativePin are two classes of one kind), one potential and one flow each."""
+        a = self.connectors
+        return (len(a) == 2 and a[0].simple and a[1].simple and a[0].potential == a[1].potential
+                and a[0].flow == a[1].flow)
+
+    @property
+    def domain(self) -> str:
+        return self.connectors[0].cls if self.connectors else ""
+
+    def across(self) -> tuple[str, str]:
+        """Qualified potential variables of connectors a and b."""
+        a, b = self.connectors
+        return f"{self.name}.{a.name}.{a.potential[0]}", f"{self.name}.{b.name}.{b.potential[0]}"
+
+    def flow(self) -> tuple[str, str]:
+        """Qualified flow variables of connectors a and b (each into the component)."""
+        a, b = self.connectors
+        return f"{self.name}.{a.name}.{a.flow[0]}", f"{self.name}.{b.name}.{b.flow[0]}"
+
+    def owns(self, variable: str) -> bool:
+        return variable.startswith(self.name + ".")
+
+
+@dataclass
+class Structure:
+    """Components and nets of a compiled model (JSON-serialisable, kept with the model)."""
+
+    model: str
+    components: dict[str, Component]
+    nets: list[list[str]]                 # connection sets of connector instances ('R1.n', 'C.p')
+
+    def two_connector_components(self) -> list[Component]:
+        return [c for c in self.components.values() if c.two_connector]
+
+    def candidates(self) -> list[Component]:
+        """The components whose law discovery may question: two connectors of one kind, no
+        signal inputs or outputs (sources and sensors are the measurement, not the plant)."""
+        return [c for c in self.two_connector_components() if not c.inputs]
+
+    def net_of(self, connector: str) -> int | None:
+        for k, net in enumerate(self.nets):
+            if connector in net:
+                return k
+        return None
+
+    def terminals(self, name: str) -> tuple:
+        """The nets a two-connector component joins (a, b)."""
+        c = self.components[name]
+        return tuple(self.net_of(f"{name}.{p.name}") for p in c.connectors)
+
+    def parallel(self, name: str) -> list[str]:
+        """Two-connector components joining the same two nets as ``name`` (either way round):
+        what flows through one cannot be told from what flows through the other."""
+        mine = self.terminals(name)
+        if None in mine:
+            return []
+        return [c.name for c in self.candidates()
+                if c.name != name and set(self.terminals(c.name)) == set(mine) and len(set(mine)) == 2]
+
+    def to_dict(self) -> dict:
+        return {"model": self.model, "nets": self.nets,
+                "components": {n: asdict(c) for n, c in self.components.items()}}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Structure":
+        comps = {}
+        for n, c in d["components"].items():
+            conns = [Connector(k["name"], k["cls"], tuple(k["potential"]), tuple(k["flow"])) for k in c["connectors"]]
+            comps[n] = Component(c["name"], c["cls"], conns, list(c["parameters"]), list(c["inputs"]),
+                                 c.get("declaration", ""))
+        return cls(d["model"], comps, [list(n) for n in d["nets"]])
+
+    def describe(self) -> str:
+        """A text listing: components with class and connectors, then the nets."""
+        lines = [f"{self.model}: {len(self.components)} components, {len(self.nets)} nets"]
+        for c in self.components.values():
+            ports = ", ".join(f"{p.name}:{p.cls.split('.')[-1]}" for p in c.connectors)
+            mark = " [candidate]" if c.two_connector and not c.inputs else ""
+            lines.append(f"  {c.name:16s} {c.cls:44s} {ports}{mark}")
+        lines.append("nets:")
+        lines += [f"  {{{', '.join(sorted(n))}}}" for n in self.nets]
+        return "\n".join(lines)
+
+
+def split_name(name: str) -> list[str]:
+    """``a.b[1,2].c`` -> ['a', 'b[1,2]', 'c'] (dots inside subscripts do not split)."""
+    parts, depth, cur = [], 0, ""
+    for ch in name:
+        if ch == "[":
+            depth += 1
+        elif ch == "]":
+            depth -= 1
+        if ch == "." and depth == 0:
+            parts.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    parts.append(cur)
+    return parts
+
+
+def _kind(value) -> str:
+    """rumoca writes an enumeration as a string or a one-key mapping."""
+    if isinstance(value, dict):
+        return next(iter(value), "")
+    return str(value or "")
+
+
+def structure_of(flat: dict, model: str, classes: dict[str, str] | None = None) -> Structure:
+    """The components, connectors and nets of rumoca's flat model of ``model``.
+
+    A connector is an instance with variables of its own, at least one of them a flow; a
+    component is an instance that has connectors; a component whose descendants include
+    components with connectors is a composite, and only its parts are listed (the elementary
+    laws are what can be wrong). ``classes`` maps component names to their declared class.
+    """
+    variables = flat.get("variables", {})
+    children: dict[str, list[tuple[str, dict]]] = {}
+    for name, v in variables.items():
+        parts = split_name(name)
+        if len(parts) > 1:
+            children.setdefault(".".join(parts[:-1]), []).append((parts[-1], v))
+    connectors = {}
+    for inst, members in children.items():
+        if not any(v.get("flow") for _, v in members):
+            continue
+        pot = tuple(n for n, v in members if not v.get("flow") and not v.get("stream")
+                    and _kind(v.get("variability")) in ("Empty", "", "Continuous"))
+        flow = tuple(n for n, v in members if v.get("flow"))
+        connectors[inst] = (pot, flow)
+    owners: dict[str, list[str]] = {}
+    for inst in connectors:
+        parts = split_name(inst)
+        if len(parts) > 1:
+            owners.setdefault(".".join(parts[:-1]), []).append(inst)
+    # composites (a part of theirs has connectors too) are left out: their parts are listed
+    elementary = [o for o in owners if not any(p != o and p.startswith(o + ".") for p in owners)]
+    classes = classes or {}
+    comps = {}
+    for name in sorted(elementary, key=_natural):
+        conns = []
+        for inst in owners[name]:
+            pot, flow = connectors[inst]
+            conns.append(Connector(split_name(inst)[-1], _connector_class(pot, flow), pot, flow))
+        own = [(n, v) for n, v in variables.items() if n.startswith(name + ".")]
+        params = [n for n, v in own if _kind(v.get("variability")) == "Parameter"]
+        signals = [n for n, v in own if _kind(v.get("causality")) in ("Input", "Output")]
+        comps[name] = Component(name, classes.get(name, ""), conns, params, signals)
+    return Structure(model, comps, _nets(flat, connectors))
+
+
+def _connector_class(pot, flow) -> str:
+    """A connector's kind by its variables (the class itself is not in the flat model)."""
+    return f"connector({', '.join(pot)}; flow {', '.join(flow)})"
+
+
+def _natural(name: str):
+    return [int(t) if t.isdigit() else t for t in re.split(r"(\d+)", name)]
+
+
+def _nets(flat: dict, connectors: dict) -> list[list[str]]:
+    """Connection sets of connector instances, from the flat model's connection equations and
+    flow sums (union-find over connectors joined by either)."""
+    parent = {c: c for c in connectors}
+
+    def find(a):
+        while parent[a] != a:
+            parent[a] = parent[parent[a]]
+            a = parent[a]
+        return a
+
+    def connector_of(var: str) -> str | None:
+        parts = split_name(var)
+        inst = ".".join(parts[:-1])
+        return inst if inst in connectors else None
+
+    for eq in flat.get("equations", []):
+        origin = eq.get("origin") or {}
+        if "Connection" in origin:
+            names = [origin["Connection"].get("lhs", ""), origin["Connection"].get("rhs", "")]
+        elif "FlowSum" in origin:
+            names = re.findall(r"[A-Za-z_][\w.\[\],]*", origin["FlowSum"].get("description", "").split("=")[0])
+        else:
+            continue
+        conns = [c for c in (connector_of(n) for n in names) if c is not None]
+        for a, b in zip(conns, conns[1:]):
+            ra, rb = find(a), find(b)
+            if ra != rb:
+                parent[ra] = rb
+    groups: dict[str, list[str]] = {}
+    for c in connectors:
+        groups.setdefault(find(c), []).append(c)
+    return [sorted(g, key=_natural) for g in groups.values()]
+
+
+# -- the class each component was declared with (for reports and exported libraries) ----------
+_DECL_PREFIX = r"(?:(?:parameter|constant|input|output|inner|outer|replaceable|redeclare|final|flow|discrete|each)\s+)*"
+
+
+def declared_classes(names, model: str, texts: dict[str, str], libraries=()) -> dict[str, str]:
+    """The fully qualified class of each component in ``names`` (instance paths), read from its
+    declaration in the texts the compiler read (``{path: text}``, the user's files first), with
+    the imports in force there; a class that cannot be resolved keeps the name as written, one
+    whose declaration is not found is left out."""
+    from .classes import LibraryClasses
+    from .library import available, library_path
+
+    stripped = _Texts(texts)
+    lib = LibraryClasses(available(library_path(libraries)))
+    out = {}
+    for name in names:
+        body, scope = None, model
+        for part in split_name(name):
+            inst = re.sub(r"\[.*\]$", "", part)
+            body = stripped.class_body(scope.split(".")[-1])     # the class declaring the part
+            found = _declared_type(body, inst) if body else None
+            if found is None:       # declared in a base class: any text that declares it
+                found = stripped.declaring(inst)
+                body = None
+            if found is None:
+                break
+            scope = _qualified(found, body or "", scope, lib)
+        else:
+            out[name] = scope
+    return out
+
+
+class _Texts:
+    """Source texts without comments, strings and annotations, stripped when first needed."""
+
+    def __init__(self, texts: dict[str, str]):
+        self.raw, self.done = dict(texts), {}
+
+    def __iter__(self):
+        from .classes import _strip
+
+        for path, text in self.raw.items():
+            if path not in self.done:
+                self.done[path] = _strip(text)
+            yield self.done[path]
+
+    def class_body(self, short: str) -> str | None:
+        return next((b for t in self if (b := _class_text(t, short)) is not None), None)
+
+    def declaring(self, inst: str) -> str | None:
+        return next((d for t in self if (d := _declared_type(t, inst)) is not None), None)
+
+
+def _class_text(text: str, short: str) -> str | None:
+    """The body of the class called ``short`` in ``text`` (with its imports), or None."""
+    m = re.search(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|expandable|operator)\s+)*"
+                  rf"(?:model|block|class|connector|record)\s+{re.escape(short)}\b(?!\s*=)", text)
+    if not m:
+        return None
+    end = re.search(rf"\bend\s+{re.escape(short)}\s*;", text[m.end():])
+    return text[m.end(): m.end() + end.start()] if end else text[m.end():]
+
+
+def _declared_type(body: str, inst: str) -> str | None:
+    m = re.search(rf"(?:^|[;\s]){_DECL_PREFIX}([A-Za-z_][\w.]*)\s*(?:\[[^\]]*\]\s*)?\s+{re.escape(inst)}\s*(?:\[[^\]]*\])?\s*[(;\"=]",
+                  body)
+    if m and m.group(1) not in ("end", "extends", "import", "connect", "equation", "algorithm"):
+        return m.group(1)
+    return None
+
+
+def _imports(body: str) -> tuple[dict[str, str], list[str]]:
+    """Named imports {alias: qualified} and wildcard packages of a class body."""
+    named, wild = {}, []
+    for m in re.finditer(r"\bimport\s+([^;]+);", body):
+        text = re.sub(r"\s+", "", m.group(1))
+        if "=" in text:
+            alias, target = text.split("=", 1)
+            named[alias] = target
+        elif text.endswith(".*"):
+            wild.append(text[:-2])
+        elif "{" in text:
+            base, members = text.split(".{", 1)
+            for member in members.rstrip("}").split(","):
+                named[member] = f"{base}.{member}"
+        else:
+            named[text.rsplit(".", 1)[-1]] = text
+    return named, wild
+
+
+def _qualified(type_name: str, body: str, scope: str, lib) -> str:
+    """``type_name`` as written in a class (``body``, inside ``scope``) made fully qualified:
+    through its imports, then the library path (``lib``: :class:`LibraryClasses`); unresolved,
+    the name as written."""
+    head, _, rest = type_name.partition(".")
+    named, wild = _imports(body)
+    if head in named:
+        return named[head] + (f".{rest}" if rest else "")
+    for base in wild:
+        if lib.find(f"{base}.{type_name}") is not None:
+            return f"{base}.{type_name}"
+    found = lib.resolve(type_name, scope)
+    return found.name if found is not None else type_name

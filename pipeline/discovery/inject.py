@@ -1,0 +1,219 @@
+"""Candidate laws inside the compiled model: the user's DAE with one component's law changed.
+
+The model is compiled once, exactly as written (:attr:`mcl.model.CompiledModel.dae` is its DAE
+before alias elimination, where each equation is still the one the flat model has). A candidate
+changes one component's law there, and only there, by a deviation ``D`` at its terminals:
+
+- ``parallel`` (a law giving the flow, i = f(v, dv): resistors, springs, dampers, capacitors):
+  in every equation outside the component (the flow sums of its nets, a user's equation that
+  reads its current) the flow into connector a is ``f_a + D`` and into b ``f_b - D``: the
+  component's own equations still hold for its own variables, and what the rest of the model
+  sees flowing through it is the nominal law's flow plus D.
+- ``series`` (a law giving the across value, v = g(i, di): inductors): inside the component
+  the potential of connector a is ``x_a - D``: the component's own law holds for what is left
+  of the across value.
+
+The law's equation fixes D. For a law that gives its variable explicitly (i = f_w(v, dv)), D =
+f_w(...) - f_nom(...), with f_nom the nominal law's own linear form in the law's variables
+(fitted along the nominal run): when the nominal law is linear, what the rest of the model sees
+is exactly f_w, the candidate law, and at the start w0 (the law fitted to the nominal one)
+D = 0: the candidate's first simulation is the nominal model. An implicit law G(v, i, ...) = 0
+replaces the terminal behaviour outright. The law's derivatives (dv, di) are new states tied to
+the across value or the flow; index reduction differentiates those ties as it does any
+constraint. Everything else the user wrote (initial equations, start values, parameters, other
+components) is untouched.
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..compile.components import Component
+from ..compile.dae import Dae, eliminate_aliases
+from ..errors import ModelicaError, UnsupportedConstruct
+
+#: suffixes of the names a candidate adds to its component (readable through ``probe``)
+ACROSS, FLOW, DEVIATION = "mcl_v", "mcl_i", "mcl_d"
+
+
+@dataclass(frozen=True)
+class NominalForm:
+    """The nominal law's linear form in the candidate law's variables: f_nom = sum c_k x_k
+    (x_k among v, dv for a parallel law; i, di for a series one) and how well it fits the
+    nominal law along the nominal run (relative RMS error; ~0 for a linear nominal law)."""
+
+    coefficients: dict
+    error: float
+
+    @property
+    def exact(self) -> bool:
+        return self.error < 1e-6
+
+
+def nominal_form(env: dict, variables: list[str], target: str) -> NominalForm:
+    """f_nom = the least-squares fit of the nominal law's ``target`` (i or v) along the nominal
+    run on ``variables`` (a subset of v, dv or i, di)."""
+    y = np.asarray(env[target], float)
+    if not variables:
+        return NominalForm({}, float(np.sqrt(np.mean(y**2)) / (np.sqrt(np.mean(y**2)) + 1e-300)) if np.any(y) else 0.0)
+    X = np.column_stack([np.asarray(env[v], float) for v in variables])
+    c, *_ = np.linalg.lstsq(X, y, rcond=None)
+    scale = float(np.sqrt(np.mean(y**2))) or 1.0
+    return NominalForm(dict(zip(variables, map(float, c))), float(np.sqrt(np.mean((y - X @ c) ** 2)) / scale))
+
+
+def mode_of(template) -> str:
+    """``series`` for a law giving the across value (v = g(i, di)), else ``parallel``."""
+    return "series" if template.explicit == "v" else "parallel"
+
+
+def qualified(component: str, names: list[str], taken) -> list[str]:
+    """Parameter names of a candidate law: ``R1.w2``, or ``R1.mcl_w2`` where the component has
+    a parameter of that name already."""
+    out = []
+    for n in names:
+        q = f"{component}.{n}"
+        out.append(q if q not in taken else f"{component}.mcl_{n}")
+    return out
+
+
+def with_law(dae: Dae, comp: Component, template, w0, nominal: NominalForm | None = None,
+             rates: dict | None = None) -> tuple[Dae, list[str]]:
+    """``dae`` with ``comp``'s terminal law changed to ``template`` (parameters at ``w0``);
+    returns the new DAE (before alias elimination, like the compiled one) and the law's
+    parameter names, qualified with the component's name. ``rates``: the component's across
+    value and flow as functions of the states (:func:`rate_variables`), for laws in their rates."""
+    nominal = nominal or NominalForm({}, 1.0)
+    dae, D, env = _deviation(dae, comp, mode_of(template))
+    explicit = template.explicit is not None
+    needs = set(template.uses) | (set(nominal.coefficients) if explicit else set())
+    env = _derivatives(dae, comp, env, needs, rates)
+    names = qualified(comp.name, template.parameter_names(), set(dae.p_names))
+    w = ca.SX.sym("w", len(names))
+    ws = ca.vertsplit(w)
+    if explicit:
+        f_nom = sum((c * env[v] for v, c in nominal.coefficients.items()), ca.SX(0))
+        law = D - (template.sx_explicit(ws, env) - f_nom)
+    else:
+        law = template.sx_residual(ws, env)
+    return _add(dae, rows=[law], p=(w, names, np.asarray(w0, float))), names
+
+
+def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
+    """The new unknown D put at ``comp``'s terminals, and the law's variables as expressions:
+    v (the across value the rest of the model sees), i (the flow into connector a)."""
+    xa, xb = (dae.exprs[n] for n in comp.across())
+    fa, fb = (dae.exprs[n] for n in comp.flow())
+    for s, n in zip((xa, xb, fa, fb), (*comp.across(), *comp.flow())):
+        if not (s.is_symbolic() and s.numel() == 1):
+            raise ModelicaError(f"{n} is not a variable of the compiled model: {comp.name} cannot take a law")
+    D = ca.SX.sym(f"{comp.name}.{DEVIATION}")
+    external = _external_rows(dae, comp)
+    rows = ca.vertsplit(dae.residual) if dae.residual.numel() else []
+    exprs = dict(dae.exprs)
+    if mode == "parallel":
+        old, new = ca.vertcat(fa, fb), ca.vertcat(fa + D, fb - D)
+        pick = external
+        exprs[comp.flow()[0]], exprs[comp.flow()[1]] = fa + D, fb - D
+    else:
+        old, new = xa, xa - D
+        pick = [k for k in range(len(rows)) if k not in set(external)]
+    for k in pick:
+        if ca.depends_on(rows[k], old):
+            rows[k] = ca.substitute(rows[k], old, new)
+    i = fa + D if mode == "parallel" else fa
+    env = {"v": xa - xb, "i": i}
+    exprs[f"{comp.name}.{ACROSS}"], exprs[f"{comp.name}.{FLOW}"], exprs[f"{comp.name}.{DEVIATION}"] = xa - xb, i, D
+    dae = dataclasses.replace(dae, residual=ca.vertcat(*rows) if rows else ca.SX(0, 1), exprs=exprs,
+                              z=ca.vertcat(dae.z, D), z_names=[*dae.z_names, f"{comp.name}.{DEVIATION}"],
+                              z_start=ca.vertcat(dae.z_start, ca.SX(0)))
+    return dae, D, env
+
+
+def _external_rows(dae: Dae, comp: Component) -> list[int]:
+    """Rows of the residual that read a variable outside ``comp`` (its nets' flow sums, the
+    connections, the other components' and the user's own equations)."""
+    unknowns = ca.vertcat(dae.x, dae.dx, dae.z)
+    names = [*dae.x_names, *dae.x_names, *dae.z_names]
+    sp = ca.jacobian_sparsity(dae.residual, unknowns) if dae.residual.numel() else None
+    if sp is None:
+        return []
+    rows, cols = sp.get_triplet()
+    foreign = np.zeros(dae.residual.numel(), bool)
+    outside = np.array([not comp.owns(n) for n in names])
+    foreign[np.asarray(rows)[outside[np.asarray(cols, int)]]] = True
+    return [int(k) for k in np.flatnonzero(foreign)]
+
+
+def _derivatives(dae: Dae, comp: Component, env: dict, needs, rates: dict | None) -> dict:
+    """dv and di for a law that uses them: the gradient of the across value (or flow), as a
+    function of the states alone, times x' (:func:`rate_variables`); a law in the rate of a
+    variable the states do not set would add a state of its own (and start singular at w0,
+    where its coefficient is nought): refused as not applicable there."""
+    for var, d in (("v", "dv"), ("i", "di")):
+        if d not in needs:
+            continue
+        e = (rates or {}).get(var)
+        if e is None:
+            what = "across value" if var == "v" else "flow"
+            raise UnsupportedConstruct(f"the {what} of {comp.name} is not set by the model's states: a law in "
+                                       f"its rate would add a state there")
+        env[d] = ca.jtimes(e, dae.x, dae.dx) + ca.jacobian(e, dae.t)
+    return env
+
+
+def rate_variables(dae: Dae, comps: list[Component], modes: dict[str, str]) -> dict[str, dict]:
+    """For each component, its across value v and flow i as functions of the states alone
+    (``{"v": expr or None, "i": expr or None}``), read from the model with a deviation at every
+    component (:func:`with_injections`) after alias elimination: a variable that depends on an
+    algebraic unknown, an input or any deviation is not set by the states (a law in its rate
+    would change the model's structure)."""
+    sdae, j_names = with_injections(dae, comps, modes)
+    e = eliminate_aliases(sdae)
+    j = ca.vertcat(*[e.p[e.p_names.index(n)] for n in j_names]) if j_names else ca.SX(0, 1)
+    others = ca.vertcat(e.z, e.u, j)
+
+    def pure(expr):
+        return expr if not ca.depends_on(expr, others) else None
+
+    out = {}
+    for c in comps:
+        xa, xb = c.across()
+        out[c.name] = {"v": pure(e.exprs[xa] - e.exprs[xb]),
+                       "i": pure(e.exprs[c.flow()[0]]) if modes.get(c.name) == "series" else None}
+    return out
+
+
+def _add(dae: Dae, rows, p) -> Dae:
+    """``dae`` with equations ``rows`` and new free parameters ``p`` = (symbols, names, values)."""
+    sym, names, values = p
+    return dataclasses.replace(dae, residual=ca.vertcat(dae.residual, *rows), p=ca.vertcat(dae.p, sym),
+                               p_names=[*dae.p_names, *names], p_values=np.concatenate([dae.p_values, values]),
+                               exprs={**dae.exprs, **{n: sym[k] for k, n in enumerate(names)}})
+
+
+def with_injections(dae: Dae, comps: list[Component], modes: dict[str, str]) -> tuple[Dae, list[str]]:
+    """``dae`` with a deviation at each of ``comps`` equal to a parameter of its own (named
+    ``<component>.mcl_j``, nominal value 0): the screening model, in which the response to a
+    deviation at any component can be read off one simulation."""
+    names = []
+    for comp in comps:
+        dae, D, _env = _deviation(dae, comp, modes.get(comp.name, "parallel"))
+        j = ca.SX.sym(f"{comp.name}.mcl_j")
+        name = f"{comp.name}.mcl_j"
+        dae = _add(dae, rows=[D - j], p=(j, [name], np.zeros(1)))
+        names.append(name)
+    return dae, names
+
+
+def compiled(dae: Dae, name: str, outputs=(), info: dict | None = None, structure=None):
+    """A :class:`mcl.model.CompiledModel` of ``dae`` (alias elimination, index reduction,
+    causalisation), with ``outputs`` (any variables of the model) appended to its outputs."""
+    from ..compile.structure import build_ode
+    from ..model import CompiledModel
+
+    ode = build_ode(eliminate_aliases(dae), name)
+    return CompiledModel(name, ode, dict(info or {}), dae, structure).with_outputs(outputs)
