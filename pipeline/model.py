@@ -14,7 +14,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from .errors import ConfigError, DataError, MclError
+from .errors import DataError, MclError
 from .compile.structure import Ode, expanded
 
 _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks", "zero", "start", "init_start",
@@ -73,12 +73,17 @@ class CompiledModel:
         ode = dataclasses.replace(o, y_names=[*o.y_names, *extra], out=out, checks=checks)
         return CompiledModel(self.name, ode, self.info)
 
-    def save(self, directory) -> Path:
-        """Write the functions (CasADi serialisation) and names to ``directory``."""
-        d = Path(directory)
-        if d.exists() and (not d.is_dir() or (any(d.iterdir()) and not (d / "model.json").is_file())):
-            raise ConfigError("exists and is not a saved mcl model: choose another output", where=str(d))
-        d.mkdir(parents=True, exist_ok=True)
+    def save(self, directory, force: bool = False) -> Path:
+        """Write the functions (CasADi serialisation) and names to ``directory``: a new one, or
+        with ``force`` one mcl saved before (never a folder of the user's: :mod:`mcl.outputs`)."""
+        from .outputs import new_directory
+
+        with new_directory(directory, force, what="a saved model") as d:
+            self._write(d)
+        return Path(directory)
+
+    def _write(self, d: Path) -> Path:
+        """The files of a saved model, into the new directory ``d``."""
         for f in _FUNCTIONS:
             if getattr(self.ode, f) is not None:     # zero: only a model with state events
                 getattr(self.ode, f).save(str(d / f"{f}.casadi"))

@@ -9,6 +9,28 @@ from pathlib import Path
 from ..errors import ConfigError
 
 IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+#: Modelica's reserved words (Modelica 3.6, section 2.3.3): never a class name
+KEYWORDS = frozenset("""algorithm and annotation block break class connect connector constant
+constrainedby der discrete each else elseif elsewhen encapsulated end enumeration equation expandable
+extends external false final flow for function if import impure in initial inner input loop model not
+operator or outer output package parameter partial protected public pure record redeclare replaceable
+return stream then true type when while within""".split())
+#: top-level names of libraries a learned library is used beside (shadowing one breaks the model)
+LIBRARIES = frozenset({"Modelica", "ModelicaServices", "ModelicaReference", "ModelicaTest", "Complex",
+                       "ObsoleteModelica4", "MCL"})
+
+
+def check_name(name) -> str:
+    """``name`` as the name of an exported library, or a ConfigError saying why not."""
+    if not isinstance(name, str) or not IDENT.match(name):
+        raise ConfigError(f"'{name}' is not a Modelica identifier (letters, digits, _; not starting "
+                          "with a digit)", where="--name")
+    if name in KEYWORDS:
+        raise ConfigError(f"'{name}' is a Modelica keyword: choose another library name", where="--name")
+    if name in LIBRARIES:
+        raise ConfigError(f"'{name}' is the name of the {name} library, which the learned class is used "
+                          "beside: choose another library name", where="--name")
+    return name
 
 
 def _inside(run: Path, relative: str) -> Path:
@@ -19,16 +41,16 @@ def _inside(run: Path, relative: str) -> Path:
     return path
 
 
-def export_library(run_dir, output, name: str = "MCLLearned") -> Path:
+def export_library(run_dir, output, name: str = "MCLLearned", force: bool = False) -> Path:
     """Write ``output/name/package.mo`` (the learned class) and the extended model's FMU;
-    returns the package directory. Reads only files inside ``run_dir``, writes only inside
-    ``output``."""
+    returns the package directory. Reads only files inside ``run_dir``, writes only the new
+    directory ``output/name`` (with ``force``, replacing one that mcl exported: mcl.outputs)."""
     from ..compile.library import uses_annotation
+    from ..outputs import check_input, check_output, new_directory
 
-    run = Path(run_dir)
-    if not IDENT.match(name):
-        raise ConfigError(f"'{name}' is not a Modelica identifier (letters, digits, _; not starting "
-                          "with a digit)", where="--name")
+    check_name(name)
+    run = check_input(run_dir, "run directory", directory_ok=True, error=ConfigError)
+    check_output(Path(output).expanduser() / name, force, directory=True, what="a library", inputs=[run])
     report_file = run / "report.json"
     if not report_file.is_file():
         raise ConfigError("not a finished run directory (no report.json)", where=str(run))
@@ -47,16 +69,14 @@ def export_library(run_dir, output, name: str = "MCLLearned") -> Path:
     m = re.search(rf"^\s*model {re.escape(cls)}\b.*?^\s*end {re.escape(cls)};", source.read_text(), re.S | re.M)
     if not m:
         raise ConfigError(f"class {cls} not found", where=str(source))
-    out = Path(output) / name
-    out.mkdir(parents=True, exist_ok=True)
     body = "\n".join("  " + line.strip() if line.strip() else "" for line in m.group(0).splitlines())
     # the libraries the run compiled with (recorded in its extended package), else the path's
     recorded = re.search(r"annotation\(uses\((?:[^()]|\([^()]*\))*\)\)", source.read_text())
     uses = recorded.group(0) if recorded else uses_annotation(body)
     annotation = f"  {uses};\n" if uses else ""
-    tmp = out / "package.mo.tmp"
-    tmp.write_text(f'within ;\npackage {name} "Components learned by mcl"\n{body}\n{annotation}end {name};\n')
-    tmp.replace(out / "package.mo")
-    if fmu.is_file():
-        shutil.copyfile(fmu, out / fmu.name)
-    return out
+    with new_directory(Path(output).expanduser() / name, force, what="a library", inputs=[run]) as out:
+        (out / "package.mo").write_text(
+            f'within ;\npackage {name} "Components learned by mcl"\n{body}\n{annotation}end {name};\n')
+        if fmu.is_file():
+            shutil.copyfile(fmu, out / fmu.name)
+    return Path(output) / name
