@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import csv
+import numbers
 import os
+import re
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,7 +43,8 @@ class TimeSeries:
         """The columns ``names`` in that order (DataError naming the missing ones)."""
         missing = [n for n in names if n not in self.names]
         if missing:
-            raise DataError(f"missing column(s) {', '.join(missing)}; the file has: "
+            held = "the data have" if self.source.startswith("<") else "the file has"
+            raise DataError(f"missing column(s) {', '.join(missing)}; {held}: "
                             f"{', '.join(self.names) or 'only time'}", where=self.source)
         idx = [self.names.index(n) for n in names]
         return TimeSeries(self.time, self.values[:, idx], list(names), self.source)
@@ -100,42 +103,103 @@ class TimeSeries:
         return TimeSeries(self.time, vals, list(self.names), self.source)
 
 
-def as_timeseries(data, what: str = "data") -> TimeSeries:
-    """A :class:`TimeSeries` from a TimeSeries, a pandas DataFrame (a ``time`` column, or the
-    index), a NumPy structured array or a mapping of columns (with ``time``), or a CSV path."""
+def as_timeseries(data, what: str = "data", time: str | None = None) -> TimeSeries:
+    """A :class:`TimeSeries` from a TimeSeries, a pandas DataFrame, a NumPy structured array, a
+    mapping of columns, or a CSV path.
+
+    Time is the column named ``time``; ``time="t"`` names another column, and ``time="index"``
+    takes a DataFrame's index (an index named ``time``, as :meth:`TimeSeries.to_frame` makes,
+    is taken without asking). Row numbers are never taken for time.
+    """
     if isinstance(data, TimeSeries):
         return data.validate()
     if isinstance(data, (str, os.PathLike)):
         return read_csv(data)
-    if hasattr(data, "columns") and hasattr(data, "index"):   # a pandas DataFrame
-        cols = [str(c) for c in data.columns]
-        if "time" in cols:
-            k = cols.index("time")
-            arr = np.asarray(data.to_numpy(dtype=float))
-            return TimeSeries(arr[:, k], np.delete(arr, k, axis=1), cols[:k] + cols[k + 1:], f"<{what}>").validate()
-        return TimeSeries(np.asarray(data.index, dtype=float), data.to_numpy(dtype=float), cols,
-                          f"<{what}>").validate()
-    if isinstance(data, np.ndarray) and data.dtype.names:
-        names = list(data.dtype.names)
-        columns = {n: data[n] for n in names}
-    elif isinstance(data, dict):
-        columns = data
-    else:
-        raise DataError(f"{what}: give a pandas DataFrame, a NumPy structured array, a mapping of "
-                        f"columns or a TimeSeries, not {type(data).__name__}")
-    if "time" not in columns:
-        raise DataError(f"{what}: no 'time' column (columns: {', '.join(map(str, columns))})")
-    names = [str(n) for n in columns if n != "time"]
-    values = np.column_stack([np.asarray(columns[n], dtype=float) for n in names]) if names else None
-    t = np.asarray(columns["time"], dtype=float)
-    return TimeSeries(t, values if values is not None else np.empty((len(t), 0)), names, f"<{what}>").validate()
+    key = time or "time"
+    try:
+        if hasattr(data, "columns") and hasattr(data, "index"):   # a pandas DataFrame
+            cols = [str(c) for c in data.columns]
+            if len(set(cols)) < len(cols):
+                raise DataError(f"{what}: duplicate column name(s) "
+                                f"{', '.join(sorted({c for c in cols if cols.count(c) > 1}))}")
+            values = _numeric(data.to_numpy(), cols, what)
+            if key in cols:
+                k = cols.index(key)
+                return TimeSeries(values[:, k], np.delete(values, k, axis=1), cols[:k] + cols[k + 1:],
+                                  f"<{what}>").validate()
+            if time == "index" or (time is None and getattr(data.index, "name", None) == "time"):
+                t = _numeric(np.asarray(data.index), ["the index"], what).ravel()
+                return TimeSeries(t, values, cols, f"<{what}>").validate()
+            raise DataError(f"{what}: no '{key}' column (columns: {', '.join(cols) or 'none'}); "
+                            + ("name the time column with time='...', or time='index' for the index"
+                               if time is None else "time='index' takes the index"))
+        if isinstance(data, np.ndarray) and data.dtype.names:
+            columns = {n: data[n] for n in data.dtype.names}
+        elif isinstance(data, dict):
+            columns = {str(k): v for k, v in data.items()}
+        else:
+            raise DataError(f"{what}: give a pandas DataFrame, a NumPy structured array, a mapping of "
+                            f"columns, a TimeSeries or a CSV path, not {type(data).__name__}")
+        if key not in columns:
+            raise DataError(f"{what}: no '{key}' column (columns: {', '.join(map(str, columns)) or 'none'})"
+                            + ("; name the time column with time='...'" if time is None else ""))
+        names = [n for n in columns if n != key]
+        arrays = [np.asarray(columns[n]).ravel() for n in [key, *names]]
+        if len({len(a) for a in arrays}) > 1:
+            raise DataError(f"{what}: the columns have different lengths "
+                            f"({', '.join(f'{n}: {len(a)}' for n, a in zip([key, *names], arrays))})")
+        values = np.column_stack([_numeric(a, [n], what)[:, 0] for n, a in zip([key, *names], arrays)])
+        return TimeSeries(values[:, 0], values[:, 1:], names, f"<{what}>").validate()
+    except MemoryError:
+        raise DataError(f"{what}: too large to hold in memory") from None
+
+
+def _numeric(array, names, what) -> np.ndarray:
+    """``array`` as floats (None, NaN and pandas' NA are not measured), or a DataError naming
+    the first value that is not a number (text is never read as a number here)."""
+    array = np.asarray(array)
+    array = array.reshape(-1, 1) if array.ndim == 1 else array
+    if array.dtype.kind in "biuf":
+        return array.astype(float)
+    out = np.empty(array.shape)
+    for (r, k), v in np.ndenumerate(array):
+        if v is None or v is getattr(_pandas_na(), "NA", None) or (isinstance(v, float) and v != v):
+            out[r, k] = np.nan
+        elif isinstance(v, (numbers.Real, np.number)) and not isinstance(v, (bool, np.bool_)):
+            out[r, k] = float(v)
+        else:
+            shown = v.item() if isinstance(v, np.generic) else v
+            raise DataError(f"{what}: column '{names[k]}' holds {shown!r} at row {r + 1}, which is not a number")
+    return out
+
+
+def _pandas_na():
+    import sys
+
+    return sys.modules.get("pandas")
+
+
+#: a decimal number as CSV files write it (Python's float() also takes 1_000 and non-ASCII digits)
+_NUMBER = re.compile(r"[+-]?([0-9]+\.?[0-9]*|\.[0-9]+)([eE][+-]?[0-9]+)?")
+_NOT_MEASURED = {"nan", "+nan", "-nan", "inf", "+inf", "-inf", "infinity", "+infinity", "-infinity"}
+
+
+def _cell(text: str) -> float:
+    """A cell's value: a decimal number (ValueError otherwise); blank is NaN (not measured);
+    nan/inf parse as themselves and are refused by the caller."""
+    text = text.strip()
+    if not text:
+        return np.nan
+    if _NUMBER.fullmatch(text) or text.lower() in _NOT_MEASURED:
+        return float(text)
+    raise ValueError(text)
 
 
 def read_csv(path) -> TimeSeries:
     """Read a CSV time series; errors name the file and line."""
-    path = Path(path)
-    if not path.is_file():
-        raise DataError("no such data file", where=str(path))
+    from .outputs import check_input
+
+    path = check_input(path, "data file")
     try:
         with path.open(newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))
@@ -164,7 +228,7 @@ def read_csv(path) -> TimeSeries:
             raise DataError(f"{len(row)} fields, the header has {len(header)}", where=f"{path}:{i}")
         for j, cell in enumerate(row):
             try:
-                data[i - 2, j] = float(cell) if cell.strip() else np.nan   # blank: not measured
+                data[i - 2, j] = _cell(cell)        # blank: not measured
             except ValueError:
                 raise DataError(f"column '{header[j]}': '{cell}' is not a number",
                                 where=f"{path}:{i}") from None

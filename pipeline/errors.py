@@ -39,3 +39,8 @@ class DataError(MclError):
 
 class ConfigError(MclError):
     """A run file or command-line value is invalid."""
+
+
+class NotFittedError(MclError, AttributeError):
+    """A result of an estimator (``law_``, ``cause_``, ...) read before ``fit``; also an
+    AttributeError, so ``hasattr(d, "law_")`` is False before fit."""

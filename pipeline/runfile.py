@@ -25,6 +25,7 @@ before anything is compiled.
 from __future__ import annotations
 
 import hashlib
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -137,12 +138,18 @@ def _lines(node, prefix="", out=None) -> dict[str, int]:
 
 
 class _Problems:
-    """Problems of one run file, each ``file:line: key: why``."""
+    """Problems of one run file, each ``file:line: key: why``; without a file (the Python API),
+    ``key: why`` with the key as the caller named it (``names``: run-file key -> argument)."""
 
-    def __init__(self, path: Path, lines: dict):
-        self.path, self.lines, self.items = path, lines, []
+    def __init__(self, path: Path | None, lines: dict, names: dict | None = None):
+        self.path, self.lines, self.items, self.names = path, lines, [], names or {}
 
     def add(self, key: str, why: str) -> None:
+        if self.path is None:
+            shown = next((arg + key[len(k):] for k, arg in sorted(self.names.items(), key=lambda kv: -len(kv[0]))
+                          if key == k or key.startswith(k + ".")), key)
+            self.items.append((0, f"{shown or '(top level)'}: {why}"))
+            return
         line = self.lines.get(key)
         parent = key
         while line is None and "." in parent:
@@ -152,7 +159,7 @@ class _Problems:
 
     def about(self, key: str) -> bool:
         """Whether a problem was reported for ``key`` or below it."""
-        return any(f": {key}:" in text or f": {key}." in text for _, text in self.items)
+        return any(f": {key}:" in f": {text}" or f": {key}." in f": {text}" for _, text in self.items)
 
     def raise_if_any(self) -> None:
         if self.items:
@@ -206,8 +213,9 @@ def load_runfile(path, registry=None) -> RunSpec:
 
 
 def _read_yaml(path: Path):
-    if not path.is_file():
-        raise ConfigError("no such run file", where=str(path))
+    from .outputs import check_input
+
+    check_input(path, "run file", error=ConfigError)
     try:
         text = path.read_text(encoding="utf-8")
         node = yaml.compose(text)
@@ -228,7 +236,34 @@ def _read_yaml(path: Path):
     if not isinstance(raw, dict):
         raise ConfigError("the run file must be a mapping of sections (model, data, output, ...)",
                           where=str(path))
+    twice = _duplicate_keys(node)
+    if twice:
+        raise ConfigError("\n".join(f"{path}:{line}: {key}: given twice (first on line {first}); "
+                                    "keep one" for key, line, first in twice))
     return raw, _lines(node)
+
+
+def _duplicate_keys(node, prefix: str = "", seen_nodes=None) -> list[tuple[str, int, int]]:
+    """(dotted key, line, line of its first occurrence) of every key a mapping gives twice
+    (YAML loaders keep the last one silently)."""
+    seen_nodes = set() if seen_nodes is None else seen_nodes
+    if node is None or id(node) in seen_nodes:      # an alias: its node was checked where anchored
+        return []
+    seen_nodes.add(id(node))
+    out = []
+    if isinstance(node, yaml.MappingNode):
+        first: dict = {}
+        for k, v in node.value:
+            name = str(k.value)
+            key = f"{prefix}.{name}" if prefix else name
+            if name in first and name != "<<":
+                out.append((key, k.start_mark.line + 1, first[name]))
+            first.setdefault(name, k.start_mark.line + 1)
+            out += _duplicate_keys(v, key, seen_nodes)
+    elif isinstance(node, yaml.SequenceNode):
+        for n, v in enumerate(node.value):
+            out += _duplicate_keys(v, f"{prefix}.{n}" if prefix else str(n), seen_nodes)
+    return out
 
 
 MAX_VALUES = 100_000
@@ -270,7 +305,7 @@ def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
     files, sources, libraries = _check_files(raw, path.parent, problems, reg)
     problems.raise_if_any()
     model, base = raw["model"], path.parent
-    output = base / str(raw["output"])
+    output = _at(base, raw["output"])
     fitting, refinement = raw.get("fitting") or {}, raw.get("refinement") or {}
     spec = RunSpec(path=path, sources=sources, model_name=model["name"], train=files["train"],
                    validate=files.get("validate"), unknown=str(raw.get("unknown", "auto")),
@@ -284,36 +319,52 @@ def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
     return spec, lines
 
 
+def _at(base: Path, name) -> Path:
+    """A path the run file names: ``~`` is the user's home, relative paths are from the file."""
+    return base / Path(str(name)).expanduser()
+
+
 def _strings(x) -> list[str]:
     return [x] if isinstance(x, str) else [s for s in (x if isinstance(x, list) else []) if isinstance(s, str)]
 
 
-def _check_files(raw: dict, base: Path, problems: _Problems, reg):
+def _check_files(raw: dict, base: Path, problems: _Problems, reg, with_data: bool = True):
     """Files the run file names exist, templates build; checked where the shape allows, so
     these problems come together with the schema's."""
     section = (lambda k: raw.get(k) if isinstance(raw.get(k), dict) else {})
     model, data, second = section("model"), section("data"), section("second")
-    sources = [base / s for s in _strings(model.get("sources"))]
-    libraries = [base / s for s in _strings(model.get("libraries"))]
+    sources = [_at(base, s) for s in _strings(model.get("sources"))]
+    libraries = [_at(base, s) for s in _strings(model.get("libraries"))]
     if "fmu" in model:
         problems.add("model.fmu", "discovery needs the Modelica sources (the template is swapped "
                                   "into them): give model.sources and model.name")
-    for key, names in (("model.sources", _strings(model.get("sources"))),
-                       ("model.libraries", _strings(model.get("libraries")))):
-        for name in names:
-            if not (base / name).exists():
-                problems.add(key, f"'{name}' does not exist")
-    files = {k: base / v for k, v in data.items() if k in ("train", "validate") and isinstance(v, str)}
+    for name in _strings(model.get("sources")):
+        why = _path_problem(_at(base, name), "source")
+        if why:
+            problems.add("model.sources", f"'{name}' {why}")
+    for name in _strings(model.get("libraries")):
+        p = _at(base, name)
+        why = _path_problem(p, "library") or (None if p.is_dir() else
+                                               "is not a directory: a library on the path is a directory "
+                                               "(a library with package.mo, or a folder of libraries)")
+        if why:
+            problems.add("model.libraries", f"'{name}' {why}")
+    files = {k: _at(base, v) for k, v in data.items() if k in ("train", "validate") and isinstance(v, str)} \
+        if with_data else {}
     for key, p in files.items():
-        if not p.is_file():
-            problems.add(f"data.{key}", f"'{data[key]}' " + ("is not a file" if p.exists() else "does not exist"))
+        why = _path_problem(p, "file") or (None if p.is_file() else "is not a file")
+        if why:
+            problems.add(f"data.{key}", f"'{data[key]}' {why}")
     if second:
         for name in _strings((second.get("model") or {}).get("sources") if isinstance(second.get("model"), dict) else None):
-            if not (base / name).exists():
-                problems.add("second.model.sources", f"'{name}' does not exist")
+            why = _path_problem(_at(base, name), "source")
+            if why:
+                problems.add("second.model.sources", f"'{name}' {why}")
         if isinstance(second.get("data"), str):
-            if not (base / second["data"]).is_file():
-                problems.add("second.data", f"'{second['data']}' does not exist")
+            p = _at(base, second["data"])
+            why = _path_problem(p, "file") or (None if p.is_file() else "is not a file")
+            if why:
+                problems.add("second.data", f"'{second['data']}' {why}")
             elif not second["data"].lower().endswith(".csv"):
                 problems.add("second.data", f"'{second['data']}' is not a CSV file")
     templates = raw.get("templates") or []
@@ -325,49 +376,123 @@ def _check_files(raw: dict, base: Path, problems: _Problems, reg):
             except MclError as exc:
                 problems.add(f"templates.{k}", exc.message)
     if isinstance(raw.get("output"), str):
-        output = base / raw["output"]
+        output = _at(base, raw["output"])
         if output.exists() and not output.is_dir():
             problems.add("output", f"'{raw['output']}' is a file, not a run directory")
     return files, sources, libraries
 
 
+def _path_problem(p: Path, what: str) -> str | None:
+    """Why the input ``p`` cannot be read (missing, a FIFO or a device), or None."""
+    from .outputs import special_kind
+
+    kind = special_kind(p)
+    if kind:
+        return f"is {kind}, not a {what}"
+    if not p.exists():
+        return "does not exist"
+    return None
+
+
 def check_data(spec: RunSpec, lines: dict) -> None:
     """The data files against the model: readable, columns present (one pass over both files)."""
-    from .api import compile_model
     from .data import read_csv
 
     problems = _Problems(spec.path, lines)
-    try:
-        model = compile_model(spec.sources, spec.model_name, libraries=spec.libraries)
-    except MclError as exc:
-        raise ConfigError(f"{spec.path}:{lines.get('model.name', 1)}: model: {exc}") from None
+    series = {}
     for key, p in (("train", spec.train), ("validate", spec.validate)):
         if p is None:
             continue
         try:
-            ts = read_csv(p)
+            series[key] = (read_csv(p), p.name)
         except MclError as exc:
             problems.add(f"data.{key}", str(exc))
-            continue
-        for why in model_column_problems(model, ts, spec.model_name, p.name):
-            problems.add(f"data.{key}", why)
+    try:
+        _check_against_model(spec, series, problems)
+    except MclError as exc:
+        raise ConfigError(f"{spec.path}:{lines.get('model.name', 1)}: model: {exc}") from None
+    problems.raise_if_any()
+
+
+def _check_against_model(spec: RunSpec, series: dict, problems: _Problems) -> None:
+    """Each series (key -> (TimeSeries, label)) against the compiled model; the unknown
+    component and the second configuration against the component graphs. A model that does not
+    compile raises its own error."""
+    from .api import compile_model
     from .graph import build_graph
 
+    model = compile_model(spec.sources, spec.model_name, libraries=spec.libraries)
+    for key, (ts, label) in series.items():
+        for why in model_column_problems(model, ts, spec.model_name, label):
+            problems.add(f"data.{key}", why)
     if spec.unknown != "auto":
         comps = build_graph(spec.sources, spec.model_name, libraries=spec.libraries).components
         if spec.unknown not in comps:
             problems.add("unknown", f"no component '{spec.unknown}' in {spec.model_name}"
                                     f"{did_you_mean(spec.unknown, comps)}")
     if spec.second:
-        sec, base = spec.second, spec.path.parent
+        sec, base = spec.second, spec.path.parent if spec.path else Path(".")
         try:
-            graph = build_graph([base / s for s in _strings(sec["model"].get("sources"))],
+            graph = build_graph([_at(base, s) for s in _strings(sec["model"].get("sources"))],
                                 sec["model"]["name"], libraries=spec.libraries)
             target = sec.get("component", spec.unknown)
             if target != "auto" and target not in graph.components:
                 problems.add("second.component", f"no component '{target}' in {sec['model']['name']}")
         except MclError as exc:
             problems.add("second.model.name", str(exc))
+
+
+#: run-file keys as the arguments of :class:`mcl.Discovery` name them
+ARGUMENTS = {"model.name": "model", "model.sources": "sources", "model.libraries": "libraries",
+             "fitting.max_simulations": "max_simulations", "fitting.screen": "screen",
+             "fitting.early_stop": "early_stop", "refinement.criterion": "criterion",
+             "refinement.method": "refinement", "data.train": "train", "data.validate": "validate"}
+
+
+def check_arguments(args: dict, registry=None) -> None:
+    """The arguments of :class:`mcl.Discovery` checked as the run file's keys are (the same
+    schema, the same messages, named by argument); a ConfigError with every problem."""
+    import jsonschema
+
+    from .api import registry as default_registry
+
+    reg = registry or default_registry()
+    plain = lambda x: str(x) if isinstance(x, os.PathLike) else x
+    paths = lambda x: [plain(v) for v in x] if isinstance(x, (list, tuple)) else plain(x)
+    templates = args.get("templates")
+    executor = args.get("executor", "local")
+    raw = {"model": {"name": args.get("model")}, "data": {"train": "<memory>"},
+           "unknown": args.get("unknown", "auto"),
+           "output": str(args["output"]) if args.get("output") is not None else "<temporary>",
+           "fitting": {"max_simulations": args.get("max_simulations", 60), "screen": args.get("screen", 3),
+                       "early_stop": args.get("early_stop", True)},
+           "refinement": {"criterion": args.get("criterion", "bic"), "method": args.get("refinement", "simulation")},
+           "executor": {"kind": executor} if isinstance(executor, str) else executor}
+    for key in ("sources", "libraries"):
+        if args.get(key) not in (None, (), []):
+            raw["model"][key] = paths(args[key])
+    if templates is not None:
+        raw["templates"] = [templates] if isinstance(templates, (str, dict)) else \
+            list(templates) if isinstance(templates, (list, tuple)) else templates
+    for key in ("second", "report"):
+        if args.get(key) is not None:
+            raw[key] = args[key]
+    problems = _Problems(None, {}, ARGUMENTS)
+    kinds = {"template": list(reg.templates), "executor": list(reg.executors), "fitter": list(reg.fitters)}
+    validator = jsonschema.Draft202012Validator(schema(reg.option_schemas, kinds))
+    for error in sorted(validator.iter_errors(raw), key=lambda e: list(map(str, e.absolute_path))):
+        _describe(error, problems)
+    _check_files(raw, Path("."), problems, reg, with_data=False)
+    problems.raise_if_any()
+
+
+def check_series(spec: RunSpec, train, validate=None) -> None:
+    """In-memory data (TimeSeries) against the model, as :func:`check_data` checks files."""
+    problems = _Problems(None, {}, ARGUMENTS)
+    series = {"train": (train, "train")}
+    if validate is not None:
+        series["validate"] = (validate, "validate")
+    _check_against_model(spec, series, problems)
     problems.raise_if_any()
 
 

@@ -67,7 +67,8 @@ def _check_options(values: dict, option) -> None:
         if not ok:
             kind = "a whole number" if integer else "a finite number"
             rng = f"greater than {lo:g}" + ("" if hi == math.inf else f" and less than {hi:g}")
-            raise ConfigError(f"{option(name)} = {value!r}: must be {kind} {rng}")
+            shown = f"{value:g}" if isinstance(value, (int, float)) and not isinstance(value, bool) else repr(value)
+            raise ConfigError(f"{option(name)} = {shown}: must be {kind} {rng}")
 
 
 @dataclass

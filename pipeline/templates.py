@@ -271,6 +271,32 @@ def _solve(g, xs: np.ndarray) -> np.ndarray:
     return out
 
 
+#: parameters a template may have: each costs one sensitivity per simulation of every fit
+MAX_PARAMETERS = 40
+
+
+def _scale(name, value) -> float:
+    """A scale's start value: a finite number other than 0 (it divides a variable: tanh(v/s1))."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = None
+    if isinstance(value, bool) or v is None or not np.isfinite(v) or not 1e-12 <= abs(v) <= 1e12:
+        raise ConfigError(f"template scale {name} = {value!r}: must be a number in the variable's units, "
+                          "not 0 and between 1e-12 and 1e12 in size")
+    return v
+
+
+def _finite(values, what: str) -> np.ndarray:
+    try:
+        out = np.asarray(values, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise ConfigError(f"template {what}: {values!r} is not a list of numbers") from None
+    if not np.all(np.isfinite(out)):
+        raise ConfigError(f"template {what}: every value must be a finite number")
+    return out
+
+
 class PolynomialTemplate(Template):
     """Linear in w: w1*lhs_1 + ... = w_k*rhs_1 + ... over monomials of v, i (paper 000, sec. II).
 
@@ -289,7 +315,14 @@ class PolynomialTemplate(Template):
     def __init__(self, lhs=None, rhs=None, degree: int = 3, start=None, prefix: str = "w", family: str = "",
                  scales: dict | None = None):
         self.family = family     # which law family discovery chose it as (static, rate, storage, shape)
-        self.scales = {str(k): float(v) for k, v in (scales or {}).items()}
+        self.scales = {str(k): _scale(k, v) for k, v in (scales or {}).items()}
+        if rhs is None and (isinstance(degree, bool) or not isinstance(degree, (int, np.integer))
+                            or not 1 <= degree < MAX_PARAMETERS):
+            raise ConfigError(f"template degree = {degree!r}: must be a whole number from 1 to {MAX_PARAMETERS - 1}")
+        if len(lhs or ()) + len(rhs or ()) + len(self.scales) > MAX_PARAMETERS:
+            raise ConfigError(f"template has {len(lhs or ()) + len(rhs or ()) + len(self.scales)} parameters; "
+                              f"at most {MAX_PARAMETERS} are fitted (each costs a sensitivity per simulation): "
+                              "give fewer terms")
         bad = [k for k in self.scales if not re.fullmatch(r"[A-Za-z_]\w*", k) or k in VARIABLES
                or k in _FUNCTIONS or re.fullmatch(rf"{re.escape(prefix)}\d+", k)]
         if bad:
@@ -299,7 +332,7 @@ class PolynomialTemplate(Template):
                                                                      for k in range(1, degree + 1)])]
         self.prefix = prefix
         n = len(self.lhs) + len(self.rhs)
-        self._start = np.full(n, 0.1) if start is None else np.asarray(start, dtype=float)
+        self._start = np.full(n, 0.1) if start is None else _finite(start, "start")
         if self._start.shape == (n + len(self.scales),):
             self._start = self._start[:n]
         if self._start.shape != (n,):
@@ -411,12 +444,14 @@ class NeuralTemplate(Template):
     def __init__(self, hidden: int = 3, start=None, seed: int = 0, x: str = "v", coupled: bool = True):
         if x not in ("v", "dv"):
             raise ConfigError(f"neural template: x must be v or dv, not {x!r}")
+        if isinstance(hidden, bool) or not isinstance(hidden, (int, np.integer)) or not 1 <= hidden <= 64:
+            raise ConfigError(f"neural template: hidden = {hidden!r} must be a whole number from 1 to 64")
         self.hidden, self.x, self.coupled = int(hidden), x, bool(coupled)
         self.per_unit = 4 if self.coupled else 3
         rng = np.random.default_rng(seed)
         n = len(self.parameter_names())
         default = np.concatenate([[1.0], rng.normal(0, 0.5, n - 1)])
-        self._start = default if start is None else np.asarray(start, dtype=float)
+        self._start = default if start is None else _finite(start, "start")
         if self._start.shape != (n,):
             raise ConfigError(f"neural template start has {self._start.size} values for {n} parameters")
 

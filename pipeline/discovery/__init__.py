@@ -13,7 +13,7 @@ import tempfile
 from pathlib import Path
 
 from ..data import as_timeseries
-from ..errors import ConfigError
+from ..errors import ConfigError, NotFittedError
 from ..progress import console
 from ..runfile import RunSpec
 from .families import family_of
@@ -72,21 +72,30 @@ class Discovery:
         output = Path(self.output) if self.output else Path(tempfile.mkdtemp(prefix="mcl-run-")) / "run"
         return RunSpec(path=None, sources=as_paths(self.sources), model_name=self.model, train=None,
                        validate=None, unknown=self.unknown, output=output,
-                       templates=list(self.templates) if self.templates else None,
+                       templates=([self.templates] if isinstance(self.templates, (str, dict)) else
+                                  list(self.templates)) if self.templates else None,
                        max_simulations=self.max_simulations, screen=self.screen, early_stop=self.early_stop,
                        criterion=self.criterion,
                        refinement_method=self.refinement, executor=executor, second=self.second,
                        report=dict(self.report_options or {}), libraries=as_paths(self.libraries))
 
-    def fit(self, train, validate=None) -> "Discovery":
+    def fit(self, train, validate=None, time: str | None = None) -> "Discovery":
         """Run the discovery on ``train`` (and held-out ``validate``) data: a pandas DataFrame,
-        a NumPy structured array, a mapping of columns, a :class:`mcl.data.TimeSeries` or a CSV."""
+        a NumPy structured array, a mapping of columns, a :class:`mcl.data.TimeSeries` or a CSV.
+        Time is the ``time`` column (or a DataFrame index named time); ``time="t"`` names
+        another column, ``time="index"`` takes the index. Mistakes are refused as the run
+        file's are, with the same messages."""
         from .run import run_discovery
+        from ..runfile import check_series
 
+        if self._spec is None:
+            self._check_arguments()
         spec = self.spec()
         self._check(spec)
-        train_ts = as_timeseries(train, "train")
-        validate_ts = None if validate is None else as_timeseries(validate, "validate")
+        train_ts = as_timeseries(train, "train", time=time)
+        validate_ts = None if validate is None else as_timeseries(validate, "validate", time=time)
+        if spec.path is None:       # a run file's data were checked against the model already
+            check_series(spec, train_ts, validate_ts)
         fingerprint = spec.fingerprint() if spec.path else {
             "train": train_ts.fingerprint(), **({"validate": validate_ts.fingerprint()} if validate_ts else {})}
         with console(self.verbose):
@@ -107,6 +116,22 @@ class Discovery:
         for t in spec.templates or []:
             reg.template(t)
 
+    def _check_arguments(self) -> None:
+        from ..runfile import check_arguments
+
+        check_arguments({"model": self.model, "sources": self.sources, "unknown": self.unknown,
+                         "templates": self.templates, "libraries": self.libraries,
+                         "max_simulations": self.max_simulations, "screen": self.screen,
+                         "criterion": self.criterion, "refinement": self.refinement,
+                         "executor": self.executor, "second": self.second, "report": self.report_options,
+                         "output": self.output, "early_stop": self.early_stop})
+
+    def __getattr__(self, name: str):
+        # called only for attributes never set: the results (ending in _) before fit
+        if name.endswith("_") and not name.startswith("_"):
+            raise NotFittedError(f"{name} is not set: this Discovery is not fitted yet; call fit(train) first")
+        raise AttributeError(f"'{type(self).__name__}' object has no attribute '{name}'")
+
     def _set_results(self, report: dict, run_dir: Path) -> None:
         self.report_, self.run_dir_ = report, Path(run_dir)
         self.misfit_, self.cause_, self.gain_ = report["misfit"], report["cause"], report["gain"]
@@ -115,7 +140,7 @@ class Discovery:
 
     def _fitted(self) -> None:
         if not hasattr(self, "report_"):
-            raise ConfigError("this Discovery is not fitted yet: call fit(train) first")
+            raise NotFittedError("this Discovery is not fitted yet: call fit(train) first")
 
     def export(self, directory, name: str = "MCLLearned") -> Path:
         """The learned component as a Modelica library ``directory/name`` (and its FMU)."""
