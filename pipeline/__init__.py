@@ -11,16 +11,33 @@ The public face:
 
 Built-in plugins live in :mod:`mcl.plugins`, the MCL Modelica library in :mod:`mcl.modelica`.
 """
-from .api import compile_model, discover, load_model, simulate
-from .data import TimeSeries, read_csv
-from .discovery import Discovery
-from .discovery.export import export_library
 from .errors import MclError
 from .hookspecs import hookimpl
-from .compile.library import mcl_version
-from .simulation import SimulationOptions, SimulationResult
 
-__version__ = mcl_version()
+#: public name -> module defining it, imported on first use (so `mcl --help` imports no numpy)
+_LAZY = {"compile_model": "api", "load_model": "api", "simulate": "api", "discover": "api",
+         "Discovery": "discovery", "export_library": "discovery.export", "TimeSeries": "data",
+         "read_csv": "data", "SimulationOptions": "simulation", "SimulationResult": "simulation"}
+
 __all__ = ["compile_model", "load_model", "simulate", "discover", "Discovery", "export_library",
            "TimeSeries", "read_csv", "SimulationOptions", "SimulationResult", "MclError", "hookimpl",
            "__version__"]
+
+
+def __getattr__(name: str):
+    import importlib
+
+    if name in _LAZY:
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+    elif name == "__version__":
+        from .compile.library import mcl_version
+
+        value = mcl_version()
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -1,10 +1,14 @@
-"""The ``mcl`` command. Only this module turns errors into one-line messages and exit codes."""
+"""The ``mcl`` command. Only this module turns errors into one-line messages and exit codes.
+
+Nothing heavy is imported before a command runs, so ``mcl --help`` and ``mcl --version`` answer
+at once: numpy, casadi, scipy, pandas, matplotlib and rumoca come in with the command that uses
+them. Every output path goes through :mod:`mcl.outputs` (new, or with ``--force`` one mcl wrote).
+"""
 from __future__ import annotations
 
 import argparse
 import logging
 import math
-import shutil
 import sys
 import traceback
 from pathlib import Path
@@ -12,6 +16,9 @@ from pathlib import Path
 from .errors import ConfigError, MclError
 
 EXIT_ERROR, EXIT_FAILED, EXIT_INTERRUPTED = 2, 1, 130
+
+#: what ``--plot`` and ``--draw`` may be called (matplotlib chooses the format by the suffix)
+IMAGE_SUFFIXES = (".png", ".svg", ".pdf")
 
 
 def _parse_params(pairs) -> dict[str, float]:
@@ -29,6 +36,34 @@ def _parse_params(pairs) -> dict[str, float]:
     return out
 
 
+def _flag(field: str) -> str:
+    """The command-line option of a SimulationOptions field (time_limit -> --time-limit)."""
+    return "--" + field.replace("_", "-")
+
+
+def _positive(option: str, value, integer: bool = False):
+    """``value`` of ``option`` if a finite number > 0 (a whole one with ``integer``)."""
+    if not (math.isfinite(value) and value > 0 and (not integer or float(value).is_integer())):
+        raise ConfigError(f"{option} {value!r}: must be a {'whole' if integer else 'finite'} number greater than 0")
+    return value
+
+
+def _image(option: str, name, suffixes=IMAGE_SUFFIXES):
+    if name is not None and Path(name).suffix.lower() not in suffixes:
+        raise ConfigError(f"{option} {name}: give a file name ending in {' or '.join(suffixes)} "
+                          "(the image format is chosen by it)")
+    return name
+
+
+def _libraries(args) -> list:
+    from .api import check_libraries
+
+    try:
+        return check_libraries(args.library)
+    except ConfigError as exc:
+        raise ConfigError(f"--library {exc.where}: {exc.message}") from None
+
+
 def _model_from_args(args):
     from .api import load_model
 
@@ -36,70 +71,128 @@ def _model_from_args(args):
         from .api import compile_model
 
         return compile_model([], args.model, args.compiler, libraries=args.library)
+    if args.model:
+        from .api import compile_model
+
+        return compile_model(args.sources, args.model, args.compiler, libraries=args.library)
     return load_model(args.sources, args.model, args.compiler)
 
 
 def cmd_compile(args) -> int:
     from .api import compile_model
+    from .outputs import check_output, record
+
+    _libraries(args)
+    fmu = Path(args.output).suffix.lower() == ".fmu"
+    out = check_output(args.output, args.force, directory=not fmu, inputs=args.sources,
+                       what="an FMU" if fmu else "a saved model")
+    model = compile_model(args.sources, args.model, args.compiler, libraries=args.library)
     from .model import CompiledModel
 
-    model = compile_model(args.sources, args.model, args.compiler, libraries=args.library)
-    out = Path(args.output)
     if isinstance(model, CompiledModel):
         o = model.ode
         print(f"compiled {model.name} with {model.info.get('compiler')}: {len(o.x_names)} states "
               f"(index {o.index}), {o.nonlinear_blocks} algebraic loop(s), {len(o.u_names)} input(s), "
               f"{len(o.y_names)} output(s), {len(o.p_names)} free parameter(s)")
-        if out.suffix.lower() == ".fmu":
+        if fmu:
             from .compile.fmu.export import build_fmu
 
             build_fmu(model, out, validate=not args.no_validate)
-            print(f"wrote {out} (FMI 2.0 Model Exchange{'' if args.no_validate else ', validated by FMPy'})")
+            record(out)
+            print(f"wrote {args.output} (FMI 2.0 Model Exchange{'' if args.no_validate else ', validated by FMPy'})")
         else:
-            model.save(out)
-            print(f"wrote {out}/ (CasADi functions; run it with 'mcl simulate {out}')")
+            model.save(out, force=args.force)
+            print(f"wrote {args.output}/ (CasADi functions; run it with 'mcl simulate {args.output}')")
     else:
-        if out.suffix.lower() != ".fmu":
+        if not fmu:
             raise ConfigError(f"compiler '{args.compiler}' writes FMUs: give -o NAME.fmu")
+        import os
+        import shutil
+
         out.parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(model.path, out)
-        print(f"wrote {out}")
+        staged = out.with_name(f".{out.name}.{os.getpid()}.tmp")
+        try:
+            shutil.copyfile(model.path, staged)
+            staged.replace(out)
+        finally:
+            staged.unlink(missing_ok=True)
+        record(out)
+        print(f"wrote {args.output}")
     return 0
 
 
 def cmd_simulate(args) -> int:
     from .api import simulate
     from .data import read_csv, write_csv
+    from .outputs import check_input, check_output, record
+    from .simulation import SimulationOptions
 
     params = _parse_params(args.param)
-    if Path(args.output).is_dir():
-        raise ConfigError("the result file to write is an existing directory", where=args.output)
-    inputs = read_csv(args.input)
+    options = SimulationOptions.from_dict({"rtol": args.rtol, "atol": args.atol, "time_limit": args.time_limit},
+                                          option=_flag)
+    _libraries(args)
+    data = check_input(args.input, "data file")
+    read = [data, *args.sources]
+    out = check_output(args.output, args.force, inputs=read, what="a result file")
+    plot = None
+    if args.plot:
+        plot = check_output(_image("--plot", args.plot, (".png",)), args.force, inputs=read, what="a plot")
+        if plot == out:
+            raise ConfigError("--plot and -o name the same file: give each its own", where=args.plot)
+    inputs = read_csv(data)
     model = _model_from_args(args)
-    options = {"rtol": args.rtol, "time_limit": args.time_limit}
     result = simulate(model, inputs, params, options=options, engine=args.engine)
     if not result.ok:
         print(f"mcl: simulation failed: {result.reason}", file=sys.stderr)
         return EXIT_FAILED
-    write_csv(args.output, result.as_series())
-    if args.plot:
+    write_csv(out, result.as_series())
+    record(out)
+    if plot is not None:
         from .plots import plot_simulation
 
-        plot_simulation(result, inputs.select(model.input_names), args.plot, title=model.name,
+        plot_simulation(result, inputs.select(model.input_names), plot, title=model.name,
                         units=getattr(model, "info", {}).get("units"))
+        record(plot)
         print(f"plotted inputs and outputs -> {args.plot}")
     print(f"simulated {len(result.time)} samples of {', '.join(result.output_names)} with the "
           f"{result.engine} engine in {result.seconds:.3g} s -> {args.output}")
     return 0
 
 
+def cmd_info(args) -> int:
+    from .info import model_info
+    from .outputs import check_input
+
+    if args.model:
+        _libraries(args)
+        model = _model_from_args(args)
+    else:
+        if len(args.sources) != 1:
+            raise ConfigError("give one FMU or saved model directory, or Modelica sources with --model")
+        path = check_input(args.sources[0], "model (an FMU or a saved model directory)", directory_ok=True)
+        if path.is_dir() and not (path / "model.json").is_file():
+            raise ConfigError("is not a saved mcl model (no model.json); for Modelica sources give --model",
+                              where=str(path))
+        if path.is_file() and path.suffix.lower() != ".fmu":
+            raise ConfigError("is not an FMU (.fmu); for Modelica sources give --model", where=str(path))
+        model = path
+    print(model_info(model).table())
+    return 0
+
+
 def cmd_graph(args) -> int:
     from .graph import build_graph
+    from .outputs import check_output, record
 
+    draw = None
+    if args.draw:
+        draw = check_output(_image("--draw", args.draw), args.force, inputs=args.sources, what="a drawing")
     graph = build_graph(args.sources, args.model)
     print(graph.describe())
-    if args.draw:
-        print(f"drew {graph.draw(args.draw)}")
+    if draw is not None:
+        graph.draw(draw)
+        record(draw)
+        print(f"drew {args.draw}")
     return 0
 
 
@@ -108,8 +201,13 @@ def cmd_pretrain(args) -> int:
 
     from .api import registry
     from .graph import build_graph
+    from .outputs import check_output, new_directory
     from .pretrain import plot_feasibility, pretrain
 
+    _positive("--samples", args.samples, integer=True)
+    _positive("--box", args.box)
+    _positive("--amplitude", args.amplitude)
+    check_output(args.output, args.force, directory=True, inputs=args.sources, what="a results directory")
     reg = registry()
     graph = build_graph(args.sources, args.model)
     comps = graph.components
@@ -125,20 +223,19 @@ def cmd_pretrain(args) -> int:
     if args.rhs:
         spec["rhs"] = args.rhs.split(",")
     template = reg.template(spec)
-    out = Path(args.output)
-    out.mkdir(parents=True, exist_ok=True)
-    with reg.executor(args.executor) as executor:
-        result = pretrain(template, comp.connectors[0], graph.sources, reg, n_samples=args.samples,
-                          box=args.box, seed=args.seed, executor=executor, feasibility=args.feasibility,
-                          amplitude=args.amplitude, directory=out / "configurations")
-    result.save(out / "samples.npz")
-    plot_feasibility(result, out / "feasibility.png", title=f"{args.component}: {template.law()}")
-    coef = getattr(result.model, "coef_", None)
-    summary = {"configurations": result.configurations, "skipped": result.notes,
-               "samples": int(len(result.labels)), "feasible": int(result.labels.sum()),
-               "held_out_accuracy": result.accuracy, "parameters": result.parameter_names,
-               "hyperplane_normal": None if coef is None else [float(c) for c in coef]}
-    (out / "pretrain.json").write_text(json.dumps(summary, indent=1))
+    with new_directory(args.output, args.force, what="a results directory", inputs=args.sources) as out:
+        with reg.executor(args.executor) as executor:
+            result = pretrain(template, comp.connectors[0], graph.sources, reg, n_samples=args.samples,
+                              box=args.box, seed=args.seed, executor=executor, feasibility=args.feasibility,
+                              amplitude=args.amplitude, directory=out / "configurations")
+        result.save(out / "samples.npz")
+        plot_feasibility(result, out / "feasibility.png", title=f"{args.component}: {template.law()}")
+        coef = getattr(result.model, "coef_", None)
+        summary = {"configurations": result.configurations, "skipped": result.notes,
+                   "samples": int(len(result.labels)), "feasible": int(result.labels.sum()),
+                   "held_out_accuracy": result.accuracy, "parameters": result.parameter_names,
+                   "hyperplane_normal": None if coef is None else [float(c) for c in coef]}
+        (out / "pretrain.json").write_text(json.dumps(summary, indent=1))
     print(f"configurations used: {', '.join(result.configurations)}")
     for name, why in result.notes.items():
         print(f"  left out {name}: {why}")
@@ -150,14 +247,22 @@ def cmd_pretrain(args) -> int:
         sym = "" if axis is None else (f", taking {result.parameter_names[axis]} >= 0: the law is "
                                        "unchanged by w -> -w")
         print(f"separating hyperplane: {terms} = 0 (feasible side > 0{sym})")
-    print(f"wrote {out}/feasibility.png, samples.npz, pretrain.json")
+    print(f"wrote {args.output}/feasibility.png, samples.npz, pretrain.json")
     return 0
 
 
 def cmd_run(args) -> int:
     from .discovery import Discovery
+    from .discovery.rundir import check_run_output
+    from .runfile import check_data, parse_runfile
 
-    discovery = Discovery.from_runfile(args.runfile, force=args.force, verbose=not args.quiet)
+    spec, lines = parse_runfile(args.runfile)
+    try:     # before anything is compiled: an output that will not be written is said at once
+        check_run_output(spec.output, args.force)
+    except ConfigError as exc:
+        raise ConfigError(f"{args.runfile}:{lines.get('output', 1)}: output: {exc}") from None
+    check_data(spec, lines)
+    discovery = Discovery.from_spec(spec, force=args.force, verbose=not args.quiet)
     discovery.fit(discovery.spec().train, discovery.spec().validate)
     print(discovery)
     return 0
@@ -166,7 +271,7 @@ def cmd_run(args) -> int:
 def cmd_export(args) -> int:
     from .discovery.export import export_library
 
-    out = export_library(args.run_dir, args.output, args.name)
+    out = export_library(args.run_dir, args.output, args.name, force=args.force)
     print(f"exported the learned component -> {out}/package.mo")
     return 0
 
@@ -197,21 +302,68 @@ def _version() -> str:
     return mcl_version()
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (exit code 2), as every other refusal of mcl."""
+
+    def error(self, message):
+        self.exit(EXIT_ERROR, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
+
+
+class _Version(argparse.Action):
+    """``--version``: the version is looked up only when asked for."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"mcl {_version()}")
+        parser.exit()
+
+
 def _library_option(p) -> None:
     p.add_argument("--library", "-L", action="append", default=[], metavar="DIR",
                    help="a Modelica library, or a directory of libraries, to search for classes "
                         "(repeatable; MODELICAPATH and MCL are searched too)")
 
 
+def _force_option(p, what: str) -> None:
+    p.add_argument("--force", action="store_true",
+                   help=f"replace {what} that mcl wrote earlier (never a file or folder mcl did not write)")
+
+
+def _command(sub, name: str, help: str, description: str, examples: str):
+    return sub.add_parser(name, help=help, description=description,
+                          epilog="examples:\n" + examples.strip("\n"),
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+OUTPUTS = """\
+outputs: mcl writes new files and folders. An existing output is replaced only with --force, and
+only if mcl wrote it and nobody changed it since (mcl keeps a record, .mcl-outputs, of what it
+wrote in each folder); a file or folder of yours is never replaced, even with --force."""
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="mcl", description="Modelica component learning")
-    parser.add_argument("--version", action="version", version=f"mcl {_version()}")
+    parser = _Parser(prog="mcl", description="Modelica component learning: find the component a model "
+                                             "gets wrong and learn its law from measurements.",
+                     epilog="examples:\n  mcl run examples/cauer/run.yaml\n"
+                            "  mcl compile Lib.mo -m Lib.Plant -o plant.fmu\n"
+                            "  mcl simulate plant.fmu -i input.csv -o result.csv --plot result.png\n"
+                            "  mcl info plant.fmu\n\n" + OUTPUTS + "\n\n'mcl COMMAND --help' shows each command.",
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action=_Version, help="print mcl's version and exit")
     parser.add_argument("--verbose", action="store_true", help="show tracebacks and debug logs")
     parser.add_argument("--quiet", "-q", action="store_true", help="print nothing but the result")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    p = sub.add_parser("compile", help="compile Modelica sources to an FMU (or a saved model)",
-                       description="Compile Modelica sources (.mo files or package directories).")
+    p = _command(sub, "compile", "compile Modelica sources to an FMU (or a saved model)",
+                 "Compile Modelica sources (.mo files or package directories) to an FMI 2.0 FMU, or to "
+                 "a saved in-process model (a directory).", """
+  mcl compile Lib.mo -m Lib.Plant -o plant.fmu
+  mcl compile MyLib/ -m MyLib.Examples.Test -L ~/libs -o test.fmu
+  MODELICAPATH=../shared/msl mcl compile -m Modelica.Electrical.Analog.Examples.ChuaCircuit -o chua.fmu
+  mcl compile Lib.mo -m Lib.Plant -o plant/          # a saved model for 'mcl simulate plant'
+  mcl compile Lib.mo -m Lib.Plant -o plant.fmu --force   # replace the FMU mcl wrote before""")
     p.add_argument("sources", nargs="*", help=".mo files or package directories (none: --model is "
                                               "a class of a library on the library path)")
     p.add_argument("--model", "-m", required=True, help="class to compile, e.g. Pkg.Model")
@@ -220,10 +372,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="OUT.fmu for an FMI 2.0 FMU, or a directory for the in-process model")
     p.add_argument("--compiler", help="compiler plugin by name (see 'mcl plugins')")
     p.add_argument("--no-validate", action="store_true", help="skip FMPy validation of the FMU")
+    _force_option(p, "an FMU or saved model")
     p.set_defaults(func=cmd_compile)
 
-    p = sub.add_parser("simulate", help="simulate a model with measured inputs",
-                       description="Simulate an FMU, a saved model, or Modelica sources (--model).")
+    p = _command(sub, "simulate", "simulate a model with measured inputs",
+                 "Simulate an FMU, a saved model, or Modelica sources (--model) with the inputs of a "
+                 "CSV file (header row, time first, one column per model input).", """
+  mcl simulate plant.fmu -i input.csv -o result.csv
+  mcl simulate Lib.mo -m Lib.Plant -i input.csv -o result.csv --plot result.png
+  mcl simulate plant/ -i input.csv -p R1.R=2.2 -p C.C=1e-3 -o result.csv --rtol 1e-8
+  mcl simulate plant.fmu -i input.csv -o result.csv --force   # replace the result mcl wrote""")
     p.add_argument("sources", nargs="*", metavar="MODEL",
                    help="an FMU, a saved model directory, or Modelica sources with --model")
     _library_option(p)
@@ -234,47 +392,81 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", metavar="PNG", help="also draw inputs and outputs to this PNG file")
     p.add_argument("--engine", help="engine by name: casadi (in-process) or fmu")
     p.add_argument("--compiler", help="compiler plugin by name, for Modelica sources")
-    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (default 1e-6)")
-    p.add_argument("--time-limit", type=float, default=60.0, help="seconds before giving up (default 60)")
+    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance, in (0, 1) (default 1e-6)")
+    p.add_argument("--atol", type=float, default=1e-8, help="absolute tolerance, > 0 (default 1e-8)")
+    p.add_argument("--time-limit", type=float, default=60.0, help="seconds before giving up, > 0 (default 60)")
+    _force_option(p, "a result or plot")
     p.set_defaults(func=cmd_simulate)
 
-    p = sub.add_parser("graph", help="print (and draw) the connection graph of a model")
+    p = _command(sub, "info", "list a model's variables, units, parameters and states",
+                 "What a model holds, as 'fmpy info' tells it: variables with causality, unit and "
+                 "description; parameters with their values; states with their start values.", """
+  mcl info plant.fmu
+  mcl info plant/                       # a saved model
+  mcl info Lib.mo -m Lib.Plant
+  mcl info -m MCL.Examples.CauerFilter  # a class on the library path""")
+    p.add_argument("sources", nargs="*", metavar="MODEL",
+                   help="an FMU, a saved model directory, or Modelica sources with --model")
+    _library_option(p)
+    p.add_argument("--model", "-m", help="class name when MODEL is Modelica sources")
+    p.add_argument("--compiler", help="compiler plugin by name, for Modelica sources")
+    p.set_defaults(func=cmd_info)
+
+    p = _command(sub, "graph", "print (and draw) the connection graph of a model",
+                 "The components of a model with their classes and connectors, the two-connector "
+                 "candidates and the nets.", """
+  mcl graph Lib.mo -m Lib.Plant
+  mcl graph Lib.mo -m Lib.Plant --draw plant.svg""")
     p.add_argument("sources", nargs="+", help=".mo files or package directories")
     p.add_argument("--model", "-m", required=True, help="class name, e.g. Pkg.Model")
-    p.add_argument("--draw", metavar="FILE", help="draw the graph to a PNG or SVG file")
+    p.add_argument("--draw", metavar="FILE", help="draw the graph to a PNG, SVG or PDF file")
+    _force_option(p, "a drawing")
     p.set_defaults(func=cmd_graph)
 
-    p = sub.add_parser("pretrain", help="pre-train the feasibility model of a template (Remark 3.1)",
-                       description="Sample a template's parameters in small configurations and "
-                                   "train q(w) on which ones simulate.")
+    p = _command(sub, "pretrain", "pre-train the feasibility model of a template (Remark 3.1)",
+                 "Sample a template's parameters in small configurations and train q(w) on which ones "
+                 "simulate.", """
+  mcl pretrain Lib.mo -m Lib.Plant -c Rnl --lhs i --rhs v^2,v^3 -o pretrained/
+  mcl pretrain Lib.mo -m Lib.Plant -c Rnl --samples 400 --feasibility neural -o pretrained/ --force""")
     p.add_argument("sources", nargs="+", help=".mo files or package directories")
     p.add_argument("--model", "-m", required=True, help="system model the component is in")
     p.add_argument("--component", "-c", required=True, help="the component's instance name")
     p.add_argument("--template", default="polynomial", help="template name (default polynomial)")
     p.add_argument("--lhs", help="comma-separated left-hand terms, e.g. i")
     p.add_argument("--rhs", help="comma-separated right-hand terms, e.g. v^2,v^3")
-    p.add_argument("--samples", type=int, default=200)
-    p.add_argument("--box", type=float, default=1.0, help="sample w in [-box, box]^n")
-    p.add_argument("--amplitude", type=float, default=1.0, help="excitation amplitude")
+    p.add_argument("--samples", type=int, default=200, help="parameter samples (default 200)")
+    p.add_argument("--box", type=float, default=1.0, help="sample w in [-box, box]^n (default 1)")
+    p.add_argument("--amplitude", type=float, default=1.0, help="excitation amplitude (default 1)")
     p.add_argument("--feasibility", default="logistic", help="logistic or neural")
     p.add_argument("--executor", default="local", help="local, serial or dask")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("-o", "--output", required=True, help="output directory")
+    _force_option(p, "an output directory")
     p.set_defaults(func=cmd_pretrain)
 
-    p = sub.add_parser("run", help="find what a model gets wrong and learn the missing law",
-                       description="Run the discovery described by a YAML run file.")
+    p = _command(sub, "run", "find what a model gets wrong and learn the missing law",
+                 "Run the discovery described by a YAML run file (see README: The run file).", """
+  mcl run examples/cauer/run.yaml
+  mcl run run.yaml --force          # replace the finished run directory mcl made
+  mcl --quiet run run.yaml          # print nothing but the result""")
     p.add_argument("runfile", help="the run file (YAML)")
-    p.add_argument("--force", action="store_true", help="replace a finished run directory")
+    _force_option(p, "a finished run directory")
     p.set_defaults(func=cmd_run)
 
-    p = sub.add_parser("export", help="copy a learned component into a reusable Modelica library")
+    p = _command(sub, "export", "copy a learned component into a reusable Modelica library",
+                 "Write the learned component of a finished run as a Modelica library OUTPUT/NAME "
+                 "(package.mo and the extended model's FMU).", """
+  mcl export out/cauer -o libs --name MyParts     # writes libs/MyParts/package.mo
+  mcl compile MyCircuit.mo -m MyCircuit -L libs -o circuit.fmu""")
     p.add_argument("run_dir", help="a finished run directory")
     p.add_argument("-o", "--output", required=True, help="directory to write the library into")
-    p.add_argument("--name", default="MCLLearned", help="library (package) name")
+    p.add_argument("--name", default="MCLLearned", help="library (package) name (default MCLLearned)")
+    _force_option(p, "a library")
     p.set_defaults(func=cmd_export)
 
-    p = sub.add_parser("plugins", help="list installed plugins, compilers and engines")
+    p = _command(sub, "plugins", "list installed plugins, compilers and engines",
+                 "Installed plugins (built-in and third-party), compilers, engines, templates, "
+                 "feasibility models and executors.", "  mcl plugins\n  MCL_DISABLE_EXTERNAL_PLUGINS=1 mcl plugins")
     p.set_defaults(func=cmd_plugins)
     return parser
 
@@ -315,7 +507,7 @@ def main(argv=None) -> int:
         if args.verbose:
             traceback.print_exc()
         print(f"mcl: internal error (please report it; --verbose shows where): "
-              f"{type(exc).__name__}: {exc}"[:500], file=sys.stderr)
+              f"{type(exc).__name__}: {' '.join(str(exc).split())}"[:500], file=sys.stderr)
         return EXIT_FAILED
     finally:
         log.removeHandler(handler)
