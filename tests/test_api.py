@@ -8,7 +8,7 @@ import pytest
 import mcl
 from mcl import Discovery, compile_model, discover, simulate
 from mcl.data import as_timeseries, read_csv
-from mcl.errors import ConfigError, DataError
+from mcl.errors import ConfigError, DataError, NotFittedError
 
 from test_discover import setup_run
 
@@ -98,7 +98,7 @@ def test_api_options_are_checked_like_a_run_file(tmp_path):
     with pytest.raises(ConfigError, match="workers"):
         Discovery("MCL.Examples.CauerFilter", executor={"kind": "local", "workers": 0}).fit(
             {"time": [0, 1], "u": [0, 0]})
-    with pytest.raises(ConfigError, match="not fitted"):
+    with pytest.raises(NotFittedError, match="not fitted"):
         Discovery("MCL.Examples.CauerFilter").export(tmp_path)
 
 

@@ -77,8 +77,50 @@ def test_user_mistakes_are_one_line(tmp_path, input_csv, args, message):
     assert "Traceback" not in proc.stderr
 
 
-def test_help_on_every_subcommand():
-    for cmd in ("compile", "simulate", "plugins"):
+def test_help_on_every_subcommand_with_examples():
+    from mcl.cli import build_parser
+
+    commands = build_parser()._subparsers._group_actions[0].choices
+    assert {"compile", "simulate", "info", "graph", "pretrain", "run", "export", "plugins"} <= set(commands)
+    for cmd in commands:
         proc = subprocess.run([sys.executable, "-m", "mcl", cmd, "--help"],
                               capture_output=True, text=True, timeout=60)
         assert proc.returncode == 0 and "usage: mcl" in proc.stdout
+        assert f"examples:\n  mcl {cmd}" in proc.stdout or f"examples:\n  MCL_" in proc.stdout, proc.stdout
+
+
+HEAVY = ("numpy", "casadi", "scipy", "pandas", "matplotlib", "rumoca")
+
+
+@pytest.mark.parametrize("flag", ["--help", "--version"])
+def test_help_and_version_import_nothing_heavy(flag):
+    """`mcl --help` and `--version` answer at once: no numerical library is imported for them
+    (their time is measured by `python -X importtime`, not asserted here)."""
+    code = (f"import sys\nfrom mcl.cli import main\ntry:\n    main([{flag!r}])\nexcept SystemExit:\n    pass\n"
+            f"print(sorted(m for m in {HEAVY!r} if m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and proc.stdout.strip().splitlines()[-1] == "[]", proc.stdout + proc.stderr
+    assert ("mcl " if flag == "--version" else "usage: mcl") in proc.stdout
+
+
+def test_info_lists_variables_units_parameters_and_states(tmp_path, capsys):
+    fmu, saved = tmp_path / "msd.fmu", tmp_path / "msd"
+    lib = ["compile", str(LIB), "-m", "MCL.Examples.MassSpringDamper"]
+    assert main([*lib, "-o", str(fmu), "--no-validate"]) == 0 and main([*lib, "-o", str(saved)]) == 0
+    capsys.readouterr()
+    tables = []
+    for args in ([str(fmu)], [str(saved)], [str(LIB), "-m", "MCL.Examples.MassSpringDamper"]):
+        assert main(["info", *args]) == 0
+        tables.append(capsys.readouterr().out)
+    for out in tables:
+        assert "model        MCL.Examples.MassSpringDamper" in out
+        lines = out.splitlines()
+        row = lambda name: next(line.split() for line in lines if line.split()[:1] == [name])
+        assert row("u")[-3:] == ["[N]", "applied", "force"] and row("y")[1] == "[m]"
+        assert float(row("mass.m")[2]) == 1 and float(row("spring.c")[2]) == 4 and row("spring.c")[3] == "[N/m]"
+        states = lines[lines.index(next(x for x in lines if x.startswith("states ("))) + 1:]
+        assert {"mass.s", "mass.v"} <= {s.split()[0] for s in states[:2]}
+    assert "FMI 2.0 FMU (Model Exchange" in tables[0] and "generated    mcl" in tables[0]
+    assert "in-process model" in tables[1] and "index 2, 0 algebraic loop(s)" in tables[1]
+    assert main(["info", str(tmp_path / "none.fmu")]) == 2
+    assert "no such model" in capsys.readouterr().err

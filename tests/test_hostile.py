@@ -221,7 +221,7 @@ def test_a_second_run_on_the_same_output_is_told_so(tmp_path):
     with pytest.raises(ConfigError, match="another mcl run"):
         RunDirectory(tmp_path / "out")
     first.finish()
-    assert (tmp_path / "out" / ".mcl-run").is_file()
+    assert (tmp_path / "out" / ".mcl-outputs").is_file()
 
 
 def test_a_second_configuration_that_does_not_exist_is_found_up_front(tmp_path, capsys):
@@ -232,3 +232,348 @@ def test_a_second_configuration_that_does_not_exist_is_found_up_front(tmp_path, 
     err = capsys.readouterr().err
     assert "run.yaml:10: second.model.name:" in err and "Circuit.Nope" in err
     assert not (tmp_path / "out").exists()
+
+
+# ---- issue 18, second round: every finding of the hostile-input probe ----------------------------
+
+import contextlib  # noqa: E402
+import hashlib  # noqa: E402
+import stat  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from mcl.errors import ConfigError, MclError, ModelicaError, NotFittedError  # noqa: E402
+from test_discover import CIRCUIT  # noqa: E402
+from test_fuzz import try_output  # noqa: E402
+
+SIM = ["simulate", "{d}/Circuit.mo", "-L", str(LIB), "-m", "Circuit.RC", "-i", "{d}/input.csv"]
+
+
+@pytest.fixture
+def user(tmp_path):
+    """A user's folder: their model, their input data, their notes."""
+    (tmp_path / "Circuit.mo").write_text(CIRCUIT)
+    (tmp_path / "input.csv").write_text("time,u\n0,0\n0.5,1\n1,1\n1.5,0\n2,0\n")
+    (tmp_path / "notes.txt").write_text("mine\n")
+    (tmp_path / "Faults.mo").write_text("package Faults\nend Faults;\n")
+    return tmp_path
+
+
+def digest(root):
+    """Every path under ``root`` with what it is (bytes, link target, folder, special)."""
+    out = {}
+    for p in sorted(root.rglob("*")):
+        mode = os.lstat(p).st_mode
+        out[str(p)] = (os.readlink(p) if stat.S_ISLNK(mode) else hashlib.sha256(p.read_bytes()).hexdigest()
+                       if stat.S_ISREG(mode) else "dir" if stat.S_ISDIR(mode) else stat.S_IFMT(mode))
+    return out
+
+
+def refused(capsys, argv, message, d):
+    """``argv`` exits 2 with one line holding ``message``."""
+    try:
+        code = main([a.format(d=d) for a in argv])
+    except SystemExit as exc:         # argparse's own refusals
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and message in err, err
+    return err
+
+
+@contextlib.contextmanager
+def deadline(seconds):
+    """Fail instead of hanging (a FIFO read by mistake blocks forever)."""
+    def expire(*_):
+        raise TimeoutError(f"no answer within {seconds} s")
+
+    old = signal.signal(signal.SIGALRM, expire)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, old)
+
+
+@pytest.mark.parametrize("extra", ["report.json", ".mcl-run", ".mcl-outputs"])
+def test_force_never_deletes_a_folder_that_merely_looks_like_a_run(tmp_path, capsys, extra):
+    run = setup_run(tmp_path, cubic=0.0)
+    run.write_text(run.read_text().replace("output: out/rc", "output: results"))
+    (tmp_path / "results").mkdir()
+    (tmp_path / "results" / extra).write_text("{}")
+    (tmp_path / "results" / "thesis.tex").write_text("my thesis")
+    before = digest(tmp_path)
+    err = refused(capsys, ["run", str(run), "--force"], "was not made by mcl", tmp_path)
+    assert "run.yaml:8: output:" in err                    # said before anything is compiled
+    assert digest(tmp_path) == before
+
+
+@pytest.mark.parametrize("args,message", [
+    (["-o", "{d}/Faults.mo"], "was not made by mcl"),           # the user's Modelica source
+    (["-o", "{d}/Circuit.mo"], "is an input of this command"),
+    (["-o", "{d}/input.csv"], "is an input of this command"),   # the data it reads
+    (["-o", "{d}/notes.txt", "--force"], "was not made by mcl"),
+    (["-o", "{d}/r.csv", "--plot", "{d}/Circuit.mo"], "ending in .png"),
+    (["-o", "{d}/r.csv", "--plot", "{d}/notes.png"], "was not made by mcl"),
+    (["-o", "{d}/r.csv", "--plot", "{d}/r.csv"], "ending in .png"),
+    (["-o", "{d}/fifo"], "FIFO"),
+    (["-o", "{d}/dangling"], "which does not exist"),
+    (["-o", "{d}/notes.txt/r.csv"], "is a file, not a folder"),
+])
+def test_simulate_never_writes_over_a_users_file(user, capsys, args, message):
+    os.mkfifo(user / "fifo")
+    (user / "dangling").symlink_to(user / "nowhere")
+    (user / "notes.png").write_bytes(b"\x89PNG mine")
+    before = digest(user)
+    refused(capsys, SIM + args, message, user)
+    assert digest(user) == before
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="making a device node needs root")
+def test_a_device_node_is_never_replaced(user, capsys):
+    os.mknod(user / "full", 0o600 | stat.S_IFCHR, os.makedev(1, 7))     # like /dev/full
+    refused(capsys, SIM + ["-o", "{d}/full", "--force"], "is a device", user)
+    assert stat.S_ISCHR(os.lstat(user / "full").st_mode)
+
+
+def test_a_result_mcl_wrote_is_replaced_only_with_force_and_only_unchanged(user, capsys):
+    argv = [a.format(d=user) for a in SIM + ["-o", "{d}/r.csv"]]
+    assert main(argv) == 0
+    assert (user / ".mcl-outputs").is_file()
+    refused(capsys, SIM + ["-o", "{d}/r.csv"], "use --force", user)
+    assert main(argv + ["--force"]) == 0
+    with open(user / "r.csv", "a") as fh:                    # the user edits the result: it is theirs now
+        fh.write("# checked by hand\n")
+    edited = (user / "r.csv").read_bytes()
+    refused(capsys, SIM + ["-o", "{d}/r.csv", "--force"], "changed since mcl wrote it", user)
+    assert (user / "r.csv").read_bytes() == edited
+
+
+def test_compile_never_writes_over_a_users_fmu_or_folder(user, capsys):
+    (user / "m.fmu").write_bytes(b"an FMU exported by Dymola")
+    (user / "mine").mkdir()
+    (user / "mine" / "model.json").write_text("{}")          # looks like a saved model
+    before = digest(user)
+    base = ["compile", "{d}/Circuit.mo", "-L", str(LIB), "-m", "Circuit.RC", "--force", "-o"]
+    refused(capsys, base + ["{d}/m.fmu"], "was not made by mcl", user)
+    refused(capsys, base + ["{d}/mine"], "was not made by mcl", user)
+    refused(capsys, base + ["{d}/Circuit.mo"], "is an input of this command", user)
+    refused(capsys, base + ["{d}/Faults.mo"], "is a file, not a saved model", user)
+    assert digest(user) == before
+    saved = [a.format(d=user) for a in base[:-2] + ["-o", "{d}/saved"]]
+    assert main(saved) == 0 and main(saved + ["--force"]) == 0     # mcl's own: replaced with --force
+
+
+def _finished_run(d):
+    run = d / "run"
+    run.mkdir()
+    (run / "ext.mo").write_text("package Ext\n  model Rx_learned\n    Real v;\n  equation\n    v = 1;\n"
+                                "  end Rx_learned;\nend Ext;\n")
+    (run / "report.json").write_text(json.dumps({"cause": {"modelica": "ext.mo", "fmu": "x.fmu",
+                                                           "learned_class": "Rx_learned"}}))
+    return run
+
+
+def test_export_never_replaces_a_users_library_and_names_are_checked(tmp_path, capsys):
+    run = _finished_run(tmp_path)
+    (tmp_path / "mylibs" / "MyParts").mkdir(parents=True)
+    (tmp_path / "mylibs" / "MyParts" / "package.mo").write_text("package MyParts\nend MyParts;\n")
+    before = digest(tmp_path)
+    refused(capsys, ["export", str(run), "-o", "{d}/mylibs", "--name", "MyParts", "--force"],
+            "was not made by mcl", tmp_path)
+    for name, why in (("model", "Modelica keyword"), ("MCL", "MCL library"), ("Modelica", "Modelica library")):
+        refused(capsys, ["export", str(run), "-o", "{d}/lib", "--name", name], why, tmp_path)
+    assert digest(tmp_path) == before
+    assert main(["export", str(run), "-o", str(tmp_path / "mylibs"), "--name", "Learned"]) == 0
+    assert "model Rx_learned" in (tmp_path / "mylibs" / "Learned" / "package.mo").read_text()
+    refused(capsys, ["export", str(run), "-o", "{d}/mylibs", "--name", "Learned"], "use --force", tmp_path)
+    assert main(["export", str(run), "-o", str(tmp_path / "mylibs"), "--name", "Learned", "--force"]) == 0
+
+
+def test_a_symlinked_run_output_is_followed_never_half_replaced(tmp_path, capsys):
+    run = setup_run(tmp_path, cubic=0.0)
+    run.write_text(run.read_text().replace("output: out/rc", "output: real"))
+    assert main(["--quiet", "run", str(run)]) == 0
+    (tmp_path / "link").symlink_to("real")
+    run.write_text(run.read_text().replace("output: real", "output: link"))
+    refused(capsys, ["run", str(run)], "use --force", tmp_path)
+    assert main(["--quiet", "run", str(run), "--force"]) == 0
+    assert (tmp_path / "link").is_symlink() and (tmp_path / "real" / "report.json").is_file()
+    assert sorted(p.name for p in tmp_path.iterdir() if "real" in p.name or "link" in p.name) == ["link", "real"]
+    (tmp_path / "real" / "thesis.tex").write_text("mine")   # the user's file inside the run: kept
+    refused(capsys, ["run", str(run), "--force"], "thesis.tex, which mcl did not write", tmp_path)
+    assert (tmp_path / "real" / "thesis.tex").read_text() == "mine"
+
+
+def test_fifos_and_devices_are_never_read(user, capsys):
+    for name in ("data.csv", "run.yaml", "m.fmu", "S.mo"):
+        os.mkfifo(user / name)
+    with deadline(60):
+        refused(capsys, SIM[:-1] + ["{d}/data.csv", "-o", "{d}/r.csv"], "FIFO", user)
+        refused(capsys, ["run", "{d}/run.yaml"], "FIFO", user)
+        refused(capsys, ["simulate", "{d}/m.fmu", "-i", "{d}/input.csv", "-o", "{d}/r.csv"], "FIFO", user)
+        refused(capsys, ["compile", "{d}/S.mo", "-m", "S", "-o", "{d}/s.fmu"], "FIFO", user)
+        refused(capsys, ["info", "{d}/m.fmu"], "FIFO", user)
+        with pytest.raises(ModelicaError, match="FIFO"):
+            mcl.api.compile_model([user / "S.mo"], "S")
+        (user / "t.yaml").write_text(f"model: {{sources: [Circuit.mo, {LIB}], name: Circuit.RC}}\n"
+                                     "data: {train: data.csv}\noutput: out\n")
+        refused(capsys, ["run", "{d}/t.yaml"], "t.yaml:2: data.train: 'data.csv' is a FIFO", user)
+
+
+@pytest.mark.parametrize("option,message", [
+    (["--rtol", "-1"], "--rtol = -1: must be a finite number greater than 0 and less than 1"),
+    (["--rtol", "0"], "--rtol = 0:"), (["--rtol", "1e10"], "--rtol = 1e+10"), (["--rtol", "nan"], "--rtol = nan"),
+    (["--atol", "-1"], "--atol = -1:"), (["--time-limit", "-5"], "--time-limit = -5:"),
+    (["--time-limit", "nan"], "--time-limit = nan"), (["--time-limit", "inf"], "--time-limit = inf"),
+    (["--rtol", "abc"], "invalid float value"), (["-L", "/nonexistent"], "--library /nonexistent: no such"),
+    (["-L", "{d}/input.csv"], "is not a directory"),
+])
+def test_numeric_and_path_options_are_checked(user, capsys, option, message):
+    err = refused(capsys, SIM + ["-o", "{d}/r.csv", *option], message, user)
+    assert not (user / "r.csv").exists(), err
+
+
+def test_simulation_options_are_checked_in_the_api_too():
+    from mcl.simulation import SimulationOptions
+
+    for bad in ({"rtol": 0}, {"rtol": 2.0}, {"atol": -1}, {"time_limit": float("nan")}, {"max_steps": 0.5}):
+        with pytest.raises(ConfigError, match="must be a"):
+            SimulationOptions.from_dict(bad)
+    with pytest.raises(ConfigError, match="rtol = -1"):
+        SimulationOptions(rtol=-1)
+
+
+def test_pretrain_numbers_are_checked(user, capsys):
+    base = ["pretrain", "{d}/Circuit.mo", str(LIB), "-m", "Circuit.RC", "-c", "Rx", "-o", "{d}/p"]
+    refused(capsys, base + ["--samples", "0"], "--samples 0: must be a whole number greater than 0", user)
+    refused(capsys, base + ["--box", "nan"], "--box nan", user)
+    refused(capsys, base + ["--amplitude", "-1"], "--amplitude -1.0", user)
+
+
+def test_run_file_keys_given_twice_and_paths(tmp_path, capsys, monkeypatch):
+    run = setup_run(tmp_path, cubic=0.0)
+    text = run.read_text()
+    run.write_text(text + "output: other\n")
+    refused(capsys, ["run", str(run)], "run.yaml:9: output: given twice (first on line 8)", tmp_path)
+    run.write_text(text.replace("  name: Circuit.RC\n", "  name: Circuit.RC\n  libraries: [train.csv]\n"))
+    refused(capsys, ["run", str(run)], "run.yaml:4: model.libraries: 'train.csv' is not a directory", tmp_path)
+    home = tmp_path / "home"
+    home.mkdir()
+    monkeypatch.setenv("HOME", str(home))
+    run.write_text(text.replace("output: out/rc", "output: ~/x"))
+    assert main(["--quiet", "run", str(run)]) == 0
+    assert (home / "x" / "report.json").is_file() and not (tmp_path / "~").exists()
+
+
+@pytest.mark.parametrize("cell", ["1_000", "١٢", "0x10", "1e", "--1"])
+def test_csv_numbers_are_plain_decimal_numbers(tmp_path, cell):
+    (tmp_path / "d.csv").write_text(f"time,u\n0,{cell}\n1,2\n")
+    with pytest.raises(DataError, match=f"'{cell}' is not a number"):
+        mcl.data.read_csv(tmp_path / "d.csv")
+
+
+def test_template_scales_and_sizes_are_checked_with_the_run_file(tmp_path, capsys):
+    run = setup_run(tmp_path, cubic=0.0)
+    text = run.read_text().replace("unknown: auto", "unknown: Rx")
+    run.write_text(text + "templates:\n  - {name: polynomial, rhs: [v, tanh(v/s1)], scales: {s1: 0}}\n")
+    refused(capsys, ["run", str(run)], "run.yaml:10: templates.0: template scale s1 = 0", tmp_path)
+    terms = ", ".join(f"'v^{k}'" for k in range(1, 300))
+    run.write_text(text + f"templates:\n  - {{name: polynomial, rhs: [{terms}]}}\n")
+    refused(capsys, ["run", str(run)], "template has 299 parameters; at most 40", tmp_path)
+    assert not (tmp_path / "out").exists()
+    from mcl.templates import NeuralTemplate, PolynomialTemplate
+
+    for bad in ({"scales": {"s1": float("nan")}, "rhs": ["tanh(v/s1)"]}, {"degree": 10**9},
+                {"start": [1, float("inf"), 1, 1]}):
+        with pytest.raises(ConfigError):
+            PolynomialTemplate(**bad)
+    with pytest.raises(ConfigError, match="hidden"):
+        NeuralTemplate(hidden=10**6)
+
+
+def test_the_api_takes_frames_arrays_and_series_and_checks_like_the_cli(user):
+    pd = pytest.importorskip("pandas")
+    model = mcl.api.compile_model([user / "Circuit.mo", LIB], "Circuit.RC")
+    t = np.linspace(0, 2, 21)
+    frame = pd.DataFrame({"time": t, "u": np.sin(t)})
+    rec = np.zeros(21, dtype=[("time", float), ("u", float)])
+    rec["time"], rec["u"] = t, np.sin(t)
+    results = [mcl.api.simulate(model, x).outputs for x in (frame, rec, mcl.data.as_timeseries(frame))]
+    assert np.allclose(results[0], results[1]) and np.allclose(results[0], results[2])
+    with pytest.raises(DataError, match="inputs: give a pandas DataFrame"):
+        mcl.api.simulate(model, None)
+    with pytest.raises(DataError, match="missing column.* u; the data have: x"):
+        mcl.api.simulate(model, pd.DataFrame({"time": t, "x": t}))
+    with pytest.raises(ConfigError, match="params: R1.R = nan"):
+        mcl.api.simulate(model, frame, {"R1.R": float("nan")})
+    with pytest.raises(ConfigError, match="rtol"):
+        mcl.api.simulate(model, frame, options={"rtol": 0})
+    with pytest.raises(ConfigError, match="no such library directory"):
+        mcl.api.compile_model([user / "Circuit.mo"], "Circuit.RC", libraries=["/nonexistent"])
+    with pytest.raises(ModelicaError, match="without package.mo"):
+        mcl.api.compile_model([user], "Circuit.RC")
+
+
+def test_discovery_checks_its_arguments_and_data_like_a_run_file(user):
+    pd = pytest.importorskip("pandas")
+    src = [user / "Circuit.mo", LIB]
+    fit = {"time": [0, 1, 2], "u": [0, 1, 0], "y": [0, 0.1, 0.2]}
+    for kwargs, message in (({"model": None}, "model: must be string, not NoneType"),
+                            ({"unknown": 42}, "unknown: must be string, not int"),
+                            ({"screen": 0}, "screen: 0 is less than 1"),
+                            ({"max_simulations": 2}, "max_simulations: 2 is less than 5"),
+                            ({"executor": "dsak"}, "did you mean 'dask'"),
+                            ({"templates": "polynomal"}, "did you mean 'polynomial'"),
+                            ({"sources": [user / "nope.mo"]}, "sources: '.*nope.mo' does not exist")):
+        with pytest.raises(ConfigError, match=message):
+            mcl.Discovery(**{"model": "Circuit.RC", "sources": src, **kwargs}).fit(fit)
+    d = mcl.Discovery("Circuit.RC", sources=src, templates="polynomial")
+    assert d.spec().templates == ["polynomial"]                 # a string is one template
+    with pytest.raises(NotFittedError, match="law_ is not set"):
+        d.law_
+    assert isinstance(NotFittedError("x"), MclError) and not hasattr(d, "cause_")
+    no_time = pd.DataFrame({"u": [0, 1, 0], "y": [0, 0.1, 0.2]})
+    with pytest.raises(DataError, match="train: no 'time' column.*time="):
+        d.fit(no_time)
+    assert mcl.data.as_timeseries(no_time, time="index").time.tolist() == [0, 1, 2]
+    with pytest.raises(ConfigError, match="column.* z of train are not inputs or variables of Circuit.RC"):
+        d.fit(pd.DataFrame({"time": [0, 1, 2], "u": [0, 1, 0], "z": [0, 0.1, 0.2]}))
+
+
+@pytest.mark.parametrize("command,kind,force", [
+    ("run", "dir+report.json", True), ("run", "link->dir", True), ("compile FMU", "file", True),
+    ("compile dir", "dir+.mcl-run", True), ("export", "mcl+user file", True), ("simulate -o", "fifo", True),
+    ("simulate --plot", "mcl+edited", True), ("graph --draw", "link->file", True),
+    ("compile FMU", "mcl", True), ("run", "mcl", False), ("simulate -o", "dangling link", False),
+])
+def test_output_paths_of_every_command(command, kind, force, tmp_path, capsys):
+    """The fuzz suite's output-path cases that the first probe found, always run."""
+    d = tmp_path
+    (d / "Circuit.mo").write_text(CIRCUIT)
+    setup_run(d, cubic=0.0)
+    (d / "input.csv").write_text("time,u\n0,0\n0.5,1\n1,1\n1.5,0\n2,0\n")
+    assert main(["--quiet", "compile", str(d / "Circuit.mo"), str(LIB), "-m", "Circuit.RC", "-o", str(d / "model")]) == 0
+    _finished_run(d).rename(d / "finished")
+    code = try_output(d, capsys, command, kind, force)
+    assert code == (0 if kind == "mcl" and force else 2)
+
+
+def test_argument_errors_are_one_line(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", "m.fmu", "-o", "r.csv"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1
+    assert err.startswith("mcl simulate: error: the following arguments are required: --input/-i")
+
+
+def test_truths_says_how_to_use_it(tmp_path):
+    script = [sys.executable, str(LIB.parents[1] / "examples" / "faults" / "truths.py")]
+    for args, code, text in (([], 2, "usage: python examples/faults/truths.py CASE OUT_DIR"),
+                             (["slider-frction", str(tmp_path)], 2, "did you mean 'slider-friction'"),
+                             (["--help"], 0, "cases: slider-cubic")):
+        proc = subprocess.run(script + args, capture_output=True, text=True, timeout=60)
+        assert proc.returncode == code and text in proc.stdout + proc.stderr and "Traceback" not in proc.stderr
+    (tmp_path / "train.csv").write_text("mine")
+    proc = subprocess.run(script + ["shunt-sinh", str(tmp_path)], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and (tmp_path / "train.csv").read_text() == "mine"

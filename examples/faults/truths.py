@@ -95,9 +95,42 @@ CASES = {
     "shunt-sinh": lambda p, s: shunt(p, s, lambda v: 0.1 * np.sinh(v / 0.35)),
 }
 
-if __name__ == "__main__":
-    case, out = sys.argv[1], Path(sys.argv[2])
+USAGE = f"""usage: python examples/faults/truths.py CASE OUT_DIR
+
+Writes OUT_DIR/train.csv and OUT_DIR/validate.csv: the system of Faults.mo with a hidden fault,
+solved by SciPy, with 1% measurement noise (two seeds).
+
+cases: {', '.join(CASES)}
+example: python examples/faults/truths.py slider-friction data/"""
+
+
+def main(argv) -> int:
+    if any(a in ("-h", "--help") for a in argv):
+        print(USAGE)
+        return 0
+    if len(argv) != 2:
+        print(USAGE, file=sys.stderr)
+        return 2
+    case, out = argv[0], Path(argv[1])
+    if case not in CASES:
+        import difflib
+
+        close = difflib.get_close_matches(case, CASES, n=1)
+        hint = f" (did you mean '{close[0]}'?)" if close else ""
+        print(f"truths.py: error: no case '{case}'{hint}; cases: {', '.join(CASES)}", file=sys.stderr)
+        return 2
+    files = [out / "train.csv", out / "validate.csv"]
+    taken = [f for f in files if f.exists() or f.is_symlink()]
+    if taken or (out.exists() and not out.is_dir()):
+        print(f"truths.py: error: {taken[0] if taken else out} exists: choose another folder "
+              "(nothing was changed)", file=sys.stderr)
+        return 2
     out.mkdir(parents=True, exist_ok=True)
-    CASES[case](out / "train.csv", 1)
-    CASES[case](out / "validate.csv", 2)
-    print(f"wrote {out}/train.csv and validate.csv ({case})")
+    CASES[case](files[0], 1)
+    CASES[case](files[1], 2)
+    print(f"wrote {files[0]} and {files[1]} ({case})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
