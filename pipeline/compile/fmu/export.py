@@ -102,8 +102,9 @@ def _step_function(o) -> ca.Function:
 
 
 def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
-                     residual_tol: float = 1e-6, tolerance: float = 1e-6) -> list[Path]:
-    """Write the C sources of the FMU into ``build``; returns the files to compile."""
+                     residual_tol: float = 1e-6, tolerance: float = 1e-6, settable=None) -> list[Path]:
+    """Write the C sources of the FMU into ``build``; returns the files to compile. ``settable``:
+    the states whose start value can be set (default: :func:`settable_starts`)."""
     o = model.ode
     prefix = f"{ident}_"
     probe_vars = _probe_variables(model)
@@ -116,7 +117,7 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     if zero is None:     # no state events: an empty indicator function keeps the C code uniform
         zero = ca.Function("zero", o.out.mx_in(), [ca.MX(0, 1)], ["x", "u", "p", "t"], ["out"])
     start, init_start = start_functions(model)
-    settable, _ = settable_starts(model)
+    settable = settable_starts(model)[0] if settable is None else settable
     funcs = dict(ode=o.ode, out=o.out, alg_res=o.alg_res, init=init_start, start=start, probe=probe,
                  zero=zero, step=_step_function(o))
     cg = ca.CodeGenerator("mcl_funcs.c", {"with_header": True})
@@ -160,11 +161,11 @@ def derivative_unit(unit: str | None) -> str | None:
 
 def model_description(model: CompiledModel, ident: str, guid: str, sources: list[str],
                       experiment: Experiment | None = None, units: dict | None = None,
-                      descriptions: dict | None = None) -> str:
+                      descriptions: dict | None = None, starts=None) -> str:
     """modelDescription.xml: Model Exchange and Co-Simulation; parameters tunable, inputs,
     outputs, states (their start values settable where they are initial conditions),
     derivatives, probes; the model's units and descriptions, completed by ``units`` and
-    ``descriptions`` (names of learned parameters, say)."""
+    ``descriptions`` (names of learned parameters, say). ``starts``: :func:`settable_starts`."""
     o = model.ode
     rows, outputs, derivs, initial = [], [], [], []
     units = {**model.info.get("units", {}), **(units or {})}
@@ -189,7 +190,7 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
         var(n, 'causality="input" variability="continuous"', f'<Real start="{float(v)!r}"/>')
     for n in o.y_names:
         outputs.append(var(n, 'causality="output" variability="continuous" initial="calculated"'))
-    settable, s0 = settable_starts(model)
+    settable, s0 = starts or settable_starts(model)
     states = [var(n, f'{local} initial="exact"', f'<Real start="{float(v)!r}"/>') if exact
               else var(n, f'{local} initial="calculated"')
               for n, exact, v in zip(o.x_names, settable, s0)]
@@ -262,7 +263,8 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
     _check_names(model, descriptions, "descriptions")
     with tempfile.TemporaryDirectory(prefix="mcl-fmu-") as tmp:
         build = Path(tmp)
-        c_files = generate_sources(model, build, ident, guid, tolerance=experiment.tolerance)
+        starts = settable_starts(model)
+        c_files = generate_sources(model, build, ident, guid, tolerance=experiment.tolerance, settable=starts[0])
         so = build / f"{ident}.so"
         cmd = ["gcc", "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-I{build}",
                *map(str, c_files), "-o", str(so), "-lm"]
@@ -274,7 +276,7 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
             raise CompileError(f"gcc failed: {proc.stderr.strip().splitlines()[-1] if proc.stderr else ''}")
         sources = sorted(p.name for p in build.iterdir() if p.suffix in (".c", ".h"))
         xml = model_description(model, ident, guid, [s for s in sources if s.endswith(".c")],
-                                experiment, units, descriptions)
+                                experiment, units, descriptions, starts)
         if out_path.is_dir():
             raise ConfigError("the FMU to write is an existing directory", where=str(out_path))
         out_path.parent.mkdir(parents=True, exist_ok=True)

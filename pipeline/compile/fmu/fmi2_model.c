@@ -129,7 +129,6 @@ static fmi2Status initial_state(Model* m) {
     }
     for (int i = 0; i < NX; i++)
         if (s->s_set[i]) start[i] = s->s_user[i];
-    m->arg[4] = NULL;
     if (call(m, F(init), s->ue, s->p, &s->t, start, s->x)) {
         logmsg(m, fmi2Error, "initialisation failed");
         return fmi2Error;
@@ -666,7 +665,7 @@ static fmi2Status integrate(Model* m, double t_end) {
         h = fmin(h, t_end - t);
     }
     while (t < t_end) {
-        double left = t_end - t, err, hnew;
+        double left = t_end - t, planned = h, err, hnew;
         int last = 0;
         if (h >= left || t + h >= t_end - 1e-12 * fmax(1.0, fabs(t_end))) { h = left; last = 1; }
         if (h < 1e-13 * fmax(1.0, fabs(t))) {
@@ -705,7 +704,7 @@ static fmi2Status integrate(Model* m, double t_end) {
         memcpy(s->x, m->ynew, NX * sizeof(double));
         if (NZ) memcpy(m->z0, m->z1, NZ * sizeof(double));
         s->t = t;
-        if (!last || hnew < s->h || s->h <= 0) s->h = hnew;    /* a last step cut short does not set h */
+        s->h = last ? fmax(hnew, planned) : hnew;    /* a last step cut short says little about h */
         h = hnew;
         rejected = 0;
         cut = 0;
