@@ -13,7 +13,7 @@ from pathlib import Path
 
 from .data import TimeSeries, as_timeseries
 from .errors import ConfigError, ModelicaError
-from .outputs import check_input
+from .outputs import check_input, special_kind
 from .registry import Registry
 from .simulation import SimulationOptions, SimulationResult
 
@@ -114,7 +114,21 @@ def check_sources(sources) -> list[Path]:
         if p.is_dir() and not (p / "package.mo").is_file():
             raise ModelicaError("is a directory without package.mo, not a Modelica package: give the "
                                 ".mo files, or the package's own directory", where=str(p))
+        if p.is_dir():
+            _regular_package(p)
     return out
+
+
+def _regular_package(directory: Path) -> None:
+    """Every file of a package directory the front end reads (.mo, package.order) is a regular
+    file: a FIFO among them would block the compile forever."""
+    for root, _, names in os.walk(directory):
+        for name in names:
+            if name.endswith(".mo") or name == "package.order":
+                kind = special_kind(Path(root) / name)
+                if kind:
+                    raise ModelicaError(f"is {kind}, not a Modelica file: mcl reads only regular files",
+                                        where=str(Path(root) / name))
 
 
 def check_class_name(model) -> str:

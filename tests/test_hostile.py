@@ -416,6 +416,10 @@ def test_fifos_and_devices_are_never_read(user, capsys):
         refused(capsys, ["info", "{d}/m.fmu"], "FIFO", user)
         with pytest.raises(ModelicaError, match="FIFO"):
             mcl.api.compile_model([user / "S.mo"], "S")
+        (user / "P").mkdir()
+        (user / "P" / "package.mo").write_text("package P\nend P;\n")
+        os.mkfifo(user / "P" / "M.mo")                        # inside a package directory
+        refused(capsys, ["compile", "{d}/P", "-m", "P.M", "-o", "{d}/p.fmu"], "P/M.mo: is a FIFO", user)
         (user / "t.yaml").write_text(f"model: {{sources: [Circuit.mo, {LIB}], name: Circuit.RC}}\n"
                                      "data: {train: data.csv}\noutput: out\n")
         refused(capsys, ["run", "{d}/t.yaml"], "t.yaml:2: data.train: 'data.csv' is a FIFO", user)
