@@ -12,12 +12,12 @@ The public face:
 Built-in plugins live in :mod:`mcl.plugins`, the MCL Modelica library in :mod:`mcl.modelica`.
 """
 from .errors import MclError
-from .hookspecs import hookimpl
 
 #: public name -> module defining it, imported on first use (so `mcl --help` imports no numpy)
 _LAZY = {"compile_model": "api", "load_model": "api", "simulate": "api", "discover": "api",
          "Discovery": "discovery", "export_library": "discovery.export", "TimeSeries": "data",
-         "read_csv": "data", "SimulationOptions": "simulation", "SimulationResult": "simulation"}
+         "read_csv": "data", "SimulationOptions": "simulation", "SimulationResult": "simulation",
+         "hookimpl": "hookspecs"}
 
 __all__ = ["compile_model", "load_model", "simulate", "discover", "Discovery", "export_library",
            "TimeSeries", "read_csv", "SimulationOptions", "SimulationResult", "MclError", "hookimpl",
