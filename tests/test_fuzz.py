@@ -23,7 +23,7 @@ from hypothesis import strategies as st
 
 from helpers import LIB, RC_MODEL
 from mcl.cli import main
-from mcl.outputs import RECORD, sha256
+from mcl.outputs import RECORD
 
 N = int(os.environ.get("MCL_FUZZ_EXAMPLES", "0"))
 FUZZ = settings(max_examples=N or 60, deadline=None, derandomize=not N,
