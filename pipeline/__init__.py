@@ -19,6 +19,8 @@ _LAZY = {"compile_model": "api", "load_model": "api", "simulate": "api", "discov
          "read_csv": "data", "SimulationOptions": "simulation", "SimulationResult": "simulation",
          "hookimpl": "hookspecs"}
 
+_SUBPACKAGES = ("modelica", "plugins", "compile", "discovery", "api", "data", "stats", "fit", "templates")
+
 __all__ = ["compile_model", "load_model", "simulate", "discover", "Discovery", "export_library",
            "TimeSeries", "read_csv", "SimulationOptions", "SimulationResult", "MclError", "hookimpl",
            "__version__"]
@@ -33,6 +35,8 @@ def __getattr__(name: str):
         from .compile.library import mcl_version
 
         value = mcl_version()
+    elif name in _SUBPACKAGES:       # mcl.modelica, mcl.plugins, ...: imported when first named
+        value = importlib.import_module(f".{name}", __name__)
     else:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     globals()[name] = value

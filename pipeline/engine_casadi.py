@@ -39,6 +39,8 @@ MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
 #: a call of the solver may use this share of the wall time still left
 CALL_SHARE = 0.4
+#: output points of a run's first call (whose steps and seconds size the calls after it)
+FIRST_CALL = 8
 
 
 class CasadiEngine(Engine):
@@ -97,11 +99,13 @@ class _Budget:
     def __init__(self, opts: SimulationOptions, clock: Stopwatch):
         self.opts, self.clock = opts, clock
         self.steps = 0
+        self.points = 0           # output points integrated so far
         self.rate = None          # seconds per step, measured
         self.guessed = False      # rate is a guess made before any call
 
-    def record(self, steps: int, seconds: float):
+    def record(self, steps: int, seconds: float, points: int = 0):
         self.steps += int(steps)
+        self.points += int(points)
         if steps > 0:
             r = seconds / steps
             self.rate = r if self.rate is None or self.guessed else max(r, 0.5 * self.rate)
@@ -118,6 +122,14 @@ class _Budget:
         ``n_points`` points: the worst case of a call (every point using its steps) stays
         within ``share`` of the time left and within the steps left."""
         cap = self.opts.max_steps
+        if self.points and self.rate is not None and self.opts.max_work is None:
+            # a run going as it has so far (4x its steps per point) fits easily: one call for
+            # the rest, so that a run's numbers never depend on how fast the machine was
+            expected = 4.0 * self.steps / self.points * n_points * self.rate
+            if expected <= 0.1 * share * max(self.opts.time_limit - self.clock.elapsed, 0.0):
+                return n_points, cap, None
+        elif not self.points:        # the first call: a fixed few points, its cost then measured
+            n_points = min(n_points, FIRST_CALL)
         allowed, bound = math.inf, None
         if self.rate is not None:
             allowed, bound = share * max(self.opts.time_limit - self.clock.elapsed, 0.0) / self.rate, "time"
@@ -271,7 +283,7 @@ class _Plan:
                     continue
                 raise _Stop(f"solver error before t = {self.t_int[sub[-1]]:g}: {_last_line(exc)}") from None
             failed = None
-            budget.record(_nsteps(integ), clock.elapsed)
+            budget.record(_nsteps(integ), clock.elapsed, len(sub))
             traj[:, sub] = xf
             if not np.all(np.isfinite(xf)):
                 bad = sub[np.argmax(~np.all(np.isfinite(xf), axis=0))]

@@ -293,12 +293,13 @@ def feasibility_terms(q_model, w, lambda1: float, lambda2: float):
 
 
 def restore_feasibility(problem: FitProblem, w0, q, budget: int = 24, seed: int = 0,
-                        on_failure=None, tag: str = "restore"):
+                        on_failure=None, tag: str = "restore", fixed=()):
     """A feasible start near ``w0`` (beyond the paper: its algorithms start where they are told).
 
     When w0 does not simulate, candidates at growing distances from it are ranked by q and the
     most likely feasible ones simulated, q learning from every outcome (Algorithm 3's online
-    step), until one succeeds. Returns (start point, whether it is feasible).
+    step), until one succeeds; coordinates ``fixed`` (the law's scale) are not moved. Returns
+    (start point, whether it is feasible).
     """
     w0 = np.asarray(w0, dtype=float)
     ev = problem.evaluate(w0, tag=tag)
@@ -310,7 +311,9 @@ def restore_feasibility(problem: FitProblem, w0, q, budget: int = 24, seed: int 
     rng = np.random.default_rng(seed)
     scale, n, used = float(np.linalg.norm(w0)) or 1.0, len(w0), 1
     for radius in (0.1, 0.3, 1.0, 3.0):
-        cand = w0 + radius * scale * rng.normal(size=(64, n)) / np.sqrt(n)
+        step = radius * scale * rng.normal(size=(64, n)) / np.sqrt(n)
+        step[:, list(fixed)] = 0.0
+        cand = w0 + step
         for c in cand[np.argsort(-q.predict_proba(cand))[:6]]:
             if used >= budget:
                 return w0, False
@@ -514,8 +517,10 @@ class LevenbergMarquardt:
     """
 
     def __init__(self, max_simulations: int = 150, axis: int | None = 0, damping: float = 1e-3,
-                 tol: float = 1e-10, feasibility=None, give_up=None, progress=None):
+                 tol: float = 1e-10, feasibility=None, give_up=None, progress=None, restore: int = 24):
         self.max_simulations, self.axis, self.damping, self.tol = max_simulations, axis, damping, tol
+        #: simulations spent looking for a feasible start near the given one when it fails
+        self.restore = restore
         self.feasibility = feasibility
         #: progress(cost): told the cost J of every better point reached
         self.progress = progress
@@ -531,7 +536,8 @@ class LevenbergMarquardt:
         free = [k for k in range(len(w)) if k != self.axis]
         lam = self.damping
         q = self.feasibility or LogisticFeasibility(symmetric_axis=self.axis)
-        w, ok = restore_feasibility(problem, w, q)
+        w, ok = restore_feasibility(problem, w, q, budget=self.restore,
+                                    fixed=[] if self.axis is None else [self.axis])
         current = self._step_data(problem, w) if ok else None
         if current is None:
             raise ConfigError("no start point of the fit simulates (tried around the given one)")

@@ -28,6 +28,11 @@ class CompiledModel:
     name: str
     ode: Ode
     info: dict = field(default_factory=dict)
+    #: the DAE as compiled, before alias elimination (candidate laws are put into it) and the
+    #: component structure (:class:`mcl.compile.components.Structure`); None for a model loaded
+    #: from a file saved without them
+    dae: object = None
+    structure: object = None
 
     @property
     def input_names(self) -> list[str]:
@@ -71,7 +76,7 @@ class CompiledModel:
         checks = expanded(ca.Function("checks", args, [ca.vertcat(y_c, o.probe(*args)[idx]), res, drift],
                                        *io, ["y", "res", "drift"]))
         ode = dataclasses.replace(o, y_names=[*o.y_names, *extra], out=out, checks=checks)
-        return CompiledModel(self.name, ode, self.info)
+        return CompiledModel(self.name, ode, self.info, self.dae, self.structure)
 
     def save(self, directory, force: bool = False) -> Path:
         """Write the functions (CasADi serialisation) and names to ``directory``: a new one, or
@@ -94,6 +99,12 @@ class CompiledModel:
                     nonlinear_blocks=o.nonlinear_blocks, time_events=list(o.time_events),
                     discrete=o.discrete, events=o.events)
         (d / "model.json").write_text(json.dumps(meta, indent=1))
+        if self.dae is not None:
+            from .compile.saved import save_dae
+
+            save_dae(self.dae, d)
+        if self.structure is not None:
+            (d / "structure.json").write_text(json.dumps(self.structure.to_dict()))
         return d
 
     @classmethod
@@ -111,7 +122,12 @@ class CompiledModel:
                   index=meta["index"], nonlinear_blocks=meta["nonlinear_blocks"],
                   time_events=tuple(meta.get("time_events", ())), discrete=meta.get("discrete", 0),
                   events=meta.get("events"), **funcs)
-        return cls(meta["name"], ode, meta.get("info", {}))
+        from .compile.components import Structure
+        from .compile.saved import load_dae
+
+        structure = (Structure.from_dict(json.loads((d / "structure.json").read_text()))
+                     if (d / "structure.json").is_file() else None)
+        return cls(meta["name"], ode, meta.get("info", {}), load_dae(d), structure)
 
 
 @dataclass

@@ -60,6 +60,13 @@ class Monomial:
             out = out * np.asarray(env[n], dtype=float) ** p
         return out
 
+    def sx(self, env: dict):
+        """The term as a CasADi expression of ``env``'s symbols (a law put into a model)."""
+        out = 1.0
+        for n, p in self.powers:
+            out = out * env[n] ** p
+        return out
+
     @property
     def variables(self) -> set[str]:
         return {n for n, _ in self.powers}
@@ -142,6 +149,28 @@ class Expression:
         with np.errstate(all="ignore"):
             return ev(_tree(self.text))
 
+    def sx(self, env: dict):
+        """The term as a CasADi expression of ``env``'s symbols (variables and scale names)."""
+        import casadi as ca
+
+        funcs = {"tanh": ca.tanh, "sinh": ca.sinh, "cosh": ca.cosh, "exp": ca.exp, "abs": ca.fabs,
+                 "sqrt": ca.sqrt, "atan": ca.atan, "log": ca.log}
+        ops = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
+               ast.Div: lambda a, b: a / b, ast.Pow: lambda a, b: a ** b}
+
+        def ev(node):
+            if isinstance(node, ast.Name):
+                return env[node.id]
+            if isinstance(node, ast.Constant):
+                return float(node.value)
+            if isinstance(node, ast.UnaryOp):
+                return -ev(node.operand) if isinstance(node.op, ast.USub) else ev(node.operand)
+            if isinstance(node, ast.BinOp):
+                return ops[type(node.op)](ev(node.left), ev(node.right))
+            return funcs[node.func.id](ev(node.args[0]))
+
+        return ev(_tree(self.text))
+
     @property
     def variables(self) -> set[str]:
         return {n.id for n in ast.walk(_tree(self.text)) if isinstance(n, ast.Name) and n.id in VARIABLES}
@@ -184,6 +213,21 @@ class Template:
 
     def residual(self, w, env: dict) -> np.ndarray:
         """G(xi; w) evaluated on arrays of v, i (and dv, di): zero where the law holds."""
+        raise NotImplementedError
+
+    def sx_residual(self, w, env: dict):
+        """G(xi; w) as a CasADi expression: ``w`` a list of parameter symbols, ``env`` symbols
+        (or expressions) of v, i, dv, di. This is how a law is put into a compiled model."""
+        raise NotImplementedError(f"template {self.name} cannot be put into a compiled model")
+
+    @property
+    def explicit(self) -> str | None:
+        """``i`` when the law gives the flow from the other variables (i = f(v, dv)), ``v`` when it
+        gives the across value (v = g(i, di)), None for an implicit law G(v, i, ...) = 0."""
+        return None
+
+    def sx_explicit(self, w, env: dict):
+        """The value of :attr:`explicit` the law gives, as a CasADi expression."""
         raise NotImplementedError
 
     def start_from(self, env: dict) -> np.ndarray:
@@ -393,6 +437,24 @@ class PolynomialTemplate(Template):
         w = np.asarray(w, dtype=float)
         return self.features(env, w) @ w[:len(self.terms)]
 
+    def _sx_env(self, w, env: dict) -> dict:
+        return {**dict(zip(self.scales, list(w)[len(self.terms):])), **env}
+
+    def sx_residual(self, w, env: dict):
+        e, k = self._sx_env(w, env), len(self.lhs)
+        return (sum(wk * m.sx(e) for wk, m in zip(w[:k], self.lhs))
+                - sum(wk * m.sx(e) for wk, m in zip(w[k:len(self.terms)], self.rhs)))
+
+    @property
+    def explicit(self) -> str | None:
+        lhs = [str(m) for m in self.lhs]
+        rhs = set().union(*(m.variables for m in self.rhs)) if self.rhs else set()
+        return lhs[0] if lhs in (["i"], ["v"]) and lhs[0] not in rhs else None
+
+    def sx_explicit(self, w, env: dict):
+        e, k = self._sx_env(w, env), len(self.lhs)
+        return sum(wk * m.sx(e) for wk, m in zip(w[k:len(self.terms)], self.rhs)) / w[0]
+
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
         rename = {"v": across, "i": flow, "dv": f"der({across})", "di": f"der({flow})"}
 
@@ -495,6 +557,24 @@ class NeuralTemplate(Template):
             a, b, e = u[0], u[1], u[-1]
             out = out - a * np.tanh(b * x + (u[2] * i if self.coupled else 0.0) + e)
         return out
+
+    def _sx_units(self, w, env: dict):
+        import casadi as ca
+
+        k, n = (1 if self.coupled else 2), self.per_unit
+        x = env[self.x]
+        return sum(w[k + j * n] * ca.tanh(w[k + j * n + 1] * x + (w[k + j * n + 2] * env["i"] if self.coupled else 0.0)
+                                          + w[k + j * n + n - 1]) for j in range(self.hidden))
+
+    def sx_residual(self, w, env: dict):
+        return w[0] * env["i"] - (0.0 if self.coupled else w[1] * env[self.x]) - self._sx_units(w, env)
+
+    @property
+    def explicit(self) -> str | None:
+        return None if self.coupled else "i"
+
+    def sx_explicit(self, w, env: dict):
+        return (w[1] * env[self.x] + self._sx_units(w, env)) / w[0]
 
     def start_from(self, env: dict) -> np.ndarray:
         """w reproducing the law observed in ``env`` (c = 1).

@@ -173,7 +173,7 @@ class KillOne(LocalExecutor):
 
     def map(self, fn, items, context=None, **kw):
         def task(ctx, item):
-            if fn.__name__ == "_candidate_task" and item[0] == self.victim:
+            if fn.__name__ == "fit_task" and item.component == self.victim:
                 os.kill(os.getpid(), signal.SIGKILL)
             return fn(ctx, item)
 

@@ -135,6 +135,7 @@ class Discovery:
     def _set_results(self, report: dict, run_dir: Path) -> None:
         self.report_, self.run_dir_ = report, Path(run_dir)
         self.misfit_, self.cause_, self.gain_ = report["misfit"], report["cause"], report["gain"]
+        self.causes_ = report.get("causes") or ([report["cause"]] if report.get("cause") else [])
         self.law_ = (report["cause"] or {}).get("law")
         self.candidates_ = report["candidates"]
 
@@ -169,8 +170,11 @@ class Discovery:
         if cause:
             val = ("" if g["validation_rms_before"] is None else
                    f"; validation RMS {g['validation_rms_before']:.4g} -> {g['validation_rms_after']:.4g}")
-            lines += [f"cause: {cause['effect']} [{cause['evidence']['strength']}]",
-                      f"gain: training RMS {g['train_rms_before']:.4g} -> {g['train_rms_after']:.4g}{val}"]
+            causes = self.report_.get("causes") or [cause]
+            for k, c in enumerate(causes):
+                label = "cause" if len(causes) == 1 else f"cause {k + 1}"
+                lines.append(f"{label}: {c['effect']} [{c['evidence']['strength']}]")
+            lines.append(f"gain: training RMS {g['train_rms_before']:.4g} -> {g['train_rms_after']:.4g}{val}")
         else:
             lines.append("cause: none (the model explains the data to the noise level)"
                          if not m["significant"] else

@@ -142,10 +142,24 @@ def _statement_end(text: str, start: int) -> int:
     return n
 
 
-def redeclared(text: str, model_short: str, component: str, new_class: str) -> str | None:
+def _arguments(text: str) -> list[str]:
+    """The top-level comma-separated arguments of a modification."""
+    out, depth, cur = [], 0, ""
+    for ch in text:
+        depth += {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0)
+        if ch == "," and depth == 0:
+            out.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return [a for a in [*out, cur] if a.strip()]
+
+
+def redeclared(text: str, model_short: str, component: str, new_class: str, keep=("v", "i")) -> str | None:
     """``text`` with the declaration of ``component`` inside class ``model_short`` changed to
-    ``new_class`` (its modification dropped: it set the nominal class's parameters; its comment
-    and annotation kept), or None when that declaration is not in the class."""
+    ``new_class``: of its modification only what modifies the learned class's own variables
+    ``keep`` stays (a start value, fixed = true; the nominal class's parameters go), its
+    comment and annotation stay. None when that declaration is not in the class."""
     head = re.search(rf"(?m)(?:^|[\s;])(?:(?:partial|encapsulated|final)\s+)*(?:model|block|class)\s+{re.escape(model_short)}\b",
                      text)
     if not head:
@@ -159,9 +173,14 @@ def redeclared(text: str, model_short: str, component: str, new_class: str) -> s
             continue
         stop = _statement_end(text, m.end())
         rest = text[m.end():stop]
-        mod = re.match(r"\s*(\([^;]*?\))?", rest)
-        if rest.lstrip().startswith("(") and mod:
-            rest = rest[mod.end():]
+        if rest.lstrip().startswith("("):          # the modification, nested parentheses and all
+            k0, depth = rest.index("("), 0
+            for k in range(k0, len(rest)):
+                depth += {"(": 1, ")": -1}.get(rest[k], 0)
+                if depth == 0:
+                    break
+            kept = [a for a in _arguments(rest[k0 + 1:k]) if re.match(rf"\s*(?:each\s+|final\s+)*({'|'.join(keep)})\b", a)]
+            rest = (f"({', '.join(a.strip() for a in kept)})" if kept else "") + rest[k + 1:]
         return text[:m.start(4)] + new_class + m.group(5) + component + rest + text[stop:]
     return None
 

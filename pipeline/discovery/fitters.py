@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..data import TimeSeries
+from ..errors import MclError
 from ..stats import criterion as criterion_of, rss as rss_of
 
 #: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
@@ -91,68 +92,109 @@ class FullDiscretisationFitter(CandidateFitter):
 
 
 def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str,
-                  give_up=None, prune: bool = True, n_terms: int | None = None, progress=None):
-    """LM fit of the template parameters, then backward elimination of terms (w1 anchors the
-    scale; ``prune=False`` keeps every parameter: a network has no terms to remove). ``give_up``
-    (see :class:`mcl.fit.LevenbergMarquardt`) stops a candidate that cannot win."""
+                  give_up=None, prune: bool = True, n_terms: int | None = None, progress=None,
+                  held=None, prunable=None):
+    """LM fit of the law parameters, then backward elimination of terms.
+
+    ``held`` marks the parameters kept at their start value (each law's scale: G(w) = 0 and
+    G(k w) = 0 are one law; default the first), ``prunable`` the terms backward elimination may
+    remove (default the first ``n_terms`` but the held); ``prune=False`` keeps every parameter (a
+    network has no terms to remove). ``give_up`` (see :class:`mcl.fit.LevenbergMarquardt`)
+    stops a candidate that cannot win; ``progress`` hears of each better RSS."""
     from ..fit import FitProblem, LevenbergMarquardt
 
+    n = len(names)
+    w0 = np.asarray(w0, float)
+    held = np.zeros(n, bool) if held is None else np.asarray(held, bool)
+    if not held.any() and prunable is None:
+        held[0] = True
+    if prunable is None:
+        prunable = np.arange(n) < (n_terms or n)
+    prunable = np.asarray(prunable, bool) & ~held
     score_of = criterion_of(criterion).score
     n_obs = int(np.isfinite(data.select([o for o in model.output_names if o in data.names]).values).sum())
-    active = np.ones(len(names), bool)
+    dictionary = int((~held).sum())
+    active = np.ones(n, bool)
 
-    def fit(active_mask, start, window=data, limit=budget):
-        params = [n for n, on in zip(names, active_mask) if on]
-        fixed = {n: 0.0 for n, on in zip(names, active_mask) if not on}
+    def fit(active_mask, start, window=data, limit=budget, restore=24):
+        free = active_mask & ~held
+        params = [nm for nm, on in zip(names, free) if on]
+        fixed = {nm: (float(w0[k]) if held[k] else 0.0) for k, nm in enumerate(names) if not free[k]}
         problem = FitProblem(model, window, params, fixed=fixed, options=FIT_OPTIONS)
         whole = window is data      # only a fit to all the data compares with other candidates
         report = None if progress is None or not whole else (lambda cost: progress(cost * len(data.time)))
         res = LevenbergMarquardt(max_simulations=limit, tol=FIT_TOL, give_up=give_up if whole else None,
-                                 progress=report).fit(problem, np.asarray(start)[active_mask])
-        w = np.zeros(len(names))
-        w[active_mask] = res.w
+                                 progress=report, restore=restore, axis=None).fit(problem, np.asarray(start)[free])
+        w = np.where(held, w0, 0.0)
+        w[free] = res.w
         rss = res.cost * len(window.time)   # J of eq. (3) is the mean over samples of the RSS
         return w, rss, problem, res
 
     visited = []
 
     def record(problem, active_mask):
+        free = active_mask & ~held
         for e in problem.recorder.evaluations:
-            full = np.zeros(len(names))
-            full[active_mask] = e.w
+            full = np.where(held, w0, 0.0)
+            full[free] = e.w
             visited.append([*full.tolist(), bool(e.feasible)])
 
-    # continuation in the horizon: a law far from the nominal one moves resonances, and the fit
-    # to the whole record falls into the local minima that phase drift makes; fitted first to
-    # its first eighth, quarter and half, each start is close enough for the next
-    w, sims = np.asarray(w0, float), 0
-    for window in horizons(data):
-        w, rss, problem, res = fit(active, w, window, max(budget - sims, 5))
-        record(problem, active)
-        sims += res.simulations
+    def score_for(rss, active_mask):
+        return score_of(rss, n_obs, int((active_mask & ~held).sum()), dictionary)
+
+    w, rss, problem, res = fit(active, w0)
+    record(problem, active)
+    sims = res.simulations
+    start = next((e.cost for e in problem.recorder.evaluations if e.feasible), None)
+    windows = horizons(data)
+    if (len(windows) > 1 and start is not None and rss > 0.5 * start * len(data.time)
+            and not res.message.startswith("stopped")):
+        # hardly better than where it started: a law far from the nominal one moves resonances,
+        # and a fit to the whole record falls into the local minima phase drift makes; fitted
+        # first to its first eighth, quarter and half, each start is close enough for the next
+        w_c = w0
+        for window in windows:
+            w_c, rss_c, problem_c, res_c = fit(active, w_c, window, max(budget - sims, 5))
+            record(problem_c, active)
+            sims += res_c.simulations
+        if rss_c < rss:
+            w, rss, problem, res = w_c, rss_c, problem_c, res_c
     path = []
-    score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
+    score = score_for(rss, active)
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
-    n_terms = n_terms or len(names)
-    while prune and active[:n_terms].sum() > 2 and not res.message.startswith("stopped"):
-        sim = problem.simulate(w[active], gradient=True)
+    while prune and (active & prunable).sum() > 1 and not res.message.startswith("stopped"):
+        sim = problem.simulate(w[active & ~held], gradient=True)
         sims += 1
         if not sim.ok:
             break
-        S = sim.sensitivities[:, problem.idx, :].reshape(-1, int(active.sum()))[:, 1:]
+        free = np.flatnonzero(active & ~held)
+        S = sim.sensitivities[:, problem.idx, :].reshape(-1, len(free))
         H_inv = np.linalg.pinv(S.T @ S)
-        idx = np.flatnonzero(active)[1:]
-        est = w[idx] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
-        est = np.where(idx < n_terms, est, np.inf)                  # a scale is not a term
-        k = idx[int(np.argmin(est))]
-        trial = active.copy()
-        trial[k] = False
-        w_t, rss_t, problem_t, res_t = fit(trial, w)
+        est = w[free] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
+        est = np.where(prunable[free], est, np.inf)                  # a scale is not a term
+        refit = None
+        # the cheapest removal first; one the model cannot do without (a capacitor's own
+        # capacitance: its state would vanish) does not simulate, and the next is tried
+        for j in np.argsort(est)[:3]:
+            if not np.isfinite(est[j]):
+                break
+            trial = active.copy()
+            trial[free[j]] = False
+            try:
+                refit = fit(trial, w, restore=1)
+            except MclError:
+                path.append({"removed": names[free[j]], "accepted": False, "message": "does not simulate without it"})
+                continue
+            k, e_k = free[j], est[j]
+            break
+        if refit is None:
+            break
+        w_t, rss_t, problem_t, res_t = refit
         record(problem_t, trial)
         sims += res_t.simulations
-        score_t = score_of(rss_t, n_obs, int(trial.sum()) - 1, len(names) - 1)
+        score_t = score_for(rss_t, trial)
         ok = score_t < score
-        path.append({"removed": names[k], "estimate": float(rss + est.min()), "rss": rss_t,
+        path.append({"removed": names[k], "estimate": float(rss + e_k), "rss": rss_t,
                      "score": score_t, "accepted": bool(ok)})
         if not ok:
             break
@@ -163,11 +205,11 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     sims += 1
     if final.ok:
         rss = rss_of(residual(data, model, final))
-        score = score_of(rss, n_obs, int(active.sum()) - 1, len(names) - 1)
+        score = score_for(rss, active)
     return w, active, rss, score, sims, path, visited, final
 
 
-def horizons(data: TimeSeries, first: float = 1 / 8, min_samples: int = 50) -> list[TimeSeries]:
+def horizons(data: TimeSeries, first: float = 1 / 8, min_samples: int = 100) -> list[TimeSeries]:
     """The data's first eighth, quarter, half and all of it (windows shorter than
     ``min_samples`` samples left out)."""
     n, out, frac = len(data.time), [], first

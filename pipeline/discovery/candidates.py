@@ -1,0 +1,269 @@
+"""Candidates: a law (or two, at two components) put into the compiled model and fitted.
+
+A candidate is an :class:`Item` (one component, one law family) or a :class:`Pair` (two laws at
+two components, fitted together: two faults at once). :func:`build` puts its laws into the base
+model's DAE (:mod:`.inject`); :func:`fit_task`, the executor's task, fits and prunes them and
+returns the result as a dict (a pair's dict holds one part per law), written to the run
+directory as it finishes. Running fits publish the best RSS they have reached, so that a fit that
+cannot win stops (:meth:`Context.give_up`), whichever worker it runs in.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from ..data import TimeSeries
+from ..errors import MclError
+from ..stats import rms
+from .fitters import residual
+from .inject import NominalForm, compiled, mode_of, nominal_form, with_law
+from .screen import law_signals
+
+#: family indices of the shape stage (after any family list)
+NEURAL_INDEX, SHAPE_INDEX = 100, 101
+
+
+class Item(NamedTuple):
+    """One candidate: a component with one law (family index ``index`` of its list, or of the
+    shape stage) given by a template spec."""
+
+    component: str
+    index: int
+    spec: object
+
+    @property
+    def key(self) -> tuple[str, int]:
+        return (self.component, self.index)
+
+    @property
+    def file(self) -> str:
+        return f"candidates/{self.component}_{self.index}.json"
+
+    @property
+    def parts(self) -> list["Item"]:
+        return [self]
+
+
+class Pair(NamedTuple):
+    """Two laws at two components, fitted together (two faults the data show at once)."""
+
+    first: Item
+    second: Item
+
+    @property
+    def component(self) -> str:
+        return f"{self.first.component}+{self.second.component}"
+
+    @property
+    def index(self) -> str:
+        return f"{self.first.index}+{self.second.index}"
+
+    @property
+    def spec(self) -> list:
+        return [self.first.spec, self.second.spec]
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return (self.component, self.index)
+
+    @property
+    def file(self) -> str:
+        return f"candidates/{self.component}_{self.index}.json"
+
+    @property
+    def parts(self) -> list[Item]:
+        return [self.first, self.second]
+
+
+@dataclass
+class Base:
+    """The model a search round works on: the compiled model with the causes found so far."""
+
+    model: object              # CompiledModel (outputs include the measured variables)
+    result: object             # its simulation of the training data
+    excluded: set = field(default_factory=set)   # components already named as causes
+
+    @property
+    def dae(self):
+        return self.model.dae
+
+    @property
+    def structure(self):
+        return self.model.structure
+
+
+@dataclass
+class Context:
+    """What every executor task of a round shares (inherited by forked workers)."""
+
+    base: Base
+    signals: dict               # component -> nominal law variables at the data points
+    rates: dict                 # component -> its across value and flow as functions of the states
+    train: TimeSeries
+    validate: TimeSeries | None
+    budget: int                 # simulations per fit
+    criterion: str
+    method: str                 # simulation | full-discretisation
+    progress_dir: str           # running and finished fits publish their RSS here ('' = no early stop)
+    n_obs: int = 0
+
+    def give_up(self, reachable: float, current: float, item) -> bool:
+        """A fit stops when it cannot win or tie. Given the RSS the other fits have reached and
+        what its trusted Gauss-Newton model can still reach: it stops when that is 10x the best
+        (n ln 10 behind in any criterion); or, near its own optimum (its RSS within 1.5x of what it
+        can reach), when it cannot come within the decisive margin of the best (n ln(RSS ratio) >
+        10), or cannot improve on another law at its own component by what one more parameter
+        costs (ln n / n of the RSS: it could only prune back to a law already fitted there).
+        Laws at other components that can tie run to their end: the verdict compares them."""
+        if not self.progress_dir:
+            return False
+        others = reached(Path(self.progress_dir), exclude=item)
+        if not others:
+            return False
+        n = max(self.n_obs, 2)
+        best = min(rss for _, rss in others)
+        mine = set(item.component.split("+"))
+        same = [rss for comp, rss in others if set(comp.split("+")) == mine]
+        near = current <= 1.5 * reachable
+        return (reachable > 10.0 * best
+                or (near and n * np.log(max(reachable, 1e-300) / max(best, 1e-300)) > 10.0)
+                or (near and bool(same) and reachable > min(same) * (1.0 - np.log(n) / n)))
+
+
+@dataclass
+class Law:
+    """One law of a built candidate: its template, start, parameter names and nominal form."""
+
+    item: Item
+    template: object
+    w0: np.ndarray
+    names: list[str]
+    nominal: NominalForm | None
+
+
+def start_of(ctx: Context, item: Item):
+    """(template, w0, nominal form) of ``item``'s law: started at its fit to the nominal law
+    along the base model's run (or at the spec's own ``start``)."""
+    from ..api import registry
+
+    template = registry().template(item.spec)
+    env = ctx.signals[item.component].env()
+    explicit = isinstance(item.spec, dict) and "start" in item.spec
+    w0 = np.asarray(template.start() if explicit else template.start_from(env), float)
+    nominal = None
+    if template.explicit is not None:
+        series = mode_of(template) == "series"
+        law_vars = [v for v in (("i", "di") if series else ("v", "dv")) if v in template.uses]
+        nominal = nominal_form(env, law_vars, "v" if series else "i")
+    return template, w0, nominal
+
+
+def build(ctx: Context, item) -> tuple[list[Law], object]:
+    """The candidate model: the base model's DAE with each law of ``item`` at its component."""
+    dae, laws = ctx.base.dae, []
+    for part in item.parts:
+        template, w0, nominal = start_of(ctx, part)
+        comp = ctx.base.structure.components[part.component]
+        dae, names = with_law(dae, comp, template, w0, nominal, ctx.rates.get(part.component))
+        laws.append(Law(part, template, w0, names, nominal))
+    base = ctx.base.model
+    return laws, compiled(dae, base.name, outputs=ctx.train.names, info=base.info, structure=base.structure)
+
+
+def fit_task(ctx: Context, item) -> dict:
+    """Executor task: one candidate built, fitted and pruned; its result as a dict."""
+    from ..api import registry, simulate
+    from .fitters import FitOutcome, fit_and_prune
+
+    try:
+        laws, model = build(ctx, item)
+    except MclError as exc:
+        return {"component": item.component, "template": item.spec, "score": None,
+                "not_applicable": f"the law cannot be put there: {exc.message}"}
+    names = [n for law in laws for n in law.names]
+    w0 = np.concatenate([law.w0 for law in laws])
+    shape = isinstance(item, Item) and item.index >= NEURAL_INDEX
+    progress = None if not ctx.progress_dir else (lambda rss: publish(Path(ctx.progress_dir), item, rss))
+    give_up = None if shape or not ctx.progress_dir else (lambda reach, now: ctx.give_up(reach, now, item))
+    if isinstance(item, Pair):        # two laws: each keeps its scale, every term may be pruned
+        held, prunable = [], []
+        for law in laws:
+            n_terms = len(getattr(law.template, "terms", law.names))
+            held += [k == 0 for k in range(len(law.names))]
+            prunable += [0 < k < n_terms for k in range(len(law.names))]
+        fit = FitOutcome(*fit_and_prune(model, ctx.train, names, w0, 2 * ctx.budget, ctx.criterion, give_up=give_up,
+                                        progress=progress, held=held, prunable=prunable))
+    else:
+        # the shape stage (a network, then distilled laws with fitted scales) always simulates:
+        # it refines the best law and is not stopped for being behind it; a network has many
+        # parameters and one chance, so it gets three fits' budget
+        template = laws[0].template
+        fitter = registry().fitter("simulation" if shape else ctx.method)
+        fit = fitter.fit(model, ctx.train, names, w0, template, ctx.criterion,
+                         ctx.budget * (3 if item.index == NEURAL_INDEX else 1), give_up=give_up,
+                         prune=bool(getattr(template, "terms", None)), progress=progress)
+    res = fit.result if fit.result is not None else simulate(model, ctx.train, dict(zip(names, fit.w)))
+    out = {"component": item.component, "template": item.spec, "rss": fit.rss, "score": fit.score,
+           "simulations": fit.simulations, "pruning": fit.path, "visited": fit.visited if len(laws) == 1 else [],
+           "train_rms": rms(residual(ctx.train, model, res)) if res.ok else None}
+    if ctx.validate is not None:
+        rv = simulate(model, ctx.validate, dict(zip(names, fit.w)))
+        out["validation_rms"] = rms(residual(ctx.validate, model, rv)) if rv.ok else None
+    parts, k = [], 0
+    for law in laws:
+        n = len(law.names)
+        parts.append(_law_result(ctx, law, model, res, fit.w[k:k + n], fit.active[k:k + n]))
+        k += n
+    if len(parts) == 1:
+        return {**parts[0], **out}
+    return {**out, "components": [p["component"] for p in parts], "parts": parts,
+            "family": "+".join(p["family"] for p in parts), "equation": "; ".join(p["equation"] for p in parts)}
+
+
+def _law_result(ctx: Context, law: Law, model, res, w, active) -> dict:
+    """One fitted law: its terms and values, and the range of its variable along the fitted run."""
+    template, comp = law.template, ctx.base.structure.components[law.item.component]
+    out = {"component": comp.name, "class": comp.cls, "template": law.item.spec,
+           "family": getattr(template, "family", "") or template.name, "law_variable": template.law_variable,
+           "mode": mode_of(template), "parameter_names": law.names,
+           "nominal_form": law.nominal.coefficients if law.nominal else None,
+           "nominal_exact": bool(law.nominal.exact) if law.nominal else None,
+           "w0": law.w0.tolist(), "w": np.asarray(w).tolist(), "active": np.asarray(active).tolist(),
+           "equation": template.equation(np.asarray(w) * np.asarray(active)),
+           "terms": [str(m) for m in getattr(template, "terms", [])]}
+    if res.ok:
+        env = law_signals(model, res.states, res.time, ctx.train, [comp])[comp.name].env()
+        out["v_range"] = [float(np.min(env["v"])), float(np.max(env["v"]))]
+        x = env[template.law_variable]
+        out["law_range"] = [float(np.min(x)), float(np.max(x))]
+    return out
+
+
+def publish(directory: Path, item, rss: float) -> None:
+    """A running or finished fit's RSS, where the other fits (in any worker) read it."""
+    if rss is None or not np.isfinite(rss):
+        return
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / f"{item.component}_{item.index}.json"
+    tmp = path.with_suffix(f".{id(path)}.tmp")
+    tmp.write_text(json.dumps({"rss": float(rss), "component": item.component}))
+    tmp.replace(path)
+
+
+def reached(directory: Path, exclude=None) -> list[tuple[str, float]]:
+    """(component, least RSS) of every fit of this round (but ``exclude``) that has published."""
+    out = []
+    own = f"{exclude.component}_{exclude.index}.json" if exclude is not None else None
+    for f in directory.glob("*.json") if directory.is_dir() else []:
+        if f.name == own:
+            continue
+        try:
+            d = json.loads(f.read_text())
+            out.append((str(d.get("component", "")), float(d["rss"])))
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+    return out

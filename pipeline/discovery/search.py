@@ -1,0 +1,321 @@
+"""One search round: which laws at which components could explain what the model gets wrong.
+
+:func:`search` lists the candidates (every candidate component with the law families of its
+role, or the pinned templates), screens them all in one simulation (:mod:`.screen`: the
+Gauss-Newton prediction of each law at each component, and, when no single law comes near the
+noise, of each pair of laws at two components: two faults at once), fits the promising ones in
+the executor's workers (:mod:`.candidates`) and, for the best law of one variable, looks for its
+shape (a network distilled into sparse readable laws).
+"""
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+from pathlib import Path
+
+import numpy as np
+
+from ..data import TimeSeries
+from ..errors import ConfigError
+from ..executor import TaskFailed
+from ..progress import log
+from ..sensitivity import fine_grid
+from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, publish
+from .families import distillations, families, role_of
+from .inject import compiled, mode_of, rate_variables, with_injections
+from .screen import law_signals, linear_response, predicted_rss
+
+#: pairs of laws are screened when the best single law is predicted to leave more than this
+#: times the noise's share of the RSS; a pair is fitted when it promises at most half the best
+#: single law's RSS
+PAIR_WHEN, PAIR_GAIN = 2.0, 0.5
+
+
+def balanced(base: Base, train: TimeSeries, comp) -> bool:
+    """Whether what flows into one connector of ``comp`` flows out of the other along the run
+    (a one-port: resistor, spring, damper, capacitor); a mass or an inertia stores it."""
+    from ..simulation import prepare_inputs
+
+    ode, res = base.model.ode, base.result
+    fa, fb = comp.flow()
+    idx = [ode.probe_names.index(n) for n in (fa, fb)]
+    u = prepare_inputs(base.model, train)
+    N = len(res.time)
+    U = np.array([np.interp(res.time, u.time, u.values[:, j]) for j in range(len(u.names))]).reshape(-1, N)
+    p = base.model.parameter_vector()
+    vals = np.array(ode.probe.map(N)(res.states.T, U, np.repeat(p[:, None], N, 1), res.time[None]))[idx]
+    scale = float(np.max(np.abs(vals))) or 1.0
+    return float(np.max(np.abs(vals[0] + vals[1]))) <= 1e-6 * scale
+
+
+def blocked(template, rates: dict, component: str) -> str | None:
+    """Why a law cannot sit at a component (it is in the rate of a variable the model's states
+    do not set there: it would add a state), or None."""
+    for var, d in (("v", "dv"), ("i", "di")):
+        if d in template.uses and rates.get(var) is None:
+            what = "across value" if var == "v" else "flow"
+            return f"the {what} of {component} is not set by the model's states: a law in its rate would add a state"
+    return None
+
+
+# -- screening -----------------------------------------------------------------------------------
+def promising(screening: list[dict], limit: int, ratio: float = 10.0) -> list[int]:
+    """Indices of the candidates worth a full fit: at most ``limit``, best predicted first, and
+    only those whose predicted RSS after one Gauss-Newton step is within ``ratio`` of the best
+    prediction (a candidate predicted 10x worse loses by n ln 10 in any criterion unless the
+    linearisation is badly wrong). Laws that could not be screened are always fitted."""
+    ok = sorted((s["predicted_rss"], k) for k, s in enumerate(screening) if s.get("predicted_rss") is not None)
+    unscreened = [k for k, s in enumerate(screening) if s.get("unscreened")]
+    if not ok:
+        return unscreened
+    floor = max(ok[0][0], 1e-300)
+    return [k for pred, k in ok[:limit] if pred <= ratio * floor] + unscreened
+
+
+class Screening:
+    """Every law at every component screened in one simulation: the linear response of the
+    outputs to a deviation at each component (:func:`.screen.linear_response`), and from it the
+    Gauss-Newton prediction of any law, or any pair of laws."""
+
+    def __init__(self, items: list[Item], base: Base, train: TimeSeries, resid: np.ndarray):
+        from ..api import registry, simulate
+        from ..simulation import SimulationOptions
+
+        reg = registry()
+        comps = [base.structure.components[c] for c in dict.fromkeys(it.component for it in items)]
+        templates = {it.key: reg.template(it.spec) for it in items}
+        modes = {}
+        for it in items:
+            modes.setdefault(it.component, mode_of(templates[it.key]))
+        sdae, j_names = with_injections(base.dae, comps, modes)
+        model = compiled(sdae, base.model.name, outputs=train.names, info=base.model.info, structure=base.structure)
+        fine, at_data = fine_grid(train.time, substeps(model, train))
+        nominal = simulate(model, train, t_out=fine, options=SimulationOptions(rtol=1e-7, atol=1e-9))
+        if not nominal.ok:
+            raise ConfigError(f"the model does not simulate the training data: {nominal.reason}")
+        sig = law_signals(model, nominal.states, fine, train, comps)
+        phis = {}
+        for it in items:
+            tpl = templates[it.key]
+            if tpl.explicit is None:      # an implicit law has no deviation terms to screen
+                continue
+            try:   # d D / d w_k: the law's right-hand terms (features are signed, lhs first)
+                phis[it.key] = -tpl.features(sig[it.component].env())[:, 1:len(tpl.terms)].T
+            except (NotImplementedError, KeyError, AttributeError):
+                continue
+        # one deviation parameter per component; every law at it shares that parameter's response
+        j_of = {c.name: n for c, n in zip(comps, j_names)}
+        resp = linear_response(model, [j_of[k[0]] for k in phis], train, nominal, at_data, phis) if phis else None
+        o_idx = [model.output_names.index(o) for o in model.output_names if o in train.names]
+        self.r = resid.ravel()
+        ok = np.isfinite(self.r)
+        self.columns: dict = {}
+        if resp is not None:
+            S = resp.S[:, o_idx, :].reshape(-1, len(resp.columns))[ok]
+            self.G, self.g = S.T @ S, S.T @ self.r[ok]     # every prediction from these
+            for j, (key, _) in enumerate(resp.columns):
+                self.columns.setdefault(key, []).append(j)
+        self.rss0 = float(np.sum(self.r[ok] ** 2))
+
+    def predicted(self, keys) -> float | None:
+        """The RSS one Gauss-Newton step of the laws ``keys`` together is predicted to reach."""
+        if any(k not in self.columns for k in keys):
+            return None
+        j = [c for k in keys for c in self.columns[k]]
+        g = self.g[j]
+        return float(max(self.rss0 - g @ np.linalg.pinv(self.G[np.ix_(j, j)]) @ g, 0.0))
+
+    def singles(self, items: list[Item]) -> list[dict]:
+        out = []
+        for it in items:
+            pred = self.predicted([it.key])
+            entry = {"component": it.component, "template": it.spec, "predicted_rss": pred}
+            if pred is None:
+                entry["unscreened"] = True
+            else:
+                entry.update(rss0=self.rss0, n_params=len(self.columns[it.key]) + 1)
+            out.append(entry)
+        return out
+
+    def pairs(self, items: list[Item], limit: int) -> list[tuple[float, Item, Item]]:
+        """The best ``limit`` pairs of laws at two different components, by predicted RSS."""
+        ranked = [(self.predicted([a.key, b.key]), a, b) for a, b in itertools.combinations(items, 2)
+                  if a.component != b.component and a.key in self.columns and b.key in self.columns]
+        return sorted(ranked, key=lambda t: t[0])[:limit]
+
+
+def substeps(model, train: TimeSeries) -> int:
+    """Points per data interval for the linearised response (:mod:`mcl.sensitivity`): enough
+    that the model's fastest mode moves little in one step."""
+    from ..api import simulate
+    from ..sensitivity import MAX_STEP, SUBSTEPS, Linearisation
+
+    res = simulate(model, train)
+    if not res.ok:
+        return SUBSTEPS
+    lin = Linearisation(model, res.states, res.time, train, model.parameter_vector(), [])
+    h = float(np.max(np.diff(train.time)))
+    return int(np.clip(np.ceil(lin.rate() * h / MAX_STEP), SUBSTEPS, 24))
+
+
+# -- fitting batches -----------------------------------------------------------------------------
+class Batch:
+    """Fits candidates in the executor's workers (each builds its own candidate model from the
+    compiled DAE), each saved as it finishes so that a rerun skips it."""
+
+    def __init__(self, ctx: Context, part: Path, rundir, reg, executor: dict):
+        self.ctx, self.part, self.rundir, self.reg, self.executor = ctx, part, rundir, reg, executor
+
+    def __call__(self, items: list) -> list[dict]:
+        part = self.part
+        todo = [it for it in items if not _done(part / it.file)]
+        log.info("      fitting %d candidate(s) (%d already done)", len(items), len(items) - len(todo))
+
+        def checkpoint(k, r):
+            it = todo[k]
+            if isinstance(r, TaskFailed):
+                r = {"component": it.component, "template": it.spec, "failed": r.reason, "score": None}
+            self.rundir.write_json(str((part / it.file).relative_to(self.rundir.partial)), r)
+            if self.ctx.progress_dir and r.get("rss") is not None and not r.get("failed"):
+                publish(Path(self.ctx.progress_dir), it, r["rss"])
+
+        if todo:
+            with self.reg.executor(self.executor) as ex:
+                ex.map(fit_task, todo, context=self.ctx, timeout=3600, label="candidates", on_result=checkpoint)
+        return [json.loads((part / it.file).read_text()) for it in items]
+
+    def patient(self) -> "Batch":
+        """The same batch with no early stop (every fit to its end)."""
+        return Batch(dataclasses.replace(self.ctx, progress_dir=""), self.part, self.rundir, self.reg, self.executor)
+
+
+def _done(path: Path) -> bool:
+    """A candidate already fitted (a failed one is tried again on resume)."""
+    if not path.exists():
+        return False
+    try:
+        return "failed" not in json.loads(path.read_text())
+    except ValueError:
+        return False
+
+
+def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
+    """Non-polynomial shapes for the most promising component: a neural law in the variable of
+    its best polynomial law, fitted to the data, then distilled into a sparse readable law over
+    tanh, sinh, |x| x, x/sqrt(1 + x^2), exp and polynomial terms (:func:`families.distillations`)
+    and fitted and pruned like any candidate. Skipped when the polynomial law already fits to
+    the noise, or when it is not a law of one variable."""
+    from ..api import registry
+
+    done = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
+    if not done or (done[0].get("train_rms") is not None and done[0]["train_rms"] < 1.2 * sigma):
+        return []
+    one = [c for c in done if c.get("family") in ("static", "rate") and c.get("law_variable") in ("v", "dv")]
+    if not one:
+        return []
+    best, var = one[0], one[0]["law_variable"]
+    log.info("      shape of %s's law in %s: neural fit, then a sparse law distilled from it", best["component"], var)
+    poly = registry().template(best["template"])
+    xs = np.linspace(*(best.get("law_range") or [-1.0, 1.0]), 201)
+    spec = {"name": "neural", "hidden": 4, "x": var, "coupled": False}
+    start = registry().template(spec).fit_curve(xs, poly.curve(np.asarray(best["w"]) * np.asarray(best["active"]), xs))
+    neural = fit([Item(best["component"], NEURAL_INDEX, {**spec, "start": start.tolist()})])
+    out = list(neural)
+    n = neural[0]
+    if n.get("score") is None or not n.get("law_range"):
+        return out
+    template = registry().template(n["template"])
+    xs = np.linspace(*n["law_range"], 201)
+    laws = distillations(xs, template.curve(np.asarray(n["w"]), xs), var)
+    items = [Item(best["component"], SHAPE_INDEX + k,
+                  {"name": "polynomial", "lhs": ["i"], "rhs": law["terms"], "scales": law["scales"],
+                   "start": [1.0, *map(float, law["c"])], "family": "shape"})
+             for k, law in enumerate(laws)]
+    return out + fit(items)
+
+
+# -- a round ------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class Round:
+    """What a search round found: the fitted candidates (singles and pairs), the screening,
+    each component's nominal law variables and role, and the batch that fitted them."""
+
+    candidates: list
+    screening: list
+    pairs: list
+    signals: dict
+    roles: dict
+    fit: Batch | None
+
+
+def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: float, resid) -> Round:
+    """The candidate components with their law families (or the pinned templates), screened in
+    one pass, the promising ones (and pairs of them, when no single law comes near the noise)
+    fitted, then the shape stage."""
+    comps = [c for c in base.structure.candidates() if c.name not in base.excluded]
+    if spec.unknown != "auto":
+        comps = [base.structure.components[spec.unknown]]
+    stores = [c.name for c in comps if not balanced(base, train, c)]
+    if stores:
+        log.info("      not one-ports (their flows do not balance: masses, inertias): %s", ", ".join(stores))
+        comps = [c for c in comps if c.name not in stores]
+    if not comps:
+        return Round([], [], [], {}, {}, None)
+    signals = law_signals(base.model, base.result.states, base.result.time, train, comps)
+    roles = {c.name: role_of(signals[c.name].env()) for c in comps}
+    items = [Item(c.name, k, t) for c in comps
+             for k, t in enumerate(spec.templates or families(roles[c.name], signals[c.name].env()))]
+    templates = {it.key: reg.template(it.spec) for it in items}
+    modes = {}
+    for it in items:
+        modes.setdefault(it.component, mode_of(templates[it.key]))
+    rates = rate_variables(base.dae, comps, modes)
+    why_not = {it.key: blocked(templates[it.key], rates[it.component], it.component) for it in items}
+    n_obs = int(np.isfinite(resid).sum())
+    screening, pairs = _screened(part, rundir, items, why_not, base, train, resid, spec, n_obs * sigma**2)
+    keep = promising(screening, spec.screen, ratio=10.0 if spec.early_stop else np.inf)
+    for k, s_ in enumerate(screening):
+        if k not in keep and s_.get("predicted_rss") is not None:
+            s_["not_fitted"] = "screening predicts it cannot compete"
+    ctx = Context(base, signals, rates, train, validate, spec.max_simulations, spec.criterion,
+                  spec.refinement_method, str(part / "progress") if spec.early_stop else "", n_obs)
+    fit = Batch(ctx, part, rundir, reg, spec.executor)
+    by_key = {it.key: it for it in items}
+    todo = [items[k] for k in keep] + [Pair(by_key[tuple(p["first"])], by_key[tuple(p["second"])]) for p in pairs]
+    cands = fit(todo)
+    for c in cands:       # a law that cannot sit at its component is not applicable, not a failure
+        if c.get("not_applicable"):
+            s_ = next((s for s in screening if s["component"] == c["component"] and s["template"] == c["template"]), None)
+            if s_ is not None:
+                s_["not_applicable"] = c["not_applicable"]
+    cands = [c for c in cands if not c.get("not_applicable")]
+    if spec.templates is None:
+        cands += [c for c in shapes(fit, [c for c in cands if "parts" not in c], sigma) if not c.get("not_applicable")]
+    return Round(cands, screening, pairs, signals, roles, fit)
+
+
+def _screened(part: Path, rundir, items, why_not, base, train, resid, spec, floor: float):
+    """The screening of every item (and the pairs worth fitting), read back on a rerun."""
+    screen_file, pair_file = part / "screening.json", part / "pairs.json"
+    if screen_file.exists() and pair_file.exists():
+        return json.loads(screen_file.read_text()), json.loads(pair_file.read_text())
+    runnable = [it for it in items if not why_not[it.key]]
+    log.info("[2/5] screening %d law(s) on %d component(s) in one simulation", len(items),
+             len({it.component for it in items}))
+    screen = Screening(runnable, base, train, resid) if runnable else None
+    singles = iter(screen.singles(runnable) if screen else [])
+    screening = [{"component": it.component, "template": it.spec, "predicted_rss": None,
+                  "not_applicable": why_not[it.key]} if why_not[it.key] else next(singles) for it in items]
+    pairs = []
+    best = min((s["predicted_rss"] for s in screening if s.get("predicted_rss") is not None), default=None)
+    if screen is not None and best is not None and best > PAIR_WHEN * floor and spec.unknown == "auto":
+        for pred, a, b in screen.pairs(runnable, spec.screen):
+            if pred < PAIR_GAIN * best:
+                pairs.append({"first": list(a.key), "second": list(b.key), "predicted_rss": pred,
+                              "components": [a.component, b.component]})
+        if pairs:
+            log.info("      no single law comes near the noise: %d pair(s) of laws screened in", len(pairs))
+    rundir.write_json(str(screen_file.relative_to(rundir.partial)), screening)
+    rundir.write_json(str(pair_file.relative_to(rundir.partial)), pairs)
+    return screening, pairs

@@ -1,0 +1,159 @@
+"""The verdict of a search round: which law convinces, how strongly, and which components the
+data cannot tell from it.
+
+Candidates are ranked by the run's :class:`mcl.stats.Criterion` against each other and the model
+without them; the best must also improve the validation data. Of laws that explain the data
+equally well (within :data:`EQUAL`), the one at the component whose role fits the learned effect
+is named: a force in the position is the spring's, in the speed the damper's; a current in the
+voltage is the resistor's, not a capacitor's leak. Every component in parallel with a cause is
+named as equivalent (a law in the across value or its rate gives the same flow whichever of two
+parallel parts carries it), as is any other that scores within :data:`EQUAL`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import MclError
+from ..stats import criterion as criterion_of
+from .candidates import Item
+from .families import families, spec_name
+
+#: a lead below this (in the criterion) does not separate two laws: they explain the data alike
+EQUAL = 2.0
+
+
+def components_of(c: dict) -> list[str]:
+    return c.get("components") or [c["component"]]
+
+
+def effect_kind(c: dict) -> str | None:
+    """Which role the learned law's additions to the nominal law point to: ``static`` (terms in
+    the across value only), ``rate`` (its rate only), ``integral`` (the flow and its rate),
+    ``storage`` (both); None when nothing is added."""
+    from ..templates import Monomial
+
+    nominal = set(c.get("nominal_form") or {})
+    extra = [t for t, on, w in zip(c.get("terms", [])[1:], c.get("active", [])[1:], c.get("w", [])[1:])
+             if on and w != 0 and t not in nominal]
+    if not extra:
+        return None
+    scales = (c.get("template") or {}).get("scales", {}) if isinstance(c.get("template"), dict) else {}
+    used = set()
+    for t in extra:
+        try:
+            used |= Monomial.parse(t, scales).variables
+        except MclError:
+            return None
+    if used <= {"v"}:
+        return "static"
+    if used <= {"dv"}:
+        return "rate"
+    if used <= {"i", "di"}:
+        return "integral"
+    return "storage"
+
+
+def equivalents(best: dict, ranked: list[dict], structure) -> list[dict]:
+    """The other components that explain the data as well as ``best``, each with the reason the
+    data cannot separate them."""
+    out, seen = [], {best["component"]}
+    if best.get("mode", "parallel") == "parallel" and structure is not None:
+        for p in structure.parallel(best["component"]):
+            seen.add(p)
+            out.append({"component": p, "class": structure.components[p].cls,
+                        "reason": f"parallel to {best['component']}: the data cannot separate them"})
+    for c in ranked:
+        if "parts" in c or c["component"] in seen or c["score"] - best["score"] > EQUAL:
+            continue
+        seen.add(c["component"])
+        out.append({"component": c["component"], "class": c.get("class"), "equation": c.get("equation"),
+                    "score_difference": c["score"] - best["score"],
+                    "reason": f"explains the data as well ({c['score'] - best['score']:+.2g} in the criterion)"})
+    return out
+
+
+def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: float):
+    """(causes, why not, score of the model without them): the winning law, or both laws of a
+    winning pair, each with its lead over the best candidate that shares none of its components
+    (or the model without it), its equivalents, its role and the kind of its effect."""
+    n_obs = int(np.isfinite(resid).sum())
+    nominal_score = criterion_of(spec.criterion).score(rss0, n_obs, 0)
+    scored = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
+    ranked = [c for c in scored if c["score"] < nominal_score]
+    if not ranked:
+        return [], ("no candidate could be evaluated" if not scored
+                    else "no candidate explains the training data better than the model without it"), nominal_score
+    close = [c for c in ranked if c["score"] - ranked[0]["score"] <= EQUAL and "parts" not in c]
+    fits = [c for c in close if effect_kind(c) is not None and roles.get(c["component"]) == effect_kind(c)]
+    best = fits[0] if fits and "parts" not in ranked[0] else ranked[0]
+    if val0 is not None and not helps(best.get("validation_rms"), val0):
+        return [], (f"the best candidate, {best['component']} ({spec_name(best['template']) if 'parts' not in best else 'two laws'}), "
+                    f"does not improve the validation data (RMS {val0:.4g} -> {_fmt(best.get('validation_rms'))})"), \
+            nominal_score
+    mine = set(components_of(best))
+    laws = best["parts"] if "parts" in best else [best]
+    for law in laws:
+        mine |= {e["component"] for e in equivalents(law, [], structure)}
+    others = [c["score"] for c in ranked if not set(components_of(c)) & mine]
+    delta = min(others + [nominal_score]) - best["score"]
+    shared = {k: best.get(k) for k in ("score", "rss", "train_rms", "validation_rms", "simulations")}
+    causes = [{**law, **shared, "delta": delta, "equivalents": equivalents(law, ranked if len(laws) == 1 else [], structure),
+               "effect_kind": effect_kind(law), "role": roles.get(law["component"]), "pair": len(laws) > 1}
+              for law in laws]
+    return causes, None, nominal_score
+
+
+def helps(after, before: float, margin: float = 0.02) -> bool:
+    """Whether the validation error improves by more than ``margin`` (relative): a law that
+    only fits the training data is not a cause."""
+    return after is not None and np.isfinite(after) and after < (1 - margin) * before
+
+
+def _fmt(x) -> str:
+    return "failed" if x is None else f"{x:.4g}"
+
+
+def role_items(best: dict, roles: dict, structure, cands: list[dict], signals) -> list[Item]:
+    """When the best law's additions do not fit its component's role (a storage law on a damper
+    whose new terms are in the position), the laws of that kind for the components in parallel
+    with it whose role does fit, so that the verdict can name the part whose physics it is (a
+    law of that kind fitted there already, to its end, is not fitted again)."""
+    kind = effect_kind(best)
+    if best.get("pair") or kind is None or roles.get(best["component"]) == kind or structure is None:
+        return []
+    tried = {(c["component"], c.get("family")) for c in cands
+             if not any(str(step.get("message", "")).startswith("stopped") for step in c.get("pruning", []))}
+    items = []
+    for other in structure.parallel(best["component"]):
+        if roles.get(other) != kind or other not in signals:
+            continue
+        for k, spec_ in enumerate(families(kind, signals[other].env())):
+            if spec_.get("family") == kind and (other, kind) not in tried:
+                items.append(Item(other, 50 + k, spec_))
+    return items
+
+
+def failures(screening: list, cands: list) -> list[dict]:
+    """Every candidate that could not be evaluated, with the stage and the reason."""
+    out = [{"component": s["component"], "template": s["template"], "stage": "screening",
+            "reason": s.get("reason", "failed")} for s in screening
+           if s.get("predicted_rss") is None and not s.get("not_applicable") and not s.get("unscreened")]
+    out += [{"component": c["component"], "template": c["template"], "stage": "fitting",
+             "reason": c["failed"]} for c in cands if c.get("failed")]
+    return out
+
+
+def weigh_unevaluated(evidence: dict, best: dict, cands: list, screening: list, spec, n_obs: int) -> None:
+    """A contender that failed in fitting can only be excluded by its screening prediction:
+    its predicted score (one linearised step) must lose by the criterion's 'decisive' margin;
+    otherwise the cause is at most 'undecided'."""
+    score_of = criterion_of(spec.criterion).score
+    open_ = []
+    for c in (c for c in cands if c.get("failed")):
+        pred = next((s for s in screening if s["component"] == c["component"] and s["template"] == c["template"]), {})
+        k = pred.get("n_params", 3)
+        if pred.get("predicted_rss") is None or score_of(pred["predicted_rss"], n_obs, k - 1) - best["score"] <= 10:
+            open_.append(c["component"])
+    if open_:
+        evidence["unevaluated"] = open_
+        evidence["strength"] = f"undecided: {', '.join(open_)} could not be evaluated"
