@@ -6,6 +6,10 @@ mcl, rumoca and CasADi. A hit loads the saved CasADi functions instead of parsin
 and analysing again (an MSL model: seconds -> a fraction of a second). Only compiles that took
 long enough to be worth it are kept, and the oldest entries are dropped beyond ``MAX_ENTRIES``.
 ``MCL_NO_COMPILE_CACHE=1`` turns it off; ``MCL_CACHE_DIR`` moves it.
+
+Built FMUs are kept beside the compiled models (``fmu/``), keyed by what goes into them (the
+generated C sources, the model description, the C compiler and its flags: see
+:mod:`mcl.compile.fmu.export`), so ``mcl compile`` of a cached model skips the C build too.
 """
 from __future__ import annotations
 
@@ -22,6 +26,7 @@ log = logging.getLogger(__name__)
 MIN_SECONDS = 0.5          # quicker compiles are not worth a disk entry
 FORMAT = 8                 # bump when what a compiled model holds changes (events 2, checks 3, fixed algebraics 4, state events 5, start values 6, DAE and structure 7, symbolic blocks 8)
 MAX_ENTRIES = 200
+MAX_FMUS = 50
 
 
 def base_dir() -> Path:
@@ -100,3 +105,34 @@ def _prune(base: Path) -> None:
                      key=lambda p: p.stat().st_mtime)
     for old in entries[:-MAX_ENTRIES]:
         shutil.rmtree(old, ignore_errors=True)
+
+
+def fmu_lookup(key: str) -> Path | None:
+    """The FMU built before for ``key``, or None."""
+    path = base_dir() / "fmu" / f"{key}.fmu"
+    if not enabled() or not path.is_file():
+        return None
+    os.utime(path)      # recently used
+    return path
+
+
+def fmu_store(key: str, fmu: Path) -> None:
+    """Keep a copy of the built (and validated) ``fmu`` under ``key``."""
+    if not enabled():
+        return
+    base = base_dir() / "fmu"
+    tmp = None
+    try:
+        base.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=base, prefix=".new-", suffix=".fmu")
+        os.close(fd)
+        shutil.copyfile(fmu, tmp)
+        os.replace(tmp, base / f"{key}.fmu")
+        old = sorted((p for p in base.glob("*.fmu") if not p.name.startswith(".")), key=lambda p: p.stat().st_mtime)
+        for p in old[:-MAX_FMUS]:
+            p.unlink(missing_ok=True)
+    except OSError as exc:      # costs speed, never the build
+        log.debug("FMU cache not written: %s", exc)
+    finally:
+        if tmp and os.path.exists(tmp):
+            os.unlink(tmp)

@@ -8,9 +8,17 @@ inputs as continuous signals. Importers that can do both get Co-Simulation by de
 does), which is the accurate choice at coarse communication intervals: Model Exchange importers
 hold the inputs between their communication points. The FMU carries its sources, so other
 platforms can rebuild it.
+
+Hybrid models (when, pre, edge, change, sample, reinit, discrete variables, assert) keep their
+events: the wrapper iterates the model's discrete update at clock ticks (announced to Model
+Exchange importers as the next event time), time events and state events (the event
+indicators), as mcl's own engine does. The discrete variables are exported as local variables
+of variability "discrete"; Boolean and Integer ones are Real-valued there (0/1 and whole numbers),
+as the compiled model holds them. Outputs that change only at events are "discrete" too.
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import shutil
@@ -24,12 +32,13 @@ from xml.sax.saxutils import quoteattr
 import casadi as ca
 import numpy as np
 
-from ...errors import CompileError, ConfigError, UnsupportedConstruct
+from .. import cache as compile_cache
+from ...errors import CompileError, ConfigError
 from ...model import CompiledModel
 from .experiment import Experiment, for_model
 
 _HERE = Path(__file__).parent
-FUNCTIONS = ("ode", "out", "alg_res", "init", "start", "probe", "zero", "step")
+FUNCTIONS = ("ode", "out", "alg_res", "init", "start", "probe", "zero", "step", "update", "asserts")
 
 
 def model_identifier(name: str) -> str:
@@ -91,14 +100,42 @@ def settable_starts(model: CompiledModel) -> tuple[list[bool], np.ndarray]:
     return [bool(np.all(np.abs(J[i] - eye[i]) < 1e-9)) for i in range(len(o.x_names))], s0
 
 
-def _step_function(o) -> ca.Function:
-    """(x, u, p, t, du) -> (f, df/dx dense, df/dt + df/du du): what a Rosenbrock step needs."""
-    X, U, P, T = o.ode.mx_in()
+def n_discrete(model: CompiledModel) -> int:
+    """Discrete values at the end of the model's state vector (0 for a continuous model)."""
+    return int(getattr(model.ode, "discrete", 0) or 0)
+
+
+def _step_function(o, nd: int = 0) -> ca.Function:
+    """(x, u, p, t, du) -> (f, df/dx dense, df/dt + df/du du) of the continuous states (the
+    first nx - nd entries of x): what a Rosenbrock step needs."""
+    _, U, P, T = o.ode.mx_in()
+    nc = len(o.x_names) - nd
+    XC, D = ca.MX.sym("xc", nc), ca.MX.sym("d", nd)
+    X = ca.vertcat(XC, D) if nd else XC
     DU = ca.MX.sym("du", U.numel())
-    f = o.ode(X, U, P, T)
+    f = o.ode(X, U, P, T)[:nc] if nd else o.ode(X, U, P, T)
     ft = ca.jacobian(f, T) + (ca.mtimes(ca.jacobian(f, U), DU) if U.numel() else 0)
-    return ca.Function("step", [X, U, P, T, DU], [f, ca.densify(ca.jacobian(f, X)), ca.densify(ft)],
+    return ca.Function("step", [X, U, P, T, DU], [f, ca.densify(ca.jacobian(f, XC)), ca.densify(ft)],
                        ["x", "u", "p", "t", "du"], ["f", "J", "ft"])
+
+
+def _c_string(text: str) -> str:
+    """A C string literal of ``text`` (UTF-8; anything but printable ASCII as octal escapes)."""
+    out = []
+    for b in text.encode("utf-8"):
+        ch = chr(b)
+        out.append(ch if 32 <= b < 127 and ch not in '"\\?' else f"\\{b:03o}")
+    return '"' + "".join(out) + '"'
+
+
+def _events(o) -> dict:
+    """The template values of a hybrid model's clocks and asserts."""
+    info = getattr(o, "events", None) or {}
+    clocks = [(float(a), float(b)) for a, b in info.get("clocks", [])]
+    asserts = info.get("asserts", []) if getattr(o, "asserts", None) is not None else []
+    return dict(NCLOCK=len(clocks), CLOCK_START=_fmt(c[0] for c in clocks), CLOCK_PERIOD=_fmt(c[1] for c in clocks),
+                NA=len(asserts), ASSERT_ERROR=", ".join("0" if a[0] == "warning" else "1" for a in asserts) or "0",
+                ASSERT_MSG=", ".join(_c_string(str(a[1])) for a in asserts) or '""')
 
 
 def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
@@ -118,11 +155,16 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
         zero = ca.Function("zero", o.out.mx_in(), [ca.MX(0, 1)], ["x", "u", "p", "t"], ["out"])
     start, init_start = start_functions(model)
     settable = settable_starts(model)[0] if settable is None else settable
+    nd = n_discrete(model)
     funcs = dict(ode=o.ode, out=o.out, alg_res=o.alg_res, init=init_start, start=start, probe=probe,
-                 zero=zero, step=_step_function(o))
+                 zero=zero, step=_step_function(o, nd), update=getattr(o, "update", None))
+    events = _events(o)
+    if events["NA"]:
+        funcs["asserts"] = o.asserts
     cg = ca.CodeGenerator("mcl_funcs.c", {"with_header": True})
     for key in FUNCTIONS:
-        cg.add(_renamed(funcs[key], prefix + key))
+        if funcs.get(key) is not None:      # update and asserts: hybrid models only
+            cg.add(_renamed(funcs[key], prefix + key))
     cg.generate(str(build) + "/")
     template = (_HERE / "fmi2_model.c").read_text()
     values = dict(NP=len(o.p_names), NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
@@ -131,7 +173,7 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
                   P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start),
                   X_SETTABLE=", ".join(str(int(b)) for b in settable) or "0",
                   N_EVENTS=len(o.time_events), EVENTS=_fmt(np.asarray(o.time_events, float)),
-                  NZ=n_indicators(model))
+                  NZ=n_indicators(model), ND=nd, HYBRID=int(funcs["update"] is not None), **events)
     source = re.sub(r"@(\w+)@", lambda m: str(values[m.group(1)]), template)
     (build / "fmi2_model.c").write_text(source)
     for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
@@ -142,6 +184,21 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
 def n_indicators(model: CompiledModel) -> int:
     """Event indicators of the FMU: the model's zero-crossing functions (state events)."""
     return 0 if model.ode.zero is None else int(model.ode.zero.size1_out(0))
+
+
+def _changes_at_events_only(f: ca.Function, nc: int) -> list[bool]:
+    """Rows of ``f(x, u, p, t)`` that depend on neither the continuous states (the first ``nc``
+    entries of x), the inputs nor time: they change only where the discrete values do."""
+    n = f.size1_out(0)
+    if not n:
+        return []
+    moving = np.zeros(n, dtype=bool)
+    for i in (0, 1, 3):
+        if f.numel_in(i) == 0:
+            continue
+        sp = np.array(ca.DM(f.sparsity_jac(i, 0), 1)).reshape(n, -1)
+        moving |= (sp[:, :nc] if i == 0 else sp).any(axis=1)
+    return [not b for b in moving]
 
 
 def derivative_unit(unit: str | None) -> str | None:
@@ -164,22 +221,30 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
                       descriptions: dict | None = None, starts=None) -> str:
     """modelDescription.xml: Model Exchange and Co-Simulation; parameters tunable, inputs,
     outputs, states (their start values settable where they are initial conditions),
-    derivatives, probes; the model's units and descriptions, completed by ``units`` and
-    ``descriptions`` (names of learned parameters, say). ``starts``: :func:`settable_starts`."""
+    derivatives, discrete variables, probes (value references in this order, as the C wrapper
+    numbers them; the hidden memories of when-conditions, named $..., are left out); the model's
+    units and descriptions, completed by ``units`` and ``descriptions`` (names of learned
+    parameters, say). ``starts``: :func:`settable_starts`."""
     o = model.ode
+    nd = n_discrete(model)
+    nc = len(o.x_names) - nd
     rows, outputs, derivs, initial = [], [], [], []
+    vr = iter(range(1 << 31))
     units = {**model.info.get("units", {}), **(units or {})}
     descriptions = {**model.info.get("descriptions", {}), **(descriptions or {})}
     used_units = set()
 
     def var(name, attrs, real="<Real/>", unit=None, desc=""):
+        ref = next(vr)
+        if name.startswith("$"):
+            return None
         desc = desc or descriptions.get(name, "")
         unit = unit or units.get(name)
         if unit:
             used_units.add(unit)
             real = real.replace("/>", f" unit={quoteattr(unit)}/>")
         d = f" description={quoteattr(desc)}" if desc else ""
-        rows.append(f'    <ScalarVariable name={quoteattr(name)} valueReference="{len(rows)}"{d} {attrs}>'
+        rows.append(f'    <ScalarVariable name={quoteattr(name)} valueReference="{ref}"{d} {attrs}>'
                     f"\n      {real}\n    </ScalarVariable>")
         return len(rows)  # 1-based index
 
@@ -188,16 +253,24 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
         var(n, 'causality="parameter" variability="tunable" initial="exact"', f'<Real start="{float(v)!r}"/>')
     for n, v in zip(o.u_names, o.u_start):
         var(n, 'causality="input" variability="continuous"', f'<Real start="{float(v)!r}"/>')
-    for n in o.y_names:
-        outputs.append(var(n, 'causality="output" variability="continuous" initial="calculated"'))
+    discrete_out = _changes_at_events_only(o.out, nc) if nd else [False] * len(o.y_names)
+    for n, disc in zip(o.y_names, discrete_out):
+        kind = "discrete" if disc else "continuous"
+        outputs.append(var(n, f'causality="output" variability="{kind}" initial="calculated"'))
     settable, s0 = starts or settable_starts(model)
-    states = [var(n, f'{local} initial="exact"', f'<Real start="{float(v)!r}"/>') if exact
-              else var(n, f'{local} initial="calculated"')
-              for n, exact, v in zip(o.x_names, settable, s0)]
-    for n, s in zip(o.x_names, states):
+
+    def state(n, exact, v, kind="continuous"):
+        attrs = f'causality="local" variability="{kind}"'
+        return (var(n, f'{attrs} initial="exact"', f'<Real start="{float(v)!r}"/>') if exact
+                else var(n, f'{attrs} initial="calculated"'))
+
+    states = [state(n, exact, v) for n, exact, v in zip(o.x_names[:nc], settable[:nc], s0[:nc])]
+    for n, s in zip(o.x_names[:nc], states):
         desc = f"time derivative of {n}" + (f" ({descriptions[n]})" if descriptions.get(n) else "")
         derivs.append(var(f"der({n})", f'{local} initial="calculated"', f'<Real derivative="{s}"/>',
                           unit=derivative_unit(units.get(n)), desc=desc))
+    for n, exact, v in zip(o.x_names[nc:], settable[nc:], s0[nc:]):
+        state(n, exact, v, "discrete")
     for _, n in _probe_variables(model):
         var(n, f'{local} initial="calculated"')
     initial = sorted(outputs + [i for i, exact in zip(states, settable) if not exact] + derivs)
@@ -227,6 +300,7 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
     </SourceFiles>
   </CoSimulation>
 {unit_defs}  <LogCategories>
+    <Category name="logStatusWarning"/>
     <Category name="logStatusError"/>
     <Category name="logAll"/>
   </LogCategories>
@@ -250,58 +324,95 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
     model's time scales.
     ``units`` / ``descriptions``: {variable name: text} added to (or replacing) what the model
     declares, e.g. for the coefficients of a learned law.
+
+    A validated build is kept in mcl's cache (:mod:`mcl.compile.cache`), keyed by its generated
+    sources and model description: building the same FMU again (a cached model, the same
+    experiment, units and descriptions) copies it instead of running gcc and FMPy again.
     """
     out_path = Path(out_path)
-    if getattr(model.ode, "discrete", 0) or getattr(model.ode, "update", None) is not None:
-        # the wrapper has no event iteration yet: discrete variables would stay at their start
-        raise UnsupportedConstruct(f"FMU export of {model.name}: discrete variables (when, pre, reinit, "
-                                   "sample) are not exported yet; mcl's own engine simulates the model")
+    if out_path.is_dir():
+        raise ConfigError("the FMU to write is an existing directory", where=str(out_path))
     ident = model_identifier(model.name)
-    guid = "{" + str(uuid.uuid4()) + "}"
     experiment = Experiment.of(experiment) or for_model(model)
     _check_names(model, units, "units")
     _check_names(model, descriptions, "descriptions")
     with tempfile.TemporaryDirectory(prefix="mcl-fmu-") as tmp:
         build = Path(tmp)
         starts = settable_starts(model)
-        c_files = generate_sources(model, build, ident, guid, tolerance=experiment.tolerance, settable=starts[0])
-        so = build / f"{ident}.so"
-        cmd = ["gcc", "-shared", "-fPIC", "-O2", "-fvisibility=hidden", f"-I{build}",
-               *map(str, c_files), "-o", str(so), "-lm"]
-        try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-        except FileNotFoundError:
-            raise CompileError("gcc not found: a C compiler is needed to build FMUs") from None
-        if proc.returncode:
-            raise CompileError(f"gcc failed: {proc.stderr.strip().splitlines()[-1] if proc.stderr else ''}")
+        c_files = generate_sources(model, build, ident, _GUID_SLOT, tolerance=experiment.tolerance, settable=starts[0])
         sources = sorted(p.name for p in build.iterdir() if p.suffix in (".c", ".h"))
-        xml = model_description(model, ident, guid, [s for s in sources if s.endswith(".c")],
+        xml = model_description(model, ident, _GUID_SLOT, [s for s in sources if s.endswith(".c")],
                                 experiment, units, descriptions, starts)
-        if out_path.is_dir():
-            raise ConfigError("the FMU to write is an existing directory", where=str(out_path))
+        key = _build_key(build, sources, xml)
+        fmu = compile_cache.fmu_lookup(key)
+        if fmu is None:
+            # the GUID follows from the content: the same sources and description, the same GUID
+            guid = "{" + str(uuid.UUID(key[:32])) + "}"
+            xml = xml.replace(_GUID_SLOT, guid)
+            for f in c_files:
+                f.write_text(f.read_text().replace(_GUID_SLOT, guid))
+            fmu = _compile_and_pack(build, ident, c_files, sources, xml)
+            if validate:
+                problems = validate_fmu(fmu)
+                if problems:
+                    raise CompileError(f"FMPy validation of the generated FMU failed: {problems[0]}")
+                compile_cache.fmu_store(key, fmu)      # only validated builds are reused
         out_path.parent.mkdir(parents=True, exist_ok=True)
-        tmp_fmu = build / "model.fmu"    # packed in the build directory: nothing half-written is left
-        with zipfile.ZipFile(tmp_fmu, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("modelDescription.xml", xml)
-            z.write(so, f"binaries/linux64/{ident}.so")
-            for s in sources:
-                z.write(build / s, f"sources/{s}")
-        if validate:
-            problems = validate_fmu(tmp_fmu)
-            if problems:
-                raise CompileError(f"FMPy validation of the generated FMU failed: {problems[0]}")
         staged = out_path.with_name(f".{out_path.name}.{os.getpid()}.tmp")
         try:
-            shutil.copyfile(tmp_fmu, staged)
+            shutil.copyfile(fmu, staged)
             staged.replace(out_path)
         finally:
             staged.unlink(missing_ok=True)
     return out_path
 
 
+_GUID_SLOT = "{mcl-guid-of-this-build}"
+_CFLAGS = ["-shared", "-fPIC", "-O2", "-fvisibility=hidden"]
+
+
+def _build_key(build: Path, sources: list[str], xml: str) -> str:
+    """What decides the FMU: its C sources, its model description, the C compiler and flags."""
+    h = hashlib.sha256()
+    for part in (_gcc_version(), " ".join(_CFLAGS), xml, *sources):
+        h.update(part.encode())
+        h.update(b"\0")
+    for s in sources:
+        h.update((build / s).read_bytes())
+    return h.hexdigest()[:40]
+
+
+def _gcc_version() -> str:
+    try:
+        return subprocess.run(["gcc", "-dumpfullversion", "-dumpversion"], capture_output=True, text=True,
+                              timeout=60).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: list[str], xml: str) -> Path:
+    """gcc, then the archive (packed in the build directory: nothing half-written is left)."""
+    so = build / f"{ident}.so"
+    cmd = ["gcc", *_CFLAGS, f"-I{build}", *map(str, c_files), "-o", str(so), "-lm"]
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    except FileNotFoundError:
+        raise CompileError("gcc not found: a C compiler is needed to build FMUs") from None
+    if proc.returncode:
+        raise CompileError(f"gcc failed: {proc.stderr.strip().splitlines()[-1] if proc.stderr else ''}")
+    fmu = build / "model.fmu"
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        z.writestr("modelDescription.xml", xml)
+        z.write(so, f"binaries/linux64/{ident}.so")
+        for s in sources:
+            z.write(build / s, f"sources/{s}")
+    return fmu
+
+
 def _check_names(model: CompiledModel, given: dict | None, what: str) -> None:
     o = model.ode
-    known = {*o.p_names, *o.u_names, *o.y_names, *o.x_names, *(f"der({n})" for n in o.x_names),
+    continuous = o.x_names[:len(o.x_names) - n_discrete(model)]
+    known = {*o.p_names, *o.u_names, *o.y_names, *o.x_names, *(f"der({n})" for n in continuous),
              *(n for _, n in _probe_variables(model))}
     unknown = sorted(set(given or ()) - known)
     if unknown:

@@ -12,6 +12,19 @@
  * the first step, where there is no slope yet). Time events end a solver step
  * exactly; a sign change of an event indicator is located on the step's cubic Hermite
  * interpolant and the step is redone up to it, so no step straddles a kink.
+ *
+ * Hybrid models (when, pre, edge, sample, reinit, discrete variables, assert): the model's state
+ * vector x holds the NC continuous states, then the ND discrete variables (discrete Real, Integer
+ * and Boolean as Real values 0/1 and whole numbers; then the hidden memories of when-conditions),
+ * whose derivative is zero. At an event the discrete update is iterated as mcl's own engine does
+ * (engine_casadi._Hybrid.iterate): until nothing changes, pre() taking the values each time they
+ * settle; a reinit() of continuous states is applied once the discrete values have settled.
+ * Events: clock ticks of sample() (announced through nextEventTime; the update runs with the
+ * tick's flag, then once more without), the model's time events, and sign changes of the event
+ * indicators (state events: Model Exchange importers locate them, Co-Simulation locates them on
+ * the step's interpolant and takes the state just past the crossing). Asserts are checked after
+ * each solver step and event: level error fails the call (fmi2Error, message logged), level
+ * warning is logged once.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -25,7 +38,17 @@
 #define NP @NP@
 #define NU @NU@
 #define NY @NY@
-#define NX @NX@
+#define NX @NX@          /* the model's state vector: continuous states, then discrete values */
+#define ND @ND@
+#define NC (NX - ND)
+#define HYBRID @HYBRID@  /* an event-iteration update function */
+#define NCLOCK @NCLOCK@
+#define NF (2 + NCLOCK)  /* flags of the update: initial(), terminal(), one tick per clock */
+#define NA @NA@          /* asserts */
+#define MAX_EVENT_ITERATIONS 100
+#define MAX_EVENTS 100000
+/* instants closer than this count as one (FMPy's own test: math.isclose, relative 1e-9) */
+#define TIME_EPS(t) (1e-9 * fmax(1.0, fabs(t)))
 #define NV @NV@
 #define HAS_LOOP @HAS_LOOP@
 #define NZ @NZ@
@@ -36,8 +59,9 @@
 #define VR_U (NP)
 #define VR_Y (VR_U + NU)
 #define VR_X (VR_Y + NY)
-#define VR_DX (VR_X + NX)
-#define VR_V (VR_DX + NX)
+#define VR_DX (VR_X + NC)
+#define VR_D (VR_DX + NC)
+#define VR_V (VR_D + ND)
 #define VR_END (VR_V + NV)
 
 #define F(name) @PREFIX@##name
@@ -50,6 +74,12 @@ static const int X_SETTABLE[NX + 1] = {@X_SETTABLE@};
 /* instants where the equations jump (time events): the solvers stop and restart there */
 static const double EVENTS[@N_EVENTS@ + 1] = {@EVENTS@};
 #define N_EVENTS @N_EVENTS@
+/* sample(start, period) clocks */
+static const double CLOCK_START[NCLOCK + 1] = {@CLOCK_START@};
+static const double CLOCK_PERIOD[NCLOCK + 1] = {@CLOCK_PERIOD@};
+/* asserts: level (1 error, 0 warning) and message */
+static const int ASSERT_ERROR[NA + 1] = {@ASSERT_ERROR@};
+static const char* const ASSERT_MSG[NA + 1] = {@ASSERT_MSG@};
 
 /* RODAS4 in the form of KPP's Rosenbrock integrator (Sandu et al.): G = I/(h g1) - J,
  * G K_i = f(t + a_i h, y + sum A_ij K_j) + sum C_ij/h K_j + g_i h df/dt, y1 = y + sum M_j K_j */
@@ -79,6 +109,10 @@ typedef struct {
     int n_hist;                        /* communication points seen (0, 1, 2 or more) */
     double du[NU + 1];
     int du_set;                        /* fmi2SetRealInputDerivatives called for this step */
+    double tick[NCLOCK + 1];           /* number of each clock's next tick */
+    int warned[NA + 1];                /* asserts of level warning already logged */
+    double stop;                       /* the stop time, when the importer gave one */
+    int stop_defined, terminal_done;
 } State;
 
 typedef struct {
@@ -96,6 +130,10 @@ typedef struct {
     double ys[NX + 1], rhs[NX + 1], ynew[NX + 1], f1[NX + 1], xi[NX + 1], t_ys;
     double z0[NZ + 1], z1[NZ + 1], zi[NZ + 1];
     int piv[NX + 1];
+    /* event iteration work */
+    double sv[NX + 1], cur[NX + 1], pre[NX + 1], nw[NX + 1], reinit[NX + 1], keep[NX + 1];
+    double flags[NF + 1], av[NA + 1];
+    int due[NCLOCK + 1];
     const casadi_real** arg;
     casadi_real** res;
     casadi_int* iw;
@@ -103,13 +141,14 @@ typedef struct {
 } Model;
 
 static void logmsg(Model* m, fmi2Status status, const char* fmt, ...) {
-    char buf[512];
+    char buf[1024];
     va_list ap;
     if (!m->cb.logger) return;
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
-    m->cb.logger(m->cb.componentEnvironment, m->name, status, status == fmi2OK ? "logAll" : "logStatusError", "%s", buf);
+    m->cb.logger(m->cb.componentEnvironment, m->name, status,
+                 status == fmi2OK ? "logAll" : status == fmi2Warning ? "logStatusWarning" : "logStatusError", "%s", buf);
 }
 
 /* Call a generated function with arguments (a0..a4) and results (r0..r2). */
@@ -120,9 +159,11 @@ static int call(Model* m, casadi_fun f, const double* a0, const double* a1, cons
     return f(m->arg, m->res, m->iw, m->w, 0);
 }
 
+static fmi2Status initial_events(Model* m);
+
 static fmi2Status initial_state(Model* m) {
     State* s = &m->st;
-    double start[NX + 1];
+    double* start = m->sv;
     if (call(m, F(start), s->p, NULL, NULL, NULL, start)) {
         logmsg(m, fmi2Error, "start values could not be evaluated");
         return fmi2Error;
@@ -137,6 +178,9 @@ static fmi2Status initial_state(Model* m) {
         if (!isfinite(s->x[i])) { logmsg(m, fmi2Error, "initialisation gave a non-finite state"); return fmi2Error; }
     s->x_valid = 1;
     m->dirty = 1;
+    if (HYBRID || NCLOCK || NA) {
+        if (initial_events(m) != fmi2OK) { s->x_valid = 0; return fmi2Error; }
+    }
     return fmi2OK;
 }
 
@@ -168,6 +212,172 @@ static fmi2Status update(Model* m) {
     return fmi2OK;
 }
 
+/* ---------------------------------------------------------------- events (hybrid models) */
+
+static int same(const double* a, const double* b, int n) {
+    for (int i = 0; i < n; i++) if (a[i] != b[i]) return 0;
+    return 1;
+}
+
+#if HYBRID
+static int call_update(Model* m, const double* x, const double* u, double t, const double* pre, double* out) {
+    m->arg[0] = x; m->arg[1] = u; m->arg[2] = m->st.p; m->arg[3] = &t; m->arg[4] = pre; m->arg[5] = m->flags;
+    m->res[0] = out; m->res[1] = NULL;
+    return F(update)(m->arg, m->res, m->iw, m->w, 0);
+}
+#endif
+
+/* Modelica's event iteration at t with the flags in m->flags, on m->st.x. *changed gets bit 1
+ * when a discrete value changed, bit 2 when a continuous state did (reinit). */
+static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
+#if HYBRID
+    State* s = &m->st;
+    double *cur = m->cur, *pre = m->pre, *nw = m->nw;
+    int has_reinit = 0;
+    memcpy(cur, s->x, NX * sizeof(double));
+    memcpy(pre, cur, NX * sizeof(double));
+    for (int it = 0; it < MAX_EVENT_ITERATIONS; it++) {
+        if (call_update(m, cur, u, t, pre, nw)) {
+            logmsg(m, fmi2Error, "event iteration failed at t = %g", t);
+            return fmi2Error;
+        }
+        for (int i = 0; i < NX; i++)
+            if (!isfinite(nw[i])) { logmsg(m, fmi2Error, "event iteration gave non-finite values at t = %g", t); return fmi2Error; }
+        if (!same(nw, cur, NC)) { memcpy(m->reinit, nw, NC * sizeof(double)); has_reinit = 1; }
+        memcpy(nw, cur, NC * sizeof(double));      /* states keep their values until the rest settles */
+        if (same(nw, cur, NX)) {
+            if (same(cur, pre, NX)) {
+                if (!has_reinit) {
+                    if (changed && !same(cur + NC, s->x + NC, ND)) *changed |= 1;
+                    if (changed && !same(cur, s->x, NC)) *changed |= 2;
+                    memcpy(s->x, cur, NX * sizeof(double));
+                    m->dirty = 1;
+                    return fmi2OK;
+                }
+                memcpy(cur, m->reinit, NC * sizeof(double));   /* then settle again with the new states */
+                has_reinit = 0;
+            }
+            memcpy(pre, cur, NX * sizeof(double));
+            continue;
+        }
+        memcpy(cur, nw, NX * sizeof(double));
+    }
+    logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
+    return fmi2Error;
+#else
+    (void)m; (void)t; (void)u; (void)changed;
+    return fmi2OK;
+#endif
+}
+
+static void set_flags(Model* m, int initial, int terminal, const int* ticks) {
+    m->flags[0] = initial;
+    m->flags[1] = terminal;
+    for (int k = 0; k < NCLOCK; k++) m->flags[2 + k] = ticks ? ticks[k] : 0;
+}
+
+/* an event at t: the clocks ticking there (m->due) with their flags, then once more without
+ * (a sampled condition is true only at its instant) */
+static fmi2Status event_at(Model* m, double t, const double* u, int* changed) {
+    int any = 0;
+    for (int k = 0; k < NCLOCK; k++) any |= m->due[k];
+    if (any) {
+        set_flags(m, 0, 0, m->due);
+        if (iterate(m, t, u, changed) != fmi2OK) return fmi2Error;
+    }
+    set_flags(m, 0, 0, NULL);
+    return iterate(m, t, u, changed);
+}
+
+static double next_tick(const State* s, int k) {
+    return CLOCK_PERIOD[k] > 0 ? CLOCK_START[k] + s->tick[k] * CLOCK_PERIOD[k] : INFINITY;
+}
+
+/* which clocks tick at t (m->due), moving each past t; 1 if any */
+static int ticks_due(Model* m, double t) {
+    State* s = &m->st;
+    int any = 0;
+    for (int k = 0; k < NCLOCK; k++) {
+        m->due[k] = 0;
+        if (next_tick(s, k) <= t + TIME_EPS(t)) {
+            m->due[k] = any = 1;
+            while (next_tick(s, k) <= t + TIME_EPS(t)) s->tick[k] += 1;
+        }
+    }
+    return any;
+}
+
+/* the next time event or clock tick after t (INFINITY: none) */
+static double next_event_time(const State* s, double t) {
+    double next = INFINITY;
+    for (int k = 0; k < N_EVENTS; k++)
+        if (EVENTS[k] > t + TIME_EPS(t) && EVENTS[k] < next) next = EVENTS[k];
+    for (int k = 0; k < NCLOCK; k++) next = fmin(next, next_tick(s, k));
+    return next;
+}
+
+/* asserts at (t, x, u): level error fails, level warning is logged once */
+static fmi2Status check_asserts(Model* m, double t, const double* x, const double* u) {
+#if NA
+    State* s = &m->st;
+    if (call(m, F(asserts), x, u, s->p, &t, m->av)) {
+        logmsg(m, fmi2Error, "asserts could not be evaluated at t = %g", t);
+        return fmi2Error;
+    }
+    for (int i = 0; i < NA; i++) {
+        if (!(m->av[i] > 0.5)) continue;
+        if (ASSERT_ERROR[i]) {
+            logmsg(m, fmi2Error, "assertion failed at t = %g: %s", t, ASSERT_MSG[i]);
+            return fmi2Error;
+        }
+        if (!s->warned[i]) {
+            s->warned[i] = 1;
+            logmsg(m, fmi2Warning, "assert at t = %g: %s", t, ASSERT_MSG[i]);
+        }
+    }
+#else
+    (void)m; (void)t; (void)x; (void)u;
+#endif
+    return fmi2OK;
+}
+
+/* the initial event iteration (initial() true); the continuous initial state again with the
+ * discrete values it found, until both settle; then the clocks ticking at the start time */
+static fmi2Status initial_events(Model* m) {
+    State* s = &m->st;
+    double t = s->t;
+    set_flags(m, 1, 0, NULL);
+    if (iterate(m, t, s->ue, NULL) != fmi2OK) return fmi2Error;
+#if HYBRID && ND
+    {
+        int it;
+        for (it = 0; it < MAX_EVENT_ITERATIONS; it++) {
+            memcpy(m->keep, s->x + NC, ND * sizeof(double));
+            memcpy(m->sv + NC, s->x + NC, ND * sizeof(double));   /* the starts, with these discrete values */
+            if (call(m, F(init), s->ue, s->p, &s->t, m->sv, m->nw)) {
+                logmsg(m, fmi2Error, "initialisation failed");
+                return fmi2Error;
+            }
+            memcpy(s->x, m->nw, NC * sizeof(double));
+            set_flags(m, 1, 0, NULL);
+            if (iterate(m, t, s->ue, NULL) != fmi2OK) return fmi2Error;
+            if (same(s->x + NC, m->keep, ND)) break;
+        }
+        if (it == MAX_EVENT_ITERATIONS) {
+            logmsg(m, fmi2Error, "initialisation did not settle: discrete and continuous initial values keep changing");
+            return fmi2Error;
+        }
+    }
+#endif
+    for (int k = 0; k < NCLOCK; k++) {
+        double n = CLOCK_PERIOD[k] > 0 ? ceil((t - CLOCK_START[k]) / CLOCK_PERIOD[k] - 1e-9) : 0;
+        s->tick[k] = n > 0 ? n : 0;
+    }
+    if (ticks_due(m, t) && event_at(m, t, s->ue, NULL) != fmi2OK) return fmi2Error;
+    m->dirty = 1;
+    return check_asserts(m, t, s->x, s->ue);
+}
+
 const char* fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char* fmi2GetVersion(void) { return fmi2Version; }
 
@@ -183,6 +393,12 @@ static void work_size(casadi_int* sz_arg, casadi_int* sz_res, casadi_int* sz_iw,
     *sz_arg = a > *sz_arg ? a : *sz_arg; *sz_res = r > *sz_res ? r : *sz_res; \
     *sz_iw = i > *sz_iw ? i : *sz_iw; *sz_w = w > *sz_w ? w : *sz_w;
     GROW(ode) GROW(out) GROW(alg_res) GROW(init) GROW(start) GROW(probe) GROW(zero) GROW(step)
+#if HYBRID
+    GROW(update)
+#endif
+#if NA
+    GROW(asserts)
+#endif
 #undef GROW
 }
 
@@ -236,9 +452,10 @@ void fmi2FreeInstance(fmi2Component c) {
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDefined, fmi2Real tol,
                                fmi2Real startTime, fmi2Boolean stopDefined, fmi2Real stopTime) {
     Model* m = (Model*)c;
-    (void)stopDefined; (void)stopTime;
     if (tolDefined && tol > 0) { m->rtol = tol; m->atol = 1e-2 * tol; }
     m->st.t = startTime;
+    m->st.stop_defined = stopDefined != 0;
+    m->st.stop = stopTime;
     return fmi2OK;
 }
 
@@ -256,11 +473,27 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     return s == fmi2OK ? update(m) : s;
 }
 
-fmi2Status fmi2Terminate(fmi2Component c) { (void)c; return fmi2OK; }
+fmi2Status fmi2Terminate(fmi2Component c) {
+    /* the event of terminal() (nothing is integrated after it) */
+    Model* m = (Model*)c;
+    if (HYBRID && m->st.initialised && m->st.x_valid && !m->st.terminal_done) {
+        m->st.terminal_done = 1;
+        set_flags(m, 0, 1, NULL);
+        return iterate(m, m->st.t, m->st.ue, NULL);
+    }
+    return fmi2OK;
+}
 
 fmi2Status fmi2Reset(fmi2Component c) {
     reset_state((Model*)c);
     return fmi2OK;
+}
+
+/* the place in x of a state or discrete variable; -1 for other variables */
+static int x_index(fmi2ValueReference r) {
+    if (r >= VR_X && r < VR_DX) return (int)(r - VR_X);
+    if (r >= VR_D && r < VR_V) return NC + (int)(r - VR_D);
+    return -1;
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
@@ -276,14 +509,14 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
         /* before initialisation: the start values of the states, nothing calculated yet */
         for (size_t k = 0; k < nvr; k++) {
             fmi2ValueReference r = vr[k];
-            if (r >= VR_X && r < VR_DX && X_SETTABLE[r - VR_X]) continue;
+            if (x_index(r) >= 0 && X_SETTABLE[x_index(r)]) continue;
             if (r >= VR_Y) { logmsg(m, fmi2Error, "variable %u is calculated at initialisation", (unsigned)r); return fmi2Error; }
         }
         if (call(m, F(start), s->p, NULL, NULL, NULL, m->xi)) return fmi2Error;
         for (size_t k = 0; k < nvr; k++) {
             fmi2ValueReference r = vr[k];
-            value[k] = r < VR_U ? s->p[r] : r < VR_Y ? s->u[r - VR_U]
-                     : s->s_set[r - VR_X] ? s->s_user[r - VR_X] : m->xi[r - VR_X];
+            int i = x_index(r);
+            value[k] = r < VR_U ? s->p[r] : r < VR_Y ? s->u[r - VR_U] : s->s_set[i] ? s->s_user[i] : m->xi[i];
         }
         return fmi2OK;
     }
@@ -292,7 +525,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     for (size_t k = 0; k < nvr; k++) {
         fmi2ValueReference r = vr[k];
         value[k] = r < VR_U ? s->p[r] : r < VR_Y ? s->u[r - VR_U] : r < VR_X ? m->y[r - VR_Y]
-                 : r < VR_DX ? s->x[r - VR_X] : r < VR_V ? m->dx[r - VR_DX] : m->v[r - VR_V];
+                 : r < VR_DX ? s->x[r - VR_X] : r < VR_D ? m->dx[r - VR_DX]
+                 : r < VR_V ? s->x[NC + r - VR_D] : m->v[r - VR_V];
     }
     return fmi2OK;
 }
@@ -303,10 +537,14 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     for (size_t k = 0; k < nvr; k++) {
         fmi2ValueReference r = vr[k];
         if (r < VR_U) { s->p[r] = value[k]; if (!s->initialised) s->x_valid = 0; }
-        else if (r < VR_Y) { s->u[r - VR_U] = value[k]; s->ue[r - VR_U] = value[k]; }
-        else if (r >= VR_X && r < VR_DX && X_SETTABLE[r - VR_X] && !s->initialised) {
-            /* a state's start value (initial="exact"), before the end of initialisation */
-            s->s_user[r - VR_X] = value[k]; s->s_set[r - VR_X] = 1; s->x_valid = 0;
+        else if (r < VR_Y) {
+            s->u[r - VR_U] = value[k]; s->ue[r - VR_U] = value[k];
+            if (s->in_init) s->x_valid = 0;     /* the initial state depends on the inputs */
+        }
+        else if (x_index(r) >= 0 && X_SETTABLE[x_index(r)] && !s->initialised) {
+            /* a state's or discrete variable's start value (initial="exact"), before the end of
+             * initialisation */
+            s->s_user[x_index(r)] = value[k]; s->s_set[x_index(r)] = 1; s->x_valid = 0;
         }
         else { logmsg(m, fmi2Error, "variable %u cannot be set now", (unsigned)r); return fmi2Error; }
     }
@@ -385,21 +623,62 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 
 fmi2Status fmi2EnterEventMode(fmi2Component c) { (void)c; return fmi2OK; }
 
+/* an event indicator exactly zero: the importer's solver stopped on the switching surface, not
+ * past it (CVode returns such roots, and after its restart it no longer sees the indicator
+ * leave zero) */
+static int on_surface(Model* m) {
+    State* s = &m->st;
+    if (!HYBRID || !NZ || call(m, F(zero), s->x, s->ue, s->p, &s->t, m->zi)) return 0;
+    for (int k = 0; k < NZ; k++) if (m->zi[k] == 0) return 1;
+    return 0;
+}
+
+/* the event iteration on the state a moment later (1e-9 of the time scale, along the
+ * derivatives): the relations see where the state is going, as they do just past a crossing;
+ * the continuous states keep their values unless a reinit() sets them */
+static fmi2Status event_just_after(Model* m, int* changed) {
+    State* s = &m->st;
+    double dt = TIME_EPS(s->t), t = s->t + dt;
+    m->dirty = 1;
+    if (update(m) != fmi2OK) return fmi2Error;
+    memcpy(m->keep, s->x, NC * sizeof(double));
+    for (int i = 0; i < NC; i++) { m->sv[i] = s->x[i] + dt * m->dx[i]; s->x[i] = m->sv[i]; }
+    if (event_at(m, t, s->ue, changed) != fmi2OK) return fmi2Error;
+    *changed &= ~2;
+    for (int i = 0; i < NC; i++) {
+        if (s->x[i] == m->sv[i]) s->x[i] = m->keep[i];     /* not set by a reinit */
+        else *changed |= 2;
+    }
+    m->dirty = 1;
+    return fmi2OK;
+}
+
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo* info) {
+    /* the whole event iteration in one call: the clocks ticking now, a time event or a state
+     * event the importer located (the state just past the crossing) */
     Model* m = (Model*)c;
-    int k;
+    State* s = &m->st;
+    double next;
     info->newDiscreteStatesNeeded = fmi2False;
     info->terminateSimulation = fmi2False;
     info->nominalsOfContinuousStatesChanged = fmi2False;
     info->valuesOfContinuousStatesChanged = fmi2False;
     info->nextEventTimeDefined = fmi2False;
     info->nextEventTime = 0;
-    for (k = 0; k < N_EVENTS; k++) {
-        if (EVENTS[k] > m->st.t * (1 + 1e-12) + 1e-12) {
-            info->nextEventTimeDefined = fmi2True;
-            info->nextEventTime = EVENTS[k];
-            break;
-        }
+    if (HYBRID || NCLOCK || NA) {
+        int changed = 0;
+        if (!s->x_valid && initial_state(m) != fmi2OK) return fmi2Error;
+        ticks_due(m, s->t);
+        if (on_surface(m)) {
+            if (event_just_after(m, &changed) != fmi2OK) return fmi2Error;
+        } else if (event_at(m, s->t, s->ue, &changed) != fmi2OK) return fmi2Error;
+        if (changed & 2) info->valuesOfContinuousStatesChanged = fmi2True;
+        if (check_asserts(m, s->t, s->x, s->ue) != fmi2OK) return fmi2Error;
+    }
+    next = next_event_time(s, s->t);
+    if (isfinite(next)) {
+        info->nextEventTimeDefined = fmi2True;
+        info->nextEventTime = next;
     }
     return fmi2OK;
 }
@@ -408,10 +687,11 @@ fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) { (void)c; return fmi2OK
 
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noPrior, fmi2Boolean* enterEventMode,
                                        fmi2Boolean* terminateSimulation) {
-    (void)c; (void)noPrior;
+    Model* m = (Model*)c;
+    (void)noPrior;
     *enterEventMode = fmi2False;
     *terminateSimulation = fmi2False;
-    return fmi2OK;
+    return check_asserts(m, m->st.t, m->st.x, m->st.ue);
 }
 
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real t) {
@@ -422,15 +702,16 @@ fmi2Status fmi2SetTime(fmi2Component c, fmi2Real t) {
 
 fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx) {
     Model* m = (Model*)c;
-    if (nx != NX) return fmi2Error;
-    memcpy(m->st.x, x, nx * sizeof(double));
+    if (nx != NC) return fmi2Error;
+    if (ND && !m->st.x_valid && initial_state(m) != fmi2OK) return fmi2Error;   /* the discrete values */
+    memcpy(m->st.x, x, nx * sizeof(double));    /* the discrete values stay */
     m->st.x_valid = 1; m->dirty = 1;
     return fmi2OK;
 }
 
 fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real dx[], size_t nx) {
     Model* m = (Model*)c;
-    if (nx != NX || update(m) != fmi2OK) return fmi2Error;
+    if (nx != NC || update(m) != fmi2OK) return fmi2Error;
     memcpy(dx, m->dx, nx * sizeof(double));
     return fmi2OK;
 }
@@ -451,7 +732,7 @@ fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real z[], size_t nz) {
 
 fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
     Model* m = (Model*)c;
-    if (nx != NX) return fmi2Error;
+    if (nx != NC) return fmi2Error;
     if (!m->st.x_valid && initial_state(m) != fmi2OK) return fmi2Error;
     memcpy(x, m->st.x, nx * sizeof(double));
     return fmi2OK;
@@ -508,11 +789,11 @@ static void input_slopes(Model* m, double t) {
 
 static double wnorm(Model* m, const double* e, const double* y0, const double* y1) {
     double sum = 0;
-    for (int i = 0; i < NX; i++) {
+    for (int i = 0; i < NC; i++) {
         double sc = m->atol + m->rtol * fmax(fabs(y0[i]), fabs(y1[i]));
         sum += (e[i] / sc) * (e[i] / sc);
     }
-    return NX ? sqrt(sum / NX) : 0;
+    return NC ? sqrt(sum / NC) : 0;
 }
 
 /* LU with partial pivoting of the column-major n x n matrix a; 0 when singular */
@@ -542,9 +823,11 @@ static void lu_solve(const double* a, const int* piv, double* b, int n) {
     }
 }
 
-/* one RODAS4 step of size h from (t, x): ynew and the error norm; -1 if the model failed */
+/* one RODAS4 step of size h from (t, x): ynew and the error norm; -1 if the model failed.
+ * Only the continuous states move (the discrete values at the end of ys and ynew are set by
+ * the caller). */
 static double rodas_step(Model* m, double t, const double* x, double h) {
-    int n = NX;
+    int n = NC;
     if (jacobian_at(m, t, x)) return -1;
     for (int k = 0; k < n * n; k++) m->G[k] = -m->J[k];
     for (int i = 0; i < n; i++) m->G[i * n + i] += 1.0 / (h * RGAMMA[0]);
@@ -583,17 +866,30 @@ static void hermite(double th, double h, const double* x0, const double* f0, con
                     const double* f1, double* out) {
     double t2 = th * th, t3 = t2 * th;
     double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + th, h01 = -2 * t3 + 3 * t2, h11 = t3 - t2;
-    for (int i = 0; i < NX; i++) out[i] = h00 * x0[i] + h10 * h * f0[i] + h01 * x1[i] + h11 * h * f1[i];
+    for (int i = 0; i < NC; i++) out[i] = h00 * x0[i] + h10 * h * f0[i] + h01 * x1[i] + h11 * h * f1[i];
 }
 
+static int sgn(double v) { return (v > 0) - (v < 0); }
+
 /* fraction of the step at which the first event indicator changes sign (Illinois method on the
- * interpolant); returns the right end of the final bracket, so the sign has changed there */
+ * interpolant); returns the right end of the final bracket, so the sign has changed there. An
+ * indicator that starts at zero (a hybrid model's state left on the switching surface by an
+ * event) changes where it leaves zero: just after the start. */
 static double locate(Model* m, double t, double h, const double* x0, const double* f0) {
     double first = 1.0;
     if (rhs_at(m, t + h, m->ynew, m->f1)) return 1.0;
     for (int k = 0; k < NZ; k++) {
         double a = 0, b = 1, fa = m->z0[k], fb = m->z1[k];
         int side = 0;
+        if (HYBRID && fa == 0 && fb != 0) {
+            for (int it = 0; it < 40; it++) {      /* halve b while the indicator has left zero there */
+                hermite(0.5 * b, h, x0, f0, m->ynew, m->f1, m->xi);
+                if (zero_at(m, t + 0.5 * b * h, m->xi, m->zi) || sgn(m->zi[k]) != sgn(fb)) break;
+                b *= 0.5;
+            }
+            if (b < first) first = b;
+            continue;
+        }
         if (!(fa * fb < 0 || (fa != 0 && fb == 0))) continue;
         if (fb == 0) { if (b < first) first = b; continue; }
         for (int it = 0; it < 100 && b - a > 1e-12 + 1e-13 * fabs(t) / h; it++) {
@@ -617,6 +913,14 @@ static int crossed(const double* z0, const double* z1) {
     return 0;
 }
 
+/* a hybrid model's relations change with the sign of their indicator, leaving zero included
+ * (as in mcl's own engine: T < 18 becomes true when T leaves 18 downwards) */
+static int sign_changed(const double* z0, const double* z1) {
+    for (int k = 0; k < NZ; k++)
+        if (sgn(z0[k]) != sgn(z1[k])) return 1;
+    return 0;
+}
+
 /* what is wrong at (t, x): an algebraic loop not solved or a non-finite derivative (0: neither) */
 static int trouble(Model* m, double t, const double* x) {
 #if HAS_LOOP
@@ -631,10 +935,10 @@ static int trouble(Model* m, double t, const double* x) {
     }
 #endif
     if (rhs_at(m, t, x, m->f1) == 0)
-        for (int i = 0; i < NX; i++)
+        for (int i = 0; i < NC; i++)
             if (!isfinite(m->f1[i])) { logmsg(m, fmi2Error, "non-finite derivative at t = %g", t); return 1; }
     if (jacobian_at(m, t, x) == 0)
-        for (int i = 0; i < NX * NX; i++)
+        for (int i = 0; i < NC * NC; i++)
             if (!isfinite(m->J[i])) {
                 logmsg(m, fmi2Error, "non-finite Jacobian at t = %g%s", t, HAS_LOOP ? " (a singular algebraic loop)" : "");
                 return 1;
@@ -650,11 +954,18 @@ static void diagnose(Model* m, double t, const double* x, const char* what) {
     logmsg(m, fmi2Error, "%s at t = %g", what, t);
 }
 
-/* integrate from the current state to t_end (no time event in between) */
-static fmi2Status integrate(Model* m, double t_end) {
+#define STATE_EVENT 100   /* integrate() stopped just past a crossing (hybrid models) */
+
+/* integrate from the current state to t_end (no time event in between); a hybrid model stops
+ * at the first crossing of an event indicator, with the state just past it (STATE_EVENT) */
+static int integrate(Model* m, double t_end) {
     State* s = &m->st;
     double t = s->t, h = s->h;
     int rejected = 0, cut = 0, steps = 0;
+    /* the discrete values are constant over the integration */
+    memcpy(m->ys + NC, s->x + NC, ND * sizeof(double));
+    memcpy(m->ynew + NC, s->x + NC, ND * sizeof(double));
+    memcpy(m->xi + NC, s->x + NC, ND * sizeof(double));
     if (NZ && zero_at(m, t, s->x, m->z0)) goto failed;
     if (!(h > 0)) {   /* first step: from the scale of the state and its derivative */
         double d0, d1;
@@ -688,6 +999,16 @@ static fmi2Status integrate(Model* m, double t_end) {
         }
         if (NZ) {
             if (zero_at(m, t + h, m->ynew, m->z1)) goto failed;
+            if (HYBRID && sign_changed(m->z0, m->z1)) {
+                /* the event: the state on the step's interpolant just past the first crossing */
+                double th = locate(m, t, h, s->x, m->f0);
+                hermite(th, h, s->x, m->f0, m->ynew, m->f1, m->xi);
+                memcpy(s->x, m->xi, NC * sizeof(double));
+                s->t = th >= 1.0 ? t + h : t + th * h;
+                if (last && th >= 1.0) s->t = t_end;
+                s->h = h;
+                return STATE_EVENT;
+            }
             if (crossed(m->z0, m->z1) && !cut) {
                 /* redo the step up to the crossing; f0 still holds f(t, x) from rodas_step */
                 double th = locate(m, t, h, s->x, m->f0);
@@ -701,9 +1022,10 @@ static fmi2Status integrate(Model* m, double t_end) {
         hnew = h * fmin(6.0, fmax(0.2, err > 1e-10 ? 0.9 * pow(err, -0.25) : 6.0));
         if (rejected) hnew = fmin(hnew, h);
         t = last ? t_end : t + h;
-        memcpy(s->x, m->ynew, NX * sizeof(double));
+        memcpy(s->x, m->ynew, NC * sizeof(double));
         if (NZ) memcpy(m->z0, m->z1, NZ * sizeof(double));
         s->t = t;
+        if (NA && check_asserts(m, t, s->x, input_at(m, t)) != fmi2OK) return fmi2Error;
         s->h = last ? fmax(hnew, planned) : hnew;    /* a last step cut short says little about h */
         h = hnew;
         rejected = 0;
@@ -715,6 +1037,49 @@ failed:
     diagnose(m, t, s->x, "model evaluation failed");
     s->t = t;
     return fmi2Error;
+}
+
+/* a communication step of a hybrid model: integrate from event to event (clock ticks and time
+ * events where the solver stops, state events where it finds them), the event iteration at each */
+static fmi2Status step_hybrid(Model* m, double t_end) {
+    State* s = &m->st;
+    int events = 0;
+    while (1) {
+        double te = next_event_time(s, s->t);
+        int timed = te <= t_end + TIME_EPS(t_end);
+        double stop = timed && te < t_end - TIME_EPS(t_end) ? te : t_end;   /* (at the end when that close) */
+        int changed = 0;
+        if (NC && s->t < stop) {
+            int rc = integrate(m, stop);
+            if (rc == STATE_EVENT) {
+                for (int k = 0; k < NCLOCK; k++) m->due[k] = 0;
+                if (event_at(m, s->t, input_at(m, s->t), &changed) != fmi2OK) return fmi2Error;
+                if (check_asserts(m, s->t, s->x, input_at(m, s->t)) != fmi2OK) return fmi2Error;
+                if (changed & 2) s->h = 0;      /* a reinit: the solver starts afresh */
+                if (++events > MAX_EVENTS) {
+                    logmsg(m, fmi2Error, "more than %d events in one communication step at t = %g (chattering?)", MAX_EVENTS, s->t);
+                    return fmi2Error;
+                }
+                continue;
+            }
+            if (rc != fmi2OK) return fmi2Error;
+        }
+        s->t = stop;
+        if (timed) {
+            ticks_due(m, stop);
+            if (event_at(m, stop, input_at(m, stop), &changed) != fmi2OK) return fmi2Error;
+            if (check_asserts(m, stop, s->x, input_at(m, stop)) != fmi2OK) return fmi2Error;
+            if (changed & 2) s->h = 0;
+            if (stop < t_end) continue;
+        }
+        break;
+    }
+    if (s->stop_defined && t_end >= s->stop - TIME_EPS(s->stop) && !s->terminal_done) {
+        s->terminal_done = 1;           /* the event of terminal() at the stop time */
+        set_flags(m, 0, 1, NULL);
+        if (iterate(m, t_end, input_at(m, t_end), NULL) != fmi2OK) return fmi2Error;
+    }
+    return fmi2OK;
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
@@ -731,7 +1096,9 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     input_slopes(m, t);
     s->du_set = 0;
     s->t = t;
-    if (NX) {
+    if (HYBRID || NCLOCK || NA) {
+        if (step_hybrid(m, t_end) != fmi2OK) { m->dirty = 1; return fmi2Error; }
+    } else if (NX) {
         for (int k = 0; k < N_EVENTS && s->t < t_end; k++) {
             if (EVENTS[k] <= s->t * (1 + 1e-12) + 1e-12 || EVENTS[k] >= t_end) continue;
             if (integrate(m, EVENTS[k]) != fmi2OK) { m->dirty = 1; return fmi2Error; }
