@@ -1049,7 +1049,7 @@ static fmi2Status step_hybrid(Model* m, double t_end) {
         int timed = te <= t_end + TIME_EPS(t_end);
         double stop = timed && te < t_end - TIME_EPS(t_end) ? te : t_end;   /* (at the end when that close) */
         int changed = 0;
-        if (NC && s->t < stop) {
+        if (NC && stop - s->t > TIME_EPS(stop)) {    /* (a state event found just before a tick) */
             int rc = integrate(m, stop);
             if (rc == STATE_EVENT) {
                 for (int k = 0; k < NCLOCK; k++) m->due[k] = 0;
