@@ -210,17 +210,15 @@ MSL_HYBRID = ["Modelica.Thermal.HeatTransfer.Examples.ControlledTemperature",   
 
 @pytest.fixture(scope="module")
 def msl_fmus(tmp_path_factory):
-    """The examples' FMUs, their DefaultExperiment from the class's annotation (found on the
-    MODELICAPATH)."""
+    """The examples' FMUs, their DefaultExperiment from the class's annotation (in the library
+    given)."""
     if MSL is None:
         pytest.skip("the Modelica Standard Library is not found (MODELICAPATH or ../shared/msl)")
     d = tmp_path_factory.mktemp("msl_hybrid")
     out = {}
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setenv("MODELICAPATH", str(MSL))
-        for name in MSL_HYBRID:
-            model = compile_model([], name)
-            out[name] = (model, build_fmu(model, d / f"{name.split('.')[-1]}.fmu"))
+    for name in MSL_HYBRID:
+        model = compile_model([], name, libraries=[MSL])
+        out[name] = (model, build_fmu(model, d / f"{name.split('.')[-1]}.fmu", libraries=[MSL]))
     return out
 
 

@@ -51,9 +51,10 @@ class Experiment:
                 f' tolerance="{self.tolerance!r}"{step}/>\n')
 
 
-def for_model(model) -> Experiment:
-    """The class's experiment annotation when its source is found, else an estimate."""
-    return from_annotation(model) or estimated(model)
+def for_model(model, libraries=()) -> Experiment:
+    """The class's experiment annotation when its source is found (the model's sources, then
+    ``libraries`` and the library path), else an estimate."""
+    return from_annotation(model, libraries) or estimated(model)
 
 
 # -- the annotation ---------------------------------------------------------------------------
@@ -62,8 +63,8 @@ _KEYWORDS = r"(?:model|block|class|package)"
 _NAMES = {"StartTime": "start", "StopTime": "stop", "Interval": "step", "Tolerance": "tolerance"}
 
 
-def from_annotation(model) -> Experiment | None:
-    text = class_text(model.name, model.info.get("sources", ()))
+def from_annotation(model, libraries=()) -> Experiment | None:
+    text = class_text(model.name, model.info.get("sources", ()), libraries)
     if text is None:
         return None
     found = list(re.finditer(r"\bexperiment\s*\(([^()]*)\)", text))
@@ -79,9 +80,9 @@ def from_annotation(model) -> Experiment | None:
     return Experiment(**values, source="annotation")
 
 
-def class_text(name: str, sources=()) -> str | None:
-    """Source text of class ``name`` (dotted) in ``sources`` or on the library path; None if
-    not found. Comments removed."""
+def class_text(name: str, sources=(), libraries=()) -> str | None:
+    """Source text of class ``name`` (dotted) in ``sources`` or on the library path (``libraries``
+    first); None if not found. Comments removed."""
     from ..library import available, library_path
 
     parts = name.split(".")
@@ -90,7 +91,7 @@ def class_text(name: str, sources=()) -> str | None:
         found = _in_root(root, parts, top_level=root.is_file())
         if found is not None:
             return found
-    lib = available(library_path()).get(parts[0])
+    lib = available(library_path(libraries)).get(parts[0])
     return _in_root(lib, parts, top_level=False) if lib is not None else None
 
 

@@ -314,14 +314,15 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
 
 
 def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experiment=None,
-              units: dict | None = None, descriptions: dict | None = None) -> Path:
+              units: dict | None = None, descriptions: dict | None = None, libraries=()) -> Path:
     """Write ``out_path`` (.fmu, Model Exchange and Co-Simulation); raises CompileError if gcc or
     FMPy validation fails.
 
     ``experiment``: the DefaultExperiment: data (a TimeSeries: its span and sampling interval),
     an :class:`~mcl.compile.fmu.experiment.Experiment` or a dict (start, stop, step,
-    tolerance); default: the class's ``experiment`` annotation, else an estimate from the
-    model's time scales.
+    tolerance); default: the class's ``experiment`` annotation (its source found among the
+    model's sources, ``libraries`` and the library path), else an estimate from the model's
+    time scales.
     ``units`` / ``descriptions``: {variable name: text} added to (or replacing) what the model
     declares, e.g. for the coefficients of a learned law.
 
@@ -333,7 +334,7 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
     if out_path.is_dir():
         raise ConfigError("the FMU to write is an existing directory", where=str(out_path))
     ident = model_identifier(model.name)
-    experiment = Experiment.of(experiment) or for_model(model)
+    experiment = Experiment.of(experiment) or for_model(model, libraries)
     _check_names(model, units, "units")
     _check_names(model, descriptions, "descriptions")
     with tempfile.TemporaryDirectory(prefix="mcl-fmu-") as tmp:
