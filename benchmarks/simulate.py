@@ -8,7 +8,9 @@ its children: the FMU engine runs in one) are medians of ``--repeat`` runs. The 
 FMU engine (Co-Simulation, the input's slope given at each sample), and FMPy's
 ``simulate_fmu`` with its defaults at the input's interval as Co-Simulation (what FMPy picks)
 and as Model Exchange, each with its largest deviation from the in-process engine. The MSL part
-runs when the Modelica Standard Library is found (``--msl DIR``, default ../shared/msl).
+runs when the Modelica Standard Library is found (``--msl DIR``, default ../shared/msl); it
+ends with the same rows for two hybrid MSL examples (an on-off temperature controller: pre() and
+state events; a PWM chopper: sample() clocks, when, reinit), on the FMU's DefaultExperiment.
 
     python benchmarks/simulate.py [--repeat 5] [--json PATH] [--msl DIR]
 """
@@ -139,6 +141,7 @@ def main(argv=None):
                     for k, (w, c) in rows.items()]}
     if (args.msl / "Modelica" / "package.mo").is_file():
         out["msl"] = msl_rows(args.msl, args.repeat)
+        out["hybrid"] = hybrid_rows(args.msl, args.repeat)
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
 
@@ -182,6 +185,107 @@ def msl_rows(msl: Path, repeat: int) -> list[dict]:
     return [{"what": "compile first", "seconds": first}, {"what": "compile cached", "seconds": again},
             {"engine": "rumoca", "seconds": rumoca_s},
             {"engine": "casadi (repeated)", "seconds": ours, "ratio": ours / rumoca_s}]
+
+
+HYBRID = ["Modelica.Thermal.HeatTransfer.Examples.ControlledTemperature",
+          "Modelica.Electrical.PowerConverters.Examples.DCDC.ChopperStepDown.ChopperStepDown_R"]
+
+
+def hybrid_rows(msl: Path, repeat: int) -> list[dict]:
+    """Hybrid MSL examples over their DefaultExperiment: rumoca, the in-process engine, mcl's FMU
+    engine and FMPy's defaults (CS; ME on the same output grid), CPU seconds and the largest
+    deviation of a continuous state (outputs for mcl's FMU engine) from the in-process engine
+    at tight tolerances (1e-9), relative to its range (grid points on a clock tick are left
+    out: either side of the event is right there)."""
+    import os
+
+    import rumoca as rm
+    from fmpy import read_model_description, simulate_fmu
+
+    from mcl.api import compile_model, simulate
+    from mcl.compile.fmu.export import build_fmu
+    from mcl.data import TimeSeries
+    from mcl.engine_casadi import CasadiEngine
+    from mcl.model import FmuModel
+    from mcl.simulation import SimulationOptions
+
+    os.environ["MODELICAPATH"] = str(msl)
+    rows = []
+    for name in HYBRID:
+        model = compile_model([], name)
+        o = model.ode
+        with tempfile.TemporaryDirectory() as tmp:
+            path = build_fmu(model, Path(tmp) / "m.fmu")
+            md = read_model_description(str(path))
+            continuous = [v.name for v in md.modelVariables if v.derivative is None and v.name in o.x_names
+                          and v.variability == "continuous"]
+            cs = simulate_fmu(str(path), output=continuous)
+            t = cs["time"]
+            grid = TimeSeries(t, np.zeros((len(t), 0)), [])
+            engine = CasadiEngine()
+            tight = CasadiEngine().simulate(model, grid, options=SimulationOptions(rtol=1e-9, atol=1e-11,
+                                                                                   time_limit=600))
+            assert tight.ok, tight.reason
+            ref = {n: tight.states[:, o.x_names.index(n)] for n in continuous}
+            ref.update({n: tight.output(n) for n in o.y_names})
+            keep = ~_on_ticks(t, o.events["clocks"])
+
+            def deviation(values, names=continuous):       # a dict or FMPy's structured array
+                given = values.dtype.names if hasattr(values, "dtype") else values
+                return max(np.max(np.abs(values[n] - ref[n])[keep]) / max(np.ptp(ref[n]), 1e-12)
+                           for n in names if n in given)
+
+            own = engine.simulate(model, grid)
+            mine = simulate(FmuModel.read(path), grid)
+
+            def me():
+                res = simulate_fmu(str(path), output=continuous, fmi_type="ModelExchange",
+                                   output_interval=float(t[1] - t[0]))
+                last = res[np.r_[res["time"][1:] != res["time"][:-1], True]]      # after each event
+                return last[np.searchsorted(last["time"], t - 1e-9 * np.maximum(1.0, np.abs(t)))]
+
+            fmu = FmuModel.read(path)
+            timings = {
+                "casadi (repeated)": (timed(lambda: engine.simulate(model, grid), repeat, cpu=True),
+                                      deviation({n: own.states[:, o.x_names.index(n)] for n in continuous})),
+                "fmu engine (CS, child process)": (timed(lambda: simulate(fmu, grid), repeat, cpu=True),
+                                                   deviation({n: mine.output(n) for n in o.y_names}, o.y_names)
+                                                   if o.y_names else None),
+                "FMPy defaults, Co-Simulation": (timed(lambda: simulate_fmu(str(path), output=continuous), repeat, cpu=True),
+                                                 deviation(cs)),
+                "FMPy defaults, Model Exchange": (timed(me, repeat, cpu=True), deviation(me())),
+            }
+            try:
+                session = rm.Session(roots=[str(msl)])
+                ref_model = session.loads(f"model BenchEntry_\n  extends {name};\nend BenchEntry_;\n",
+                                          model="BenchEntry_", filename="/mcl-bench/BenchEntry_.mo")
+                cfg = rm.SimConfig(rtol=1e-6, atol=1e-8, dt=float(t[1] - t[0]))
+                theirs = ref_model.simulate(t=(float(t[0]), float(t[-1])), config=cfg)
+                values = {n: np.interp(t, np.asarray(theirs.time), np.asarray(theirs[n]))
+                          for n in continuous if n in theirs.names}
+                timings = {"rumoca": (timed(lambda: ref_model.simulate(t=(float(t[0]), float(t[-1])), config=cfg),
+                                            repeat, cpu=True), deviation(values) if values else None), **timings}
+            except rm.RumocaError as exc:
+                print(f"  rumoca cannot simulate {name}: {str(exc).splitlines()[0][:100]}")
+        own_cpu = timings["casadi (repeated)"][0][1]
+        print(f"\nhybrid MSL {name.split('.')[-1]}, {t[-1] - t[0]:g} s ({len(o.events['clocks'])} clock(s), "
+              f"{0 if o.zero is None else o.zero.size1_out(0)} event indicator(s)); median of {repeat} runs")
+        print(f"  {'engine':38s} {'wall s':>8s} {'cpu s':>8s} {'cpu/casadi':>11s} {'max dev':>9s}")
+        for label, ((wall, cpu), dev) in timings.items():
+            shown = f"{dev:9.1e}" if dev is not None else f"{'':9s}"
+            print(f"  {label:38s} {wall:8.3f} {cpu:8.3f} {cpu / own_cpu:11.2f} {shown}")
+            rows.append({"model": name, "engine": label, "seconds": wall, "cpu_seconds": cpu,
+                         "cpu_ratio_to_casadi": cpu / own_cpu,
+                         **({"max_relative_deviation": float(dev)} if dev is not None else {})})
+    return rows
+
+
+def _on_ticks(t, clocks):
+    hit = np.zeros(len(t), dtype=bool)
+    for start, period in clocks:
+        n = np.round((t - start) / period)
+        hit |= (n >= 0) & (np.abs(start + n * period - t) <= 1e-9 * np.maximum(1.0, np.abs(t)))
+    return hit
 
 
 if __name__ == "__main__":

@@ -64,3 +64,29 @@ def test_fmu_exposes_component_variables_and_carries_sources(fmus):
         files = set(z.namelist())
     assert {"sources/fmi2_model.c", "sources/mcl_funcs.c", "modelDescription.xml"} <= files
     assert any(f.startswith("binaries/linux64/") and f.endswith(".so") for f in files)
+
+
+def test_a_build_is_kept_and_reused(tmp_path, monkeypatch):
+    """The same model, experiment, units and descriptions: the stored build is copied (the same
+    bytes, not a second gcc run); a model loaded from the compile cache finds the build of the
+    model stored there; another experiment is another build."""
+    from helpers import RC_MODEL
+    from mcl import compile_model
+    from mcl.compile import cache
+
+    monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "RC.mo").write_text(RC_MODEL)
+    model = compile_model([tmp_path / "RC.mo"], "RC")
+    cache.store("rc-key", model, seconds=1.0)              # as the compiler stores a slow compile
+    first = build_fmu(model, tmp_path / "a.fmu").read_bytes()
+    builds = tmp_path / "cache" / "fmu"
+    assert len(list(builds.glob("*.fmu"))) == 2            # by the compile key and by the sources
+    assert build_fmu(model, tmp_path / "b.fmu").read_bytes() == first
+    loaded = cache.load("rc-key")
+    assert loaded is not model and cache.model_key(loaded) == "rc-key"
+    assert build_fmu(loaded, tmp_path / "c.fmu").read_bytes() == first
+    assert cache.model_key(loaded.with_outputs(["C.v"])) is None         # a derived model: its own build
+    other = build_fmu(model, tmp_path / "d.fmu", experiment={"start": 0, "stop": 3, "step": 0.1})
+    guid = {p: read_model_description(str(p)).guid for p in (tmp_path / "a.fmu", other)}
+    assert len(set(guid.values())) == 2 and len(list(builds.glob("*.fmu"))) == 4
+    assert validate_fmu(other) == []

@@ -7,8 +7,9 @@ and analysing again (an MSL model: seconds -> a fraction of a second). Only comp
 long enough to be worth it are kept, and the oldest entries are dropped beyond ``MAX_ENTRIES``.
 ``MCL_NO_COMPILE_CACHE=1`` turns it off; ``MCL_CACHE_DIR`` moves it.
 
-Built FMUs are kept beside the compiled models (``fmu/``), keyed by what goes into them (the
-generated C sources, the model description, the C compiler and its flags: see
+Built FMUs are kept beside the compiled models (``fmu/``), keyed by the compile key of the model
+(for the very model object this cache loaded or stored: :func:`model_key`) or by the generated
+C sources, with the model description, the C compiler and its flags (see
 :mod:`mcl.compile.fmu.export`), so ``mcl compile`` of a cached model skips the C build too.
 """
 from __future__ import annotations
@@ -19,6 +20,7 @@ import logging
 import os
 import shutil
 import tempfile
+import weakref
 from pathlib import Path
 
 log = logging.getLogger(__name__)
@@ -78,6 +80,7 @@ def load(key: str):
         return None
     os.utime(entry)     # recently used
     model.info = {**model.info, "cached": True}
+    _remember(model, key)
     return model
 
 
@@ -95,6 +98,7 @@ def store(key: str, model, seconds: float) -> None:
         except OSError:        # another process stored it first
             pass
         shutil.rmtree(tmp, ignore_errors=True)
+        _remember(model, key)
         _prune(base)
     except OSError as exc:      # a full or read-only disk costs speed, never the compile
         log.debug("compile cache not written: %s", exc)
@@ -105,6 +109,26 @@ def _prune(base: Path) -> None:
                      key=lambda p: p.stat().st_mtime)
     for old in entries[:-MAX_ENTRIES]:
         shutil.rmtree(old, ignore_errors=True)
+
+
+_keys: dict[int, tuple] = {}     # id(model) -> (weak reference, compile key)
+
+
+def _remember(model, key: str) -> None:
+    ident = id(model)
+
+    def forget(ref, ident=ident):
+        if _keys.get(ident, (None,))[0] is ref:
+            del _keys[ident]
+
+    _keys[ident] = (weakref.ref(model, forget), key)
+
+
+def model_key(model) -> str | None:
+    """The compile key of ``model`` when it is the very object this cache loaded or stored (a
+    model derived from it, with outputs added or a law put in, is another object: None)."""
+    entry = _keys.get(id(model))
+    return entry[1] if entry is not None and entry[0]() is model else None
 
 
 def fmu_lookup(key: str) -> Path | None:

@@ -326,9 +326,10 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
     ``units`` / ``descriptions``: {variable name: text} added to (or replacing) what the model
     declares, e.g. for the coefficients of a learned law.
 
-    A validated build is kept in mcl's cache (:mod:`mcl.compile.cache`), keyed by its generated
-    sources and model description: building the same FMU again (a cached model, the same
-    experiment, units and descriptions) copies it instead of running gcc and FMPy again.
+    A validated build is kept in mcl's cache (:mod:`mcl.compile.cache`), keyed by the model's
+    compile key (a model as the compile cache holds it) or else by its generated sources, and
+    by its model description: building the same FMU again (a cached model, the same experiment,
+    units and descriptions) copies it instead of generating code and running gcc and FMPy.
     """
     out_path = Path(out_path)
     if out_path.is_dir():
@@ -337,15 +338,21 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
     experiment = Experiment.of(experiment) or for_model(model, libraries)
     _check_names(model, units, "units")
     _check_names(model, descriptions, "descriptions")
+    starts = settable_starts(model)
+    xml = model_description(model, ident, _GUID_SLOT, list(C_SOURCES), experiment, units, descriptions, starts)
+    compiled_as = compile_cache.model_key(model)
+    # a model as the compile cache holds it: its compile key says what the generated code is
+    model_key = _build_key("model", compiled_as, xml, _HERE.joinpath("fmi2_model.c").read_text(),
+                           Path(__file__).read_text(), ca.__version__) if compiled_as else None
     with tempfile.TemporaryDirectory(prefix="mcl-fmu-") as tmp:
         build = Path(tmp)
-        starts = settable_starts(model)
-        c_files = generate_sources(model, build, ident, _GUID_SLOT, tolerance=experiment.tolerance, settable=starts[0])
-        sources = sorted(p.name for p in build.iterdir() if p.suffix in (".c", ".h"))
-        xml = model_description(model, ident, _GUID_SLOT, [s for s in sources if s.endswith(".c")],
-                                experiment, units, descriptions, starts)
-        key = _build_key(build, sources, xml)
-        fmu = compile_cache.fmu_lookup(key)
+        fmu = compile_cache.fmu_lookup(model_key) if model_key else None
+        if fmu is None:
+            c_files = generate_sources(model, build, ident, _GUID_SLOT, tolerance=experiment.tolerance,
+                                       settable=starts[0])
+            sources = sorted(p.name for p in build.iterdir() if p.suffix in (".c", ".h"))
+            key = _build_key("sources", xml, *sources, *((build / s).read_text() for s in sources))
+            fmu = compile_cache.fmu_lookup(key)
         if fmu is None:
             # the GUID follows from the content: the same sources and description, the same GUID
             guid = "{" + str(uuid.UUID(key[:32])) + "}"
@@ -357,7 +364,8 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
                 problems = validate_fmu(fmu)
                 if problems:
                     raise CompileError(f"FMPy validation of the generated FMU failed: {problems[0]}")
-                compile_cache.fmu_store(key, fmu)      # only validated builds are reused
+                for k in filter(None, (key, model_key)):   # only validated builds are reused
+                    compile_cache.fmu_store(k, fmu)
         out_path.parent.mkdir(parents=True, exist_ok=True)
         staged = out_path.with_name(f".{out_path.name}.{os.getpid()}.tmp")
         try:
@@ -370,16 +378,16 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
 
 _GUID_SLOT = "{mcl-guid-of-this-build}"
 _CFLAGS = ["-shared", "-fPIC", "-O2", "-fvisibility=hidden"]
+C_SOURCES = ("fmi2_model.c", "mcl_funcs.c")
 
 
-def _build_key(build: Path, sources: list[str], xml: str) -> str:
-    """What decides the FMU: its C sources, its model description, the C compiler and flags."""
+def _build_key(*parts: str) -> str:
+    """What decides the FMU (its code or what the code is made from, its model description),
+    with the C compiler and its flags."""
     h = hashlib.sha256()
-    for part in (_gcc_version(), " ".join(_CFLAGS), xml, *sources):
+    for part in (_gcc_version(), " ".join(_CFLAGS), *parts):
         h.update(part.encode())
         h.update(b"\0")
-    for s in sources:
-        h.update((build / s).read_bytes())
     return h.hexdigest()[:40]
 
 
