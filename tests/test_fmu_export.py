@@ -90,3 +90,14 @@ def test_a_build_is_kept_and_reused(tmp_path, monkeypatch):
     guid = {p: read_model_description(str(p)).guid for p in (tmp_path / "a.fmu", other)}
     assert len(set(guid.values())) == 2 and len(list(builds.glob("*.fmu"))) == 4
     assert validate_fmu(other) == []
+
+
+def test_a_model_without_variables_is_refused_in_one_line(tmp_path):
+    """FMI 2.0 needs at least one variable: the error says so instead of FMPy's schema error."""
+    from mcl import compile_model
+    from mcl.errors import ModelicaError
+
+    (tmp_path / "Empty.mo").write_text("model Empty\nend Empty;\n")
+    with pytest.raises(ModelicaError, match="model Empty has no variables"):
+        build_fmu(compile_model([tmp_path / "Empty.mo"], "Empty"), tmp_path / "e.fmu")
+    assert not (tmp_path / "e.fmu").exists()

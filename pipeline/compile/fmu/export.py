@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from .. import cache as compile_cache
-from ...errors import CompileError, ConfigError
+from ...errors import CompileError, ConfigError, ModelicaError
 from ...model import CompiledModel
 from .experiment import Experiment, for_model
 
@@ -334,6 +334,9 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
     out_path = Path(out_path)
     if out_path.is_dir():
         raise ConfigError("the FMU to write is an existing directory", where=str(out_path))
+    o = model.ode
+    if not (o.p_names or o.u_names or o.y_names or o.x_names or _probe_variables(model)):
+        raise ModelicaError(f"model {model.name} has no variables: an FMU needs at least one")
     ident = model_identifier(model.name)
     experiment = Experiment.of(experiment) or for_model(model, libraries)
     _check_names(model, units, "units")
