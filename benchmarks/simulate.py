@@ -152,7 +152,6 @@ def msl_rows(msl: Path, repeat: int) -> list[dict]:
 
     import rumoca as rm
 
-    from mcl.compile import cache as compile_cache
     from mcl.api import compile_model
     from mcl.data import TimeSeries
     from mcl.engine_casadi import CasadiEngine
