@@ -7,6 +7,8 @@ user or a fitting loop sets), constants are substituted, and every name the user
 """
 from __future__ import annotations
 
+import dataclasses
+from collections import deque
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -84,17 +86,13 @@ def resolve_parameters(values: ca.SX, p_all: ca.SX, free: list[int], name: str) 
     """The free parameters' symbols ``p`` and every parameter of ``p_all`` as an expression of
     them: a dependent parameter's binding (``values``, in ``p_all``) substituted to a fixed point."""
     p = ca.SX.sym("p", len(free))
-    resolved = ca.SX(p_all)
-    for k, j in enumerate(free):
-        resolved[j] = p[k]
-    dependent = [j for j in range(p_all.numel()) if j not in set(free)]
-    for _ in range(len(dependent) + 1):
-        if not dependent or not ca.depends_on(resolved, p_all):
+    own = dict(zip(free, ca.vertsplit(p)))
+    resolved = ca.vertcat(*[own.get(j, e) for j, e in enumerate(ca.vertsplit(p_all))]) if p_all.numel() else p_all
+    for _ in range(p_all.numel() - len(free) + 1):   # each pass resolves one more level
+        if not ca.depends_on(resolved, p_all):
             return p, resolved
-        nxt = ca.SX(resolved)
-        for j in dependent:
-            nxt[j] = ca.substitute(values[j], p_all, resolved)
-        resolved = nxt
+        new = ca.vertsplit(ca.substitute(values, p_all, resolved))
+        resolved = ca.vertcat(*[own.get(j, e) for j, e in enumerate(new)])
     if ca.depends_on(resolved, p_all):
         raise ModelicaError(f"model {name}: parameter bindings are circular")
     return p, resolved
@@ -211,65 +209,224 @@ def _aliases(model):
                 yield name, (target, float(sign))
 
 
-def eliminate_aliases(dae: Dae, passes: int = 20) -> Dae:
+def eliminate_aliases(dae: Dae) -> Dae:
     """Remove the trivial equations a flat model is full of (``a = b``, ``a = -b``, ``a = c*b + d``
-    with constant c, ``a = parameter``): the algebraic variable they define is replaced by its
-    expression everywhere. Index reduction and causalisation then see the real structure (a
-    connector's potential is a state's alias, not a second state), and simulation gets cheaper.
-    States are never removed; every eliminated name stays readable through ``exprs``."""
-    residual, z, z_names, z_start = dae.residual, dae.z, list(dae.z_names), dae.z_start
-    init_residual, exprs, relations = dae.init_residual, dict(dae.exprs), dae.relations
-    d_update, x_reinit, asserts = dae.d_update, dae.x_reinit, dae.asserts
-    for _ in range(passes):
-        w = ca.vertcat(dae.x, z)
-        nx = dae.x.numel()
-        if residual.numel() == 0 or z.numel() == 0:
-            break
-        jac = ca.jacobian(residual, w)
-        sp = jac.sparsity()
-        cols_of = {}
-        for r, c in zip(sp.get_triplet()[0], sp.get_triplet()[1]):
-            cols_of.setdefault(r, []).append(c)
-        eliminated, keep_rows, taken = {}, [], set()
-        for r in range(residual.numel()):
-            cols = cols_of.get(r, [])
-            row = residual[r]
-            if (not 1 <= len(cols) <= 2 or ca.depends_on(row, dae.dx)
-                    or ca.depends_on(row, dae.t) or ca.depends_on(row, dae.u) or taken & set(cols)):
-                keep_rows.append(r)
-                continue
-            coef = [jac[r, c] for c in cols]
-            if any(ca.depends_on(k, w) for k in coef):
-                keep_rows.append(r)        # not linear in the unknowns
-                continue
-            alg = [c for c in cols if c >= nx]
-            if not alg:
-                keep_rows.append(r)        # between states: index reduction's business
-                continue
-            e = alg[-1]                    # the algebraic variable to eliminate
-            k_e = coef[cols.index(e)]
-            if k_e.is_zero():
-                keep_rows.append(r)
-                continue
-            rest = ca.substitute(row, w[e], ca.SX(0))   # row = k_e * w_e + rest (linear in w_e)
-            eliminated[e - nx] = -rest / k_e
-            taken |= set(cols)
-        if not eliminated:
-            break
-        drop = sorted(eliminated)
-        keep = [j for j in range(z.numel()) if j not in eliminated]
-        old = ca.vertcat(*[z[j] for j in drop])
-        new = ca.vertcat(*[eliminated[j] for j in drop])   # names no variable of this pass ("taken")
-        residual = ca.substitute(residual[keep_rows], old, new) if keep_rows else ca.SX(0, 1)
-        init_residual = ca.substitute(init_residual, old, new)
-        relations = ca.substitute(relations, old, new)
-        d_update, x_reinit, asserts = (ca.substitute(e, old, new) for e in (d_update, x_reinit, asserts))
-        exprs = {n: ca.substitute(v, old, new) if ca.depends_on(v, old) else v for n, v in exprs.items()}
-        z_start = z_start[keep] if keep else ca.SX(0, 1)
-        z = ca.vertcat(*[z[j] for j in keep]) if keep else ca.SX(0, 1)
-        z_names = [z_names[j] for j in keep]
-    import dataclasses
+    with c and d free of unknowns, ``a = parameter``): the algebraic variable they define is
+    replaced by its expression everywhere. Index reduction and causalisation then see the real
+    structure (a connector's potential is a state's alias, not a second state), and simulation
+    gets cheaper. States are never removed; every eliminated name stays readable through
+    ``exprs``.
 
-    return dataclasses.replace(dae, z=z, residual=residual, init_residual=init_residual, z_names=z_names,
-                               z_start=z_start, exprs=exprs, relations=relations, d_update=d_update,
-                               x_reinit=x_reinit, asserts=asserts)
+    Linear in the model's size: each eliminated variable is an affine function of one other
+    unknown (or none), so chains of aliases are followed as in a union-find (:class:`_Aliases`)
+    and every expression is substituted once, at the end."""
+    w = ca.vertcat(dae.x, dae.z)
+    nx, nr = dae.x.numel(), dae.residual.numel()
+    if nr == 0 or dae.z.numel() == 0:
+        return dae
+    al = _Aliases(dae, w)
+    al.run()
+    if not al.defs:
+        return dae
+    drop = sorted(al.defs)
+    old = ca.vertcat(*[al.w[e] for e in drop])
+    new = ca.vertcat(*[al.expr(e) for e in drop])
+    keep_rows = [r for r in range(nr) if r not in al.used]
+    keep = [j for j in range(dae.z.numel()) if j + nx not in al.defs]
+    names = list(dae.exprs)
+    parts = [dae.residual[keep_rows] if keep_rows else ca.SX(0, 1), dae.init_residual, dae.relations,
+             dae.d_update, dae.x_reinit, dae.asserts, *[dae.exprs[n] for n in names]]
+    out = ca.substitute(parts, [old], [new])
+    residual, init_residual, relations, d_update, x_reinit, asserts = out[:6]
+    exprs = dict(zip(names, out[6:]))
+    zs = ca.vertsplit(dae.z)
+    z = ca.vertcat(*[zs[j] for j in keep]) if keep else ca.SX(0, 1)
+    return dataclasses.replace(dae, z=z, residual=residual, init_residual=init_residual,
+                               z_names=[dae.z_names[j] for j in keep],
+                               z_start=dae.z_start[keep] if keep else ca.SX(0, 1), exprs=exprs,
+                               relations=relations, d_update=d_update, x_reinit=x_reinit, asserts=asserts)
+
+
+class _Aliases:
+    """Alias equations found among the rows linear in the unknowns (without der(), inputs or
+    time). Each eliminated unknown ``e`` is ``alpha * w[root] + beta`` of one unknown that stays
+    (or ``beta`` alone, free of unknowns); ``find`` follows the chain and shortens it. A row whose
+    remaining unknowns (after the eliminations so far, cancelled coefficients dropped) are one or
+    two, one of them algebraic, eliminates the algebraic one of higher index; a row is looked at
+    again when one of its unknowns goes. A row with a coefficient in unknowns (``R * i`` where
+    ``R`` is computed from a parameter) joins the candidates once those unknowns are all
+    eliminated to expressions without unknowns."""
+
+    #: a row naming more distinct unknowns than this is not looked at (it would need this many
+    #: coefficients to cancel): keeps a long sum from being re-read at every elimination
+    MAX_DISTINCT = 4
+
+    def __init__(self, dae: Dae, w: ca.SX):
+        self.dae, self.nx = dae, dae.x.numel()
+        self.w = ca.vertsplit(w)
+        self.index = {s.element_hash(): k for k, s in enumerate(self.w)}
+        self.defs: dict[int, tuple] = {}     # eliminated unknown -> (alpha, root or None, beta)
+        self.used: set[int] = set()          # rows that became definitions
+        self.rows: dict[int, tuple] = {}     # candidate row -> ([(column, coefficient)], rest)
+        self.of_root: dict[int, set] = {}    # unknown -> candidate rows that (through aliases) read it
+        self.waiting: dict[int, set] = {}    # unknown -> rows with a coefficient in it
+        self.queue, self.queued = deque(), set()
+
+    def run(self):
+        dae = self.dae
+        w = ca.vertcat(*self.w)
+        jac = ca.jacobian(dae.residual, w)
+        rows, cols = jac.sparsity().get_triplet()
+        if not rows:
+            return
+        coefs = [_num(k) for k in ca.vertsplit(jac.nz[:])]
+        outside = set(ca.jacobian_sparsity(dae.residual, ca.vertcat(dae.dx, dae.u, dae.t)).get_triplet()[0])
+        nz, var = ca.jacobian_sparsity(jac.nz[:], w).get_triplet()
+        for k, v in zip(nz, var):
+            if rows[k] not in outside:
+                self.waiting.setdefault(v, set()).add(rows[k])
+        nonlinear = {rows[k] for k in nz}
+        terms: dict[int, list] = {}
+        for k, (r, c) in enumerate(zip(rows, cols)):
+            terms.setdefault(r, []).append((c, coefs[k]))
+        cand = [r for r in sorted(terms) if r not in outside and r not in nonlinear]
+        if cand:
+            rests = ca.vertsplit(ca.substitute(dae.residual[cand], w, ca.SX.zeros(w.numel())))
+            for j, r in enumerate(cand):
+                self._candidate(r, terms[r], _num(rests[j]))
+        while self.queue:
+            r = self.queue.popleft()
+            self.queued.discard(r)
+            if r in self.used:
+                continue
+            found = self._solve(*self.rows[r])
+            if found is not None:
+                self._eliminate(r, *found)
+
+    def _candidate(self, r: int, terms, rest):
+        self.rows[r] = (terms, rest)
+        for c, _k in terms:
+            self.of_root.setdefault(c, set()).add(r)
+        self._push(r)
+
+    def _push(self, r: int):
+        if r not in self.queued and r not in self.used:
+            self.queue.append(r)
+            self.queued.add(r)
+
+    def _eliminate(self, r: int, e: int, d: tuple):
+        self.defs[e] = d
+        self.used.add(r)
+        root = d[1]
+        moved = self.of_root.pop(e, set())
+        for q in moved:
+            self._push(q)
+        if root is not None:            # rows of e now read root (the smaller set merged in)
+            mine = self.of_root.setdefault(root, set())
+            if len(mine) < len(moved):
+                mine, moved = moved, mine
+                self.of_root[root] = mine
+            mine |= moved
+        for q in self.waiting.pop(e, set()):
+            if root is not None:
+                self.waiting.setdefault(root, set()).add(q)
+            elif q not in self.rows:
+                self._linearised(q)
+
+    def _linearised(self, r: int):
+        """Row ``r`` with the unknowns eliminated so far replaced: a candidate when it is now
+        linear (called when an unknown of its coefficients is eliminated to a value)."""
+        row = self.dae.residual[r]
+        syms = [s for s in ca.symvar(row) if s.element_hash() in self.index]
+        cols = [self.index[s.element_hash()] for s in syms]
+        vals = [self.expr(c) for c in cols]
+        row = ca.substitute([row], [ca.vertcat(*syms)], [ca.vertcat(*vals)])[0] if syms else row
+        syms = [s for s in ca.symvar(row) if s.element_hash() in self.index]
+        if not syms:
+            return
+        v = ca.vertcat(*syms)
+        jac = ca.jacobian(row, v)
+        if ca.depends_on(jac, v):
+            return
+        rest = ca.substitute(row, v, ca.SX.zeros(v.numel()))
+        self._candidate(r, [(self.index[s.element_hash()], _num(jac[0, k])) for k, s in enumerate(syms)], _num(rest))
+
+    def find(self, v: int):
+        """(alpha, root, beta): w[v] = alpha * w[root] + beta, root an unknown that stays (or None)."""
+        chain = []
+        while v in self.defs and self.defs[v][1] is not None and self.defs[v][1] in self.defs:
+            chain.append(v)
+            v = self.defs[v][1]
+        out = self.defs.get(v, (1.0, v, 0.0))
+        for u in reversed(chain):          # shortened: each now points at the root
+            alpha, _, beta = self.defs[u]
+            out = self.defs[u] = (_mul(alpha, out[0]), out[1], _add(_mul(alpha, out[2]), beta))
+        return out
+
+    def _solve(self, terms, rest):
+        """(e, (alpha, root, beta)) when the row defines an algebraic unknown e; else None."""
+        roots = set()
+        for c, _k in terms:
+            roots.add(self.find(c)[1])
+            if len(roots) > self.MAX_DISTINCT:
+                return None
+        coef = {q: 0.0 for q in roots}
+        const = rest
+        for c, k in terms:
+            alpha, root, beta = self.find(c)
+            coef[root] = _add(coef[root], _mul(k, alpha))
+            const = _add(const, _mul(k, beta))
+        live = sorted(q for q in roots if q is not None and not _is_zero(coef[q]))
+        alg = [q for q in live if q >= self.nx]
+        if not 1 <= len(live) <= 2 or not alg:
+            return None
+        e = alg[-1]
+        k_e = coef[e]
+        other = [q for q in live if q != e]
+        if other:
+            return e, (_div(-coef[other[0]], k_e), other[0], _div(-const, k_e))
+        return e, (0.0, None, _div(-const, k_e))
+
+    def expr(self, e: int) -> ca.SX:
+        """w[e] in the unknowns that stay."""
+        alpha, root, beta = self.find(e)
+        return ca.SX(beta) if root is None else ca.SX(_add(_mul(alpha, self.w[root]), beta))
+
+
+# Coefficients are mostly plain numbers (1, -1, 0): kept as floats, CasADi only when symbolic
+def _num(k):
+    return float(k) if isinstance(k, ca.SX) and k.is_constant() else k
+
+
+def _is_zero(a) -> bool:
+    return a == 0.0 if isinstance(a, float) else a.is_zero()
+
+
+def _mul(a, b):
+    if isinstance(a, float) and isinstance(b, float):
+        return a * b
+    if isinstance(a, float) and a in (0.0, 1.0):
+        return b if a == 1.0 else 0.0
+    if isinstance(b, float) and b in (0.0, 1.0):
+        return a if b == 1.0 else 0.0
+    return a * b
+
+
+def _add(a, b):
+    if isinstance(a, float) and isinstance(b, float):
+        return a + b
+    if isinstance(a, float) and a == 0.0:
+        return b
+    if isinstance(b, float) and b == 0.0:
+        return a
+    return a + b
+
+
+def _div(a, b):
+    if isinstance(a, float) and isinstance(b, float):
+        return a / b
+    if isinstance(b, float) and b == 1.0:
+        return a
+    if isinstance(a, float) and a == 0.0:
+        return 0.0
+    return a / b

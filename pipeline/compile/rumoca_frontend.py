@@ -764,9 +764,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
 
     # parameters: an element whose binding depends on other parameters is a dependent one
     values = ca.vertcat(*[value_of(i) for i in index["p"]]) if index["p"] else ca.SX(0, 1)
-    free = [j for j in range(values.numel()) if not ca.depends_on(values[j], p_all) and values[j].is_constant()]
+    elements = ca.vertsplit(values)
+    free = [j for j, v in enumerate(elements) if v.is_constant()]
     p_names = [names["p"][j] for j in free]
-    p_values = np.array([float(ca.evalf(values[j])) for j in free])
+    p_values = np.array([float(elements[j]) for j in free])
     p, resolved = resolve_parameters(values, p_all, free, model)
 
     # between events pre(v) is v, initial() and terminal() are false (initial() true in the
@@ -805,7 +806,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                     if v["attributes"].get("description")}
     # relations on the unknowns are state events; on time alone they are time events (above)
     unknowns = ca.vertcat(x, dx, z)
-    rel = [r for r in tr.relations if ca.depends_on(r, unknowns)]
+    on = set(ca.jacobian_sparsity(ca.vertcat(*tr.relations), unknowns).get_triplet()[0]) if tr.relations else ()
+    rel = [r for k, r in enumerate(tr.relations) if k in on]
     relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
     d_start = ca.vertcat(starts("d"), ca.SX.zeros(len(memory), 1)) if nd else ca.SX(0, 1)
     # initial equations pre(v) = value: the value v's pre() has at initialisation

@@ -30,6 +30,10 @@ log = logging.getLogger(__name__)
 #: than one holding a run-time solver); larger ones go through a sparse QR at run time.
 SYMBOLIC_SOLVE_MAX = 40
 NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
+#: an algebraic loop's residual accepted from Newton's method without the fallback
+LOOP_TOL = 1e-9
+DAMPED_ITERATIONS = 30       # Newton steps with a line search (the fallback)
+LINE_SEARCH_STEPS = 12       # step lengths tried: 1, 1/2, ..., 1/2^11
 
 
 @dataclass
@@ -74,6 +78,15 @@ def reduce_index(dae: Dae):
         state_to_orig = ca.Function("state_to_orig", [xs, dae.z], [ca.SX(0, 1), dae.z],
                                     ["xf", "zf"], ["x_impl", "z"])
         return semi, state_to_orig, ca.SX(0, 1), 0
+    w = ca.vertcat(dae.dx, dae.z)
+    if ca.sprank(ca.jacobian_sparsity(dae.residual, w)) == dae.residual.numel():
+        # index 1 (the equations determine x' and z): the semi-explicit form is x' = dx with
+        # (dx, z) algebraic, what dae_map_semi_expl gives, without dae_reduce_index's search
+        # (cubic in the model's size: 87 s for 800 R-C sections)
+        semi = dict(x=dae.x, z=w, p=up, t=dae.t, ode=dae.dx, alg=dae.residual)
+        state_to_orig = ca.Function("state_to_orig", [dae.x, w], [dae.dx, dae.x, dae.z],
+                                    ["xf", "zf"], ["dx_impl", "x_impl", "z"])
+        return semi, state_to_orig, ca.SX(0, 1), 1
     impl = dict(x_impl=dae.x, dx_impl=dae.dx, z=dae.z, alg=dae.residual, t=dae.t, p=up)
     try:
         red, stats = ca.dae_reduce_index(impl, {})
@@ -90,26 +103,24 @@ def reduce_index(dae: Dae):
     return semi, state_to_orig, red["I"], int(stats["index"])
 
 
-def _blocks(g: ca.SX, z: ca.SX):
-    """BTF blocks of dg/dz in solving order: list of (rows, cols)."""
-    sp = ca.jacobian(g, z).sparsity()
-    if ca.sprank(sp) < z.numel():
+def _blocks(sp: ca.Sparsity, nz: int):
+    """BTF blocks of the algebraic Jacobian's sparsity ``sp`` in solving order: [(rows, cols)]."""
+    if ca.sprank(sp) < nz:
         raise ModelicaError(
-            f"the algebraic equations are structurally singular ({ca.sprank(sp)} of {z.numel()} "
+            f"the algebraic equations are structurally singular ({ca.sprank(sp)} of {nz} "
             "variables determined): an equation is missing or a variable is over-constrained")
     _, rowperm, colperm, rowblock, colblock, _, _ = sp.btf()
     blocks = [(list(rowperm[rowblock[k]:rowblock[k + 1]]), list(colperm[colblock[k]:colblock[k + 1]]))
               for k in range(len(rowblock) - 1)]
-    dense = np.array(ca.DM(sp, 1))
-    col_block = {c: k for k, (_, cols) in enumerate(blocks) for c in cols}
+    rows, cols = sp.get_triplet()
 
     def upper(bl):  # does some block depend on a later one?
-        return any(col_block[c] > k for k, (rows, _) in enumerate(bl)
-                   for r in rows for c in np.nonzero(dense[r])[0])
+        row_block = {r: k for k, (rs, _) in enumerate(bl) for r in rs}
+        col_block = {c: k for k, (_, cs) in enumerate(bl) for c in cs}
+        return any(col_block[c] > row_block[r] for r, c in zip(rows, cols))
 
     if upper(blocks):
         blocks = blocks[::-1]
-        col_block = {c: k for k, (_, cols) in enumerate(blocks) for c in cols}
         assert not upper(blocks), "BTF order"
     return blocks
 
@@ -120,14 +131,19 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
     Linear blocks A z_k + b = 0 are solved symbolically (small) or by sparse QR (large);
     nonlinear blocks by Newton's method started from ``z_guess``.
     """
-    blocks = _blocks(g, z)
+    sp = ca.jacobian_sparsity(g, z)
+    blocks = _blocks(sp, z.numel())
+    reads: dict[int, set] = {}          # row -> the unknowns it reads
+    for r, c in zip(*sp.get_triplet()):
+        reads.setdefault(r, set()).add(c)
+    gs, zs = ca.vertsplit(g), ca.vertsplit(z)
     mx_args = [ca.MX.sym(f"a{i}", a.sparsity()) for i, a in enumerate(args)]
     solved: dict[int, ca.MX] = {}
     n_nonlinear = 0
     for k, (rows, cols) in enumerate(blocks):
-        gk, zk = g[rows], ca.vertcat(*[z[c] for c in cols])
-        prev = [c for c in sorted(solved) if ca.depends_on(gk, z[c])]
-        zprev = ca.vertcat(*[z[c] for c in prev]) if prev else ca.SX(0, 1)
+        gk, zk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[zs[c] for c in cols])
+        prev = sorted(set().union(*[reads.get(r, set()) for r in rows]) - set(cols))
+        zprev = ca.vertcat(*[zs[c] for c in prev]) if prev else ca.SX(0, 1)
         prev_mx = ca.vertcat(*[solved[c] for c in prev]) if prev else ca.MX(0, 1)
         A = ca.jacobian(gk, zk)
         if not ca.depends_on(A, zk):
@@ -144,13 +160,48 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
             n_nonlinear += 1
             par = ca.vertcat(zprev, *args)
             resid = ca.Function(f"loop{k}", [zk, par], [gk])
-            rf = ca.rootfinder(f"newton{k}", "fast_newton", resid, NEWTON_OPTS)
-            guess = ca.DM(z_guess[cols])
-            sol = rf(guess, ca.vertcat(prev_mx, *mx_args))
+            sol = _loop_solve(f"loop{k}", resid, z_guess[cols], ca.vertcat(prev_mx, *mx_args))
         for i, c in enumerate(cols):
             solved[c] = sol[i]
     zsol = ca.vertcat(*[solved[c] for c in range(z.numel())]) if z.numel() else ca.MX(0, 1)
     return ca.Function("zsol", mx_args, [zsol]), n_nonlinear
+
+
+def _loop_solve(name: str, resid: ca.Function, guess: np.ndarray, par: ca.MX) -> ca.MX:
+    """The solution of an algebraic loop 0 = resid(z, par): Newton's method from the start
+    values; where it does not converge (it cycles between the branches of a piecewise law, such
+    as an amplifier's output limit, or meets a singular Jacobian), Newton's method with a
+    backtracking line search from the start values, then polished by Newton. The fallback is
+    evaluated only when needed (a short-circuit conditional); everything stays C-generable."""
+    quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
+    z1 = quick(ca.DM(guess), par)
+    ok = ca.mmax(ca.fabs(resid(z1, par))) <= LOOP_TOL
+    step = _damped_step(name, resid)
+    z = ca.MX(ca.DM(guess))
+    for _ in range(DAMPED_ITERATIONS):
+        z = step(z, par)
+    polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, NEWTON_OPTS)
+    return ca.if_else(ok, z1, polish(z, par), True)
+
+
+def _damped_step(name: str, resid: ca.Function) -> ca.Function:
+    """One step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
+    decreases |r|^2 enough (Armijo), the shortest when none does."""
+    z, par = ca.MX.sym("z", resid.size1_in(0)), ca.MX.sym("par", resid.size1_in(1))
+    zs, ps = ca.SX.sym("z", z.numel()), ca.SX.sym("p", par.numel())
+    jac = ca.Function(f"{name}_jac", [zs, ps], [ca.jacobian(resid(zs, ps), zs)])
+    r = resid(z, par)
+    dz = -ca.solve(jac(z, par), r, "qr")
+    f0 = ca.dot(r, r)
+    alphas = [0.5 ** j for j in range(LINE_SEARCH_STEPS)]
+    alpha = ca.MX(alphas[-1])
+    for a in reversed(alphas[:-1]):
+        ra = resid(z + a * dz, par)
+        alpha = ca.if_else(ca.dot(ra, ra) <= (1 - 1e-4 * a) * f0, a, alpha)
+    body = ca.Function(f"{name}_ls", [z, par], [z + alpha * dz])
+    r = resid(z, par)
+    done = ca.dot(r, r) <= LOOP_TOL ** 2     # converged: the rest of the steps cost one residual
+    return ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)])
 
 
 def build_ode(dae: Dae, name: str = "model") -> Ode:
@@ -267,7 +318,8 @@ def _hybrid(dae: Dae, name: str) -> Ode:
 
     PA = ca.vertcat(P, D, D, orig(X), ca.MX.zeros(nf))
     names = inner.probe_names
-    idx = {key: [names.index(n) for n in hidden[key]] for key in hidden}
+    where_is = {n: j for j, n in enumerate(names)}
+    idx = {key: [where_is[n] for n in hidden[key]] for key in hidden}
     visible = [j for j, n in enumerate(names) if not n.startswith("$")]
     args, io = [XF, U, P, T], ["x", "u", "p", "t"]
 
@@ -353,12 +405,18 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     nx = xs.numel()
     init_res = ca.Function("ires", [dae.x, dae.dx, dae.z, dae.u, dae.p, dae.t], [dae.init_residual])
     hard = ca.vertcat(inv, init_res(XI, dXI, ZI, U, P, T)) if dae.init_residual.numel() else inv
-    semi_start = ca.Function("sst", [dae.p], [ca.vertcat(*[
-        _start_of(s, dae) for s in ca.vertsplit(xs)])])(P)
+    semi_start = ca.Function("sst", [dae.p], [_starts_of(xs, dae)])(P)
 
+    # the system in SX where it expands (its Jacobian is then sparse and cheap: 10 s in MX for
+    # 800 R-C sections), else in MX (it holds the Newton solve of an algebraic loop)
+    H = expanded(ca.Function("H", [X, U, P, T], [hard]))
+    sym = ca.SX.sym if H.is_a("SXFunction") else ca.MX.sym
+    Xs, Us, Ps, Ts, Ss = (sym(n, k) for n, k in (("x", nx), ("u", U.numel()), ("p", P.numel()),
+                                                    ("t", 1), ("s", nx)))
+    hard_s = H(Xs, Us, Ps, Ts)
     # numeric Jacobian at the nominal start point, to choose a square nonsingular system
     xs0 = np.array(ca.Function("s0", [P], [semi_start])(dae.p_values)).ravel()
-    jac = ca.Function("J", [X, U, P, T], [ca.jacobian(hard, X)])
+    jac = ca.Function("J", [Xs, Us, Ps, Ts], [ca.jacobian(hard_s, Xs)])
     J = np.array(jac(xs0, dae.u_start, dae.p_values, 0.0))
     rows = _independent_rows(J)
     J = J[rows]
@@ -366,41 +424,69 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     order = ([i for i, n in enumerate(x_names) if n in fixed]
              + [i for i, n in enumerate(x_names) if n in dae.x_names and n not in fixed]
              + [i for i, n in enumerate(x_names) if n not in dae.x_names])
-    pins = []
-    rank = np.linalg.matrix_rank(J) if J.size else 0
-    for i in order:
-        if rank + len(pins) >= nx:
-            break
-        trial = np.vstack([J, np.eye(nx)[pins + [i]]])
-        if np.linalg.matrix_rank(trial) == rank + len(pins) + 1:
-            pins.append(i)
-        elif x_names[i] in fixed:
+    # the states the equations determine: a basis of J's columns taken from the end of ``order``
+    # (the rest, pinned to their start values, are then the first ``order`` can give: the
+    # greedy choice on the dual matroid)
+    basis = _column_basis(J, order[::-1])
+    if len(basis) < len(rows):
+        raise ModelicaError("cannot find a consistent initial state (singular initial system)")
+    chosen = set(basis)
+    pins = [i for i in order if i not in chosen]
+    for i in basis:
+        if x_names[i] in fixed:
             log.warning("start value of %s is not used: the state is determined by constraints",
                         x_names[i])
-    if rank + len(pins) < nx:
-        raise ModelicaError("cannot find a consistent initial state (singular initial system)")
     S = ca.MX.sym("s", nx)
     start = ca.Function("start", [P], [semi_start], ["p"], ["s"])
-    residual = ca.vertcat(hard[rows] if rows else ca.MX(0, 1),
-                          X[pins] - S[pins] if pins else ca.MX(0, 1))
-    if not ca.depends_on(ca.jacobian(residual, X), X):
+    empty = ca.SX(0, 1) if sym is ca.SX.sym else ca.MX(0, 1)
+    residual = ca.vertcat(hard_s[rows] if rows else empty, Xs[pins] - Ss[pins] if pins else empty)
+    A_s = ca.jacobian(residual, Xs)
+    if not ca.depends_on(A_s, Xs):
         # linear: one exact solve, no Newton iteration
-        Ab = ca.Function("Ab", [X, U, P, T, S], [ca.jacobian(residual, X), residual])
+        Ab = ca.Function("Ab", [Xs, Us, Ps, Ts, Ss], [A_s, residual])
         A, b = Ab(ca.DM.zeros(nx), U, P, T, S)
         x0 = -ca.solve(A, b) if nx else ca.MX(0, 1)
         return start, ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
-    G = ca.Function("G", [X, ca.vertcat(U, P, T, S)], [residual])
+    R = ca.Function("R", [Xs, Us, Ps, Ts, Ss], [residual])
+    Q = ca.MX.sym("q", U.numel() + P.numel() + 1 + nx)
+    cut = np.cumsum([0, U.numel(), P.numel(), 1, nx]).tolist()
+    G = ca.Function("G", [X, Q], [R(X, *ca.vertsplit(Q, cut))])
     rf = ca.rootfinder("init_newton", "fast_newton", G, NEWTON_OPTS)
     x0 = rf(S, ca.vertcat(U, P, T, S))
     return start, ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
 
 
-def _start_of(s, dae: Dae):
-    for vec, start in ((dae.x, dae.x_start), (dae.z, dae.z_start)):
-        for i, v in enumerate(ca.vertsplit(vec)):
-            if ca.is_equal(v, s):
-                return start[i]
-    return ca.SX(0)
+def _starts_of(syms: ca.SX, dae: Dae) -> ca.SX:
+    """The start values of symbols of ``dae``'s x and z (0 for others: differentiated variables)."""
+    start = {}
+    for vec, values in ((dae.x, dae.x_start), (dae.z, dae.z_start)):
+        start.update(zip((v.element_hash() for v in ca.vertsplit(vec)), ca.vertsplit(values)))
+    return ca.vertcat(*[start.get(s.element_hash(), ca.SX(0)) for s in ca.vertsplit(syms)])
+
+
+def _column_basis(J: np.ndarray, order: list[int]) -> list[int]:
+    """Columns of J, tried in ``order``, each kept when it is independent of those kept before
+    (Gram-Schmidt, twice, against an orthonormal basis of the kept ones)."""
+    m = J.shape[0]
+    if m == 0:
+        return []
+    if m == J.shape[1]:        # as many independent equations as states: all are determined
+        return list(order)
+    tol = np.linalg.norm(J) * max(J.shape) * np.finfo(float).eps * 100
+    Q = np.zeros((m, m))
+    kept = []
+    for i in order:
+        v = J[:, i].astype(float)
+        q = Q[:, :len(kept)]
+        for _ in range(2):
+            v = v - q @ (q.T @ v)
+        n = np.linalg.norm(v)
+        if n > tol:
+            Q[:, len(kept)] = v / n
+            kept.append(i)
+            if len(kept) == m:
+                break
+    return kept
 
 
 def _independent_rows(J: np.ndarray) -> list[int]:
