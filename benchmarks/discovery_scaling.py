@@ -25,7 +25,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "examples" / "ladder"))
 from ladder import values, write_data, write_model  # noqa: E402  (made without mcl)
 
-CUBIC = 0.8       # the faulty resistor: i = v/R + 0.8 v^3
+def cubic(n: int) -> float:
+    """The faulty resistor's cubic coefficient, i = v/R + a v^3: the voltage across one section
+    falls as 1/n, so a grows as n^3 for the fault to matter as much at every size (a = 0.8 at 4)."""
+    return 0.8 * (n / 4) ** 3
 
 
 def cpu() -> float:
@@ -38,8 +41,8 @@ def run(n: int, msl: Path, work: Path) -> dict:
 
     fault = 2
     name = write_model(n, work / f"Ladder{n}.mo")
-    write_data(n, work / "train.csv", 1, cubic={fault: CUBIC})
-    write_data(n, work / "validate.csv", 2, cubic={fault: CUBIC})
+    write_data(n, work / "train.csv", 1, cubic={fault: cubic(n)})
+    write_data(n, work / "validate.csv", 2, cubic={fault: cubic(n)})
     (work / "run.yaml").write_text(f"model: {{sources: [Ladder{n}.mo], name: {name}, libraries: [{msl}]}}\n"
                                    "data: {train: train.csv, validate: validate.csv}\noutput: out\n")
     c0, t0 = cpu(), time.perf_counter()
@@ -53,7 +56,7 @@ def run(n: int, msl: Path, work: Path) -> dict:
     err = None
     if law.get("curve"):
         xs, fs = np.array(law["curve"]).T
-        truth = xs / R + CUBIC * xs**3
+        truth = xs / R + cubic(n) * xs**3
         err = float(np.max(np.abs(fs - truth)) / np.max(np.abs(truth)))
     return {"N": n, "components": report.get("components"), "cpu_seconds": cpu_s, "wall_seconds": seconds,
             "exit": code, "component": cause.get("component"), "right": cause.get("component") == f"R{fault}",

@@ -56,7 +56,7 @@ def _image(option: str, name, suffixes=IMAGE_SUFFIXES):
 
 
 def _libraries(args) -> list:
-    from .api import check_libraries
+    from .services import check_libraries
 
     try:
         return check_libraries(args.library)
@@ -65,21 +65,21 @@ def _libraries(args) -> list:
 
 
 def _model_from_args(args):
-    from .api import load_model
+    from .services import load_model
 
     if not args.sources and args.model:
-        from .api import compile_model
+        from .services import compile_model
 
         return compile_model([], args.model, args.compiler, libraries=args.library)
     if args.model:
-        from .api import compile_model
+        from .services import compile_model
 
         return compile_model(args.sources, args.model, args.compiler, libraries=args.library)
     return load_model(args.sources, args.model, args.compiler)
 
 
 def cmd_compile(args) -> int:
-    from .api import compile_model
+    from .services import compile_model
     from .outputs import check_output, record
 
     _libraries(args)
@@ -97,9 +97,9 @@ def cmd_compile(args) -> int:
         if fmu:
             from .compile.fmu.export import build_fmu
 
-            build_fmu(model, out, validate=not args.no_validate)
+            build_fmu(model, out, validate=not args.no_validate, libraries=args.library or ())
             record(out)
-            print(f"wrote {args.output} (FMI 2.0 Model Exchange{'' if args.no_validate else ', validated by FMPy'})")
+            print(f"wrote {args.output} (FMI 2.0 Model Exchange and Co-Simulation{'' if args.no_validate else ', validated by FMPy'})")
         else:
             model.save(out, force=args.force)
             print(f"wrote {args.output}/ (CasADi functions; run it with 'mcl simulate {args.output}')")
@@ -122,7 +122,7 @@ def cmd_compile(args) -> int:
 
 
 def cmd_simulate(args) -> int:
-    from .api import simulate
+    from .services import simulate
     from .data import read_csv, write_csv
     from .outputs import check_input, check_output, record
     from .simulation import SimulationOptions
@@ -181,13 +181,15 @@ def cmd_info(args) -> int:
 
 
 def cmd_graph(args) -> int:
-    from .graph import build_graph
     from .outputs import check_output, record
+    from .services import compile_model
 
     draw = None
     if args.draw:
         draw = check_output(_image("--draw", args.draw), args.force, inputs=args.sources, what="a drawing")
-    graph = build_graph(args.sources, args.model)
+    graph = compile_model(args.sources, args.model, libraries=args.library or ()).structure
+    if graph is None:
+        raise ConfigError(f"the compiler kept no component structure of {args.model}")
     print(graph.describe())
     if draw is not None:
         graph.draw(draw)
@@ -196,10 +198,22 @@ def cmd_graph(args) -> int:
     return 0
 
 
+def cmd_library_path(args) -> int:
+    from .compile.library import available, library_path, library_version
+    from .modelica import MCL_LIBRARY
+
+    if args.mcl:
+        print(MCL_LIBRARY.parent)
+        return 0
+    for name, path in available(library_path(args.library or ())).items():
+        print(f"{name} {library_version(path) or ''}".rstrip() + f": {path}")
+    return 0
+
+
 def cmd_pretrain(args) -> int:
     import json
 
-    from .api import registry
+    from .services import registry
     from .graph import build_graph
     from .outputs import check_output, new_directory
     from .pretrain import plot_feasibility, pretrain
@@ -416,12 +430,25 @@ def build_parser() -> argparse.ArgumentParser:
                  "The components of a model with their classes and connectors, the two-connector "
                  "candidates and the nets.", """
   mcl graph Lib.mo -m Lib.Plant
-  mcl graph Lib.mo -m Lib.Plant --draw plant.svg""")
-    p.add_argument("sources", nargs="+", help=".mo files or package directories")
+  mcl graph Lib.mo -m Lib.Plant --draw plant.svg
+  mcl graph -m Modelica.Electrical.Analog.Examples.ChuaCircuit   # a class on the library path""")
+    p.add_argument("sources", nargs="*", help=".mo files or package directories (none: a class on the library path)")
+    _library_option(p)
     p.add_argument("--model", "-m", required=True, help="class name, e.g. Pkg.Model")
     p.add_argument("--draw", metavar="FILE", help="draw the graph to a PNG, SVG or PDF file")
     _force_option(p, "a drawing")
     p.set_defaults(func=cmd_graph)
+
+    p = _command(sub, "library-path", "print where the MCL library is (for other tools' library path)",
+                 "The libraries mcl finds, in the order it searches them: --library, MODELICAPATH, then "
+                 "mcl's own MCL library, which exported libraries use. Add MCL's folder to OpenModelica's "
+                 "or Dymola's library path to load an exported library there.", """
+  mcl library-path
+  export MODELICAPATH="$(mcl library-path --mcl):$MODELICAPATH"
+""")
+    _library_option(p)
+    p.add_argument("--mcl", action="store_true", help="print only the folder holding the MCL library")
+    p.set_defaults(func=cmd_library_path)
 
     p = _command(sub, "pretrain", "pre-train the feasibility model of a template (Remark 3.1)",
                  "Sample a template's parameters in small configurations and train q(w) on which ones "

@@ -44,3 +44,11 @@ class ConfigError(MclError):
 class NotFittedError(MclError, AttributeError):
     """A result of an estimator (``law_``, ``cause_``, ...) read before ``fit``; also an
     AttributeError, so ``hasattr(d, "law_")`` is False before fit."""
+
+
+def did_you_mean(word, choices) -> str:
+    """`` (did you mean 'x'?)`` for the closest of ``choices`` to a misspelt ``word``, or ""."""
+    import difflib
+
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
+    return f" (did you mean '{close[0]}'?)" if close else ""

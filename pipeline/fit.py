@@ -347,7 +347,34 @@ SCIPY_OPTIMISERS = ("Nelder-Mead", "Powell", "COBYLA", "SLSQP", "BFGS", "CG", "L
 _GRADIENT_OPTIMISERS = {"SLSQP", "BFGS", "CG", "L-BFGS-B"}
 
 
-class Algorithm3:
+class Fitter:
+    """Base of the fitting algorithms: what they share is here, each writes :meth:`_minimise`.
+
+    :meth:`fit` counts the simulations and failures a fit spends (its budget is the algorithm's
+    own ``max_simulations``), times it and returns the :class:`FitResult`; :meth:`_start` finds
+    a feasible start near the given one (:func:`restore_feasibility`). Algorithms are chosen by
+    name (:data:`FITTERS`, ``fitting: {algorithm: ...}`` in a run file)."""
+
+    name = ""
+
+    def fit(self, problem: FitProblem, w0) -> FitResult:
+        t0 = time.perf_counter()
+        start = problem.recorder.simulations
+        w, cost, message, feasibility = self._minimise(problem, np.asarray(w0, dtype=float), start)
+        return FitResult(np.asarray(w, dtype=float), cost, problem.recorder.simulations - start,
+                         problem.recorder.failures_since(start), time.perf_counter() - t0, feasibility, message)
+
+    def _minimise(self, problem: FitProblem, w0: np.ndarray, start: int):
+        """(w, cost, message, feasibility model) of a fit from ``w0``; ``start`` is the number of
+        simulations the problem's recorder held before it."""
+        raise NotImplementedError
+
+    @staticmethod
+    def _start(problem: FitProblem, w0, q, on_failure=None, budget: int = 24, fixed=()):
+        return restore_feasibility(problem, w0, q, budget=budget, on_failure=on_failure, fixed=fixed)
+
+
+class Algorithm3(Fitter):
     """One-shot heuristic of sec. IV (Algorithm 3) with any scipy optimiser.
 
     ``gradient=True`` gives gradient-based optimisers the exact grad J' from sensitivities
@@ -378,14 +405,13 @@ class Algorithm3:
             self.best_cost_, self.w_best_ = ev.cost, np.asarray(w, dtype=float).copy()
         return jt + ft, (gjt + gft if gradient else None)
 
-    def fit(self, problem: FitProblem, w0) -> FitResult:
-        t0 = time.perf_counter()
-        w0 = np.asarray(w0, dtype=float)
+    name = "algorithm3"
+
+    def _minimise(self, problem: FitProblem, w0, start):
         self.feasibility_ = self.feasibility or LogisticFeasibility(symmetric_axis=self.symmetric_axis)
         self.p_tilde_ = PseudoFeasibility(self.sigma, self.mu)
         self.best_cost_, self.w_best_ = None, w0.copy()
-        start = problem.recorder.simulations
-        w0, ok = restore_feasibility(problem, w0, self.feasibility_, on_failure=self.p_tilde_.add)
+        w0, ok = self._start(problem, w0, self.feasibility_, on_failure=self.p_tilde_.add)
         if ok:
             self.best_cost_, self.w_best_ = problem.recorder.evaluations[-1].cost, w0.copy()
         use_grad = self.gradient and self.optimizer in _GRADIENT_OPTIMISERS
@@ -415,11 +441,8 @@ class Algorithm3:
             message = str(res.message)
         except _BudgetExhausted:
             message = f"simulation budget of {budget} reached"
-        w = self.w_best_
         cost = self.best_cost_ if self.best_cost_ is not None else float("nan")
-        return FitResult(w, cost, problem.recorder.simulations - start,
-                         problem.recorder.failures_since(start),
-                         time.perf_counter() - t0, self.feasibility_, message)
+        return self.w_best_, cost, message, self.feasibility_
 
 
 class _BudgetExhausted(Exception):
@@ -431,7 +454,7 @@ def delta_schedule(k: int, eps: float = 1e-7, lam: float = 0.8) -> tuple[float, 
     return eps + (1 - eps) * (lam + eps) ** k, 1 + eps - lam**k
 
 
-class Algorithm1:
+class Algorithm1(Fitter):
     """Iterative constrained optimisation with constraint discovery (Algorithm 1, eqs. 5-8).
 
     Outer step k solves min J~(w) subject to g_k1 = 1 - delta_k1 - q_k(w) <= 0 and
@@ -451,16 +474,16 @@ class Algorithm1:
         self.max_simulations, self.gradient = max_simulations, gradient
         self.fd_step, self.tol = fd_step, tol
 
-    def fit(self, problem: FitProblem, w0) -> FitResult:
-        t0 = time.perf_counter()
-        w = np.asarray(w0, dtype=float)
+    name = "algorithm1"
+
+    def _minimise(self, problem: FitProblem, w0, start):
+        w = w0
         q = self.feasibility or LogisticFeasibility(symmetric_axis=self.symmetric_axis)
         p_tilde = PseudoFeasibility(self.sigma, self.mu)
-        start = problem.recorder.simulations
         best = [None, w.copy()]
         budget = self.max_simulations or 10**9
-        w, ok = restore_feasibility(problem, w, LogisticFeasibility(symmetric_axis=self.symmetric_axis),
-                                    on_failure=p_tilde.add)
+        w, ok = self._start(problem, w, LogisticFeasibility(symmetric_axis=self.symmetric_axis),
+                            on_failure=p_tilde.add)
         if ok:
             best[:] = [problem.recorder.evaluations[-1].cost, w.copy()]
         use_grad = self.gradient and self.optimizer == "SLSQP"
@@ -502,12 +525,10 @@ class Algorithm1:
         except _BudgetExhausted:
             message = f"simulation budget of {budget} reached"
         cost = best[0] if best[0] is not None else float("nan")
-        return FitResult(best[1], cost, problem.recorder.simulations - start,
-                         problem.recorder.failures_since(start),
-                         time.perf_counter() - t0, q, message)
+        return best[1], cost, message, q
 
 
-class LevenbergMarquardt:
+class LevenbergMarquardt(Fitter):
     """Low-budget fit: damped Gauss-Newton on the output residuals with the exact Jacobian.
 
     One simulation (with sensitivities) per trial step. A failed simulation is a rejected step:
@@ -529,15 +550,14 @@ class LevenbergMarquardt:
         #: (discovery: another candidate is already better than this one can get)
         self.give_up = give_up
 
-    def fit(self, problem: FitProblem, w0) -> FitResult:
-        t0 = time.perf_counter()
-        start = problem.recorder.simulations
-        w = np.asarray(w0, dtype=float).copy()
+    name = "levenberg-marquardt"
+
+    def _minimise(self, problem: FitProblem, w0, start):
+        w = w0.copy()
         free = [k for k in range(len(w)) if k != self.axis]
         lam = self.damping
         q = self.feasibility or LogisticFeasibility(symmetric_axis=self.axis)
-        w, ok = restore_feasibility(problem, w, q, budget=self.restore,
-                                    fixed=[] if self.axis is None else [self.axis])
+        w, ok = self._start(problem, w, q, budget=self.restore, fixed=[] if self.axis is None else [self.axis])
         current = self._step_data(problem, w) if ok else None
         if current is None:
             raise ConfigError("no start point of the fit simulates (tried around the given one)")
@@ -583,9 +603,7 @@ class LevenbergMarquardt:
         W, y = problem.recorder.points()
         if 0 < y[start:].sum() < len(y[start:]):
             q.fit(W[start:], y[start:])
-        return FitResult(w, current[2], problem.recorder.simulations - start,
-                         problem.recorder.failures_since(start),
-                         time.perf_counter() - t0, q, message)
+        return w, current[2], message, q
 
     @staticmethod
     def _step_data(problem: FitProblem, w):
@@ -598,3 +616,22 @@ class LevenbergMarquardt:
             return None
         S = res.sensitivities[:, problem.idx, :]
         return r.ravel(), -S.reshape(-1, S.shape[2]), ev_cost
+
+
+#: the fitting algorithms by name (``fitting: {algorithm: ...}``)
+FITTERS = {c.name: c for c in (LevenbergMarquardt, Algorithm1, Algorithm3)}
+
+
+def fitter(name: str, budget: int, **lm) -> Fitter:
+    """The algorithm called ``name`` with a budget of ``budget`` simulations; ``lm`` are the
+    options only Levenberg-Marquardt takes (give_up, progress, restore, tol), which the paper's
+    algorithms do without."""
+    if name not in FITTERS:
+        from .errors import did_you_mean
+
+        raise ConfigError(f"fitting algorithm '{name}'{did_you_mean(name, FITTERS)}: choose {', '.join(FITTERS)}")
+    if name == "levenberg-marquardt":
+        return LevenbergMarquardt(max_simulations=budget, axis=None, **lm)
+    if name == "algorithm1":
+        return Algorithm1(max_simulations=budget, symmetric_axis=None, optimizer="SLSQP", gradient=True)
+    return Algorithm3(optimizer="L-BFGS-B", gradient=True, maxfev=budget, symmetric_axis=None)

@@ -67,6 +67,13 @@ def mcl_fitters() -> list[type]:
 
 
 @hookspec
+def mcl_criteria() -> list[type]:
+    """Register information criteria (subclasses of :class:`mcl.stats.Criterion` with a
+    ``name``), chosen by ``refinement: {criterion: name}`` and resolved once into the object that
+    ranks candidates and prunes terms. All results are collected (bic, aic and aicc built in)."""
+
+
+@hookspec
 def mcl_prioritisers() -> list[type]:
     """Register prioritiser classes for backward elimination (subclasses of
     :class:`mcl.sparsify.Prioritiser`): which parameters may be removed next, in stages.

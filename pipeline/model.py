@@ -46,6 +46,25 @@ class CompiledModel:
     def parameters(self) -> dict[str, float]:
         return dict(zip(self.ode.p_names, map(float, self.ode.p_values)))
 
+    def __repr__(self) -> str:
+        o = self.ode
+        return (f"CompiledModel({self.name!r}: {len(o.x_names)} states, {len(o.u_names)} inputs, "
+                f"{len(o.y_names)} outputs, {len(o.p_names)} free parameters)")
+
+    def _repr_html_(self) -> str:
+        """A table in notebooks: the model's inputs, outputs, states and parameters with units."""
+        import html
+
+        o, units = self.ode, self.info.get("units", {})
+        rows = [("input", n, "") for n in o.u_names] + [("output", n, "") for n in o.y_names]
+        rows += [("state", n, "") for n in o.x_names]
+        rows += [("parameter", n, f"{v:g}") for n, v in zip(o.p_names, o.p_values)]
+        body = "".join(f"<tr><td>{k}</td><td>{html.escape(n)}</td><td>{html.escape(units.get(n, ''))}</td>"
+                       f"<td>{v}</td></tr>" for k, n, v in rows[:200])
+        more = f"<p>... and {len(rows) - 200} more</p>" if len(rows) > 200 else ""
+        return (f"<div><b>{html.escape(self.name)}</b> (index {o.index}, {o.nonlinear_blocks} algebraic loop(s))"
+                f"<table><tr><th>kind</th><th>name</th><th>unit</th><th>value</th></tr>{body}</table>{more}</div>")
+
     def parameter_vector(self, overrides: dict | None = None) -> np.ndarray:
         """Nominal parameter values with ``overrides`` (by name) applied."""
         p = self.ode.p_values.astype(float).copy()
@@ -111,7 +130,8 @@ class CompiledModel:
     def load(cls, directory) -> "CompiledModel":
         d = Path(directory)
         meta = json.loads((d / "model.json").read_text())
-        funcs = {f: ca.Function.load(str(d / f"{f}.casadi")) for f in _FUNCTIONS if (d / f"{f}.casadi").is_file()}
+        funcs = {f: _fresh(ca.Function.load(str(d / f"{f}.casadi"))) for f in _FUNCTIONS
+                 if (d / f"{f}.casadi").is_file()}
         if "checks" not in funcs:      # saved by mcl 0.1: compose it
             from .compile.structure import composed_checks
 
@@ -128,6 +148,15 @@ class CompiledModel:
         structure = (Structure.from_dict(json.loads((d / "structure.json").read_text()))
                      if (d / "structure.json").is_file() else None)
         return cls(meta["name"], ode, meta.get("info", {}), load_dae(d), structure)
+
+
+def _fresh(f: ca.Function) -> ca.Function:
+    """A loaded SX function rebuilt on new symbols: CasADi 3.8 cannot differentiate the one it
+    deserialises ("the input expressions are not independent"), which the integrator must."""
+    if not f.is_a("SXFunction"):
+        return f
+    args = f.sx_in()
+    return ca.Function(f.name(), args, f.call(args), f.name_in(), f.name_out())
 
 
 @dataclass

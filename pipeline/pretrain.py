@@ -94,7 +94,7 @@ class Configuration:
 def build_configurations(template: Template, connector: Connector, sources, registry,
                          directory=None, amplitude: float = 1.0) -> list[Configuration]:
     """Write, compile and check every configuration; the ones failing at the start are dropped."""
-    from .api import compile_model, simulate
+    from .services import compile_model, simulate
 
     directory = Path(directory or tempfile.mkdtemp(prefix="mcl-config-"))
     cls = "Template"

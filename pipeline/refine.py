@@ -29,7 +29,7 @@ def refine(model, data: TimeSeries, names: list[str], w0, criterion: str, terms=
     w0[0]); ``terms`` (the template's monomials, one per name) order the pruning by degree.
     Returns (w, active, path): the full parameter vector, which terms survive and the pruning
     path as dicts (removed, estimate, cost, score, accepted)."""
-    from .api import simulate
+    from .services import simulate
     from .stats import noise_estimate
     from .lm import CompiledRhs, IdentificationProblem, Measurements
     from .sparsify import BackwardElimination

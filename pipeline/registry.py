@@ -16,7 +16,7 @@ from importlib import metadata
 import pluggy
 
 from . import hookspecs
-from .errors import ConfigError, PluginError
+from .errors import ConfigError, PluginError, did_you_mean  # noqa: F401  (re-exported)
 
 ENTRY_POINT_GROUP = "mcl"
 DEFAULT_PLUGINS = (
@@ -29,6 +29,7 @@ DEFAULT_PLUGINS = (
     "mcl.plugins.executors",
     "mcl.plugins.prioritisers",
     "mcl.plugins.fitters",
+    "mcl.plugins.criteria",
 )
 ENV_DISABLE = "MCL_DISABLE_EXTERNAL_PLUGINS"
 ENV_ALLOW = "MCL_PLUGINS"
@@ -82,12 +83,6 @@ def plugin_manager(external: bool = True, extra=()) -> tuple[pluggy.PluginManage
     return pm, infos
 
 
-def did_you_mean(word, choices) -> str:
-    import difflib
-
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1, cutoff=0.6)
-    return f" (did you mean '{close[0]}'?)" if close else ""
-
 
 def _named(results, kind: str) -> dict[str, type]:
     out: dict[str, type] = {}
@@ -114,6 +109,7 @@ class Registry:
         self.executors = _named(self.pm.hook.mcl_executors(), "executor")
         self.prioritisers = _named(self.pm.hook.mcl_prioritisers(), "prioritiser")
         self.fitters = _named(self.pm.hook.mcl_fitters(), "fitter")
+        self.criteria = _named(self.pm.hook.mcl_criteria(), "criterion")
         self.option_schemas: dict[str, dict[str, dict]] = {}
         for contribution in reversed(self.pm.hook.mcl_option_schemas()):  # later plugins win
             for section, kinds in (contribution or {}).items():
@@ -154,6 +150,18 @@ class Registry:
             raise ConfigError(f"no candidate fitter named '{name}'{did_you_mean(name, self.fitters)} "
                               f"(installed: {', '.join(self.fitters)})")
         return self.fitters[name]()
+
+    def criterion(self, which):
+        """An information criterion by name (``refinement: {criterion: name}``), resolved once:
+        what comes back is the object every stage scores with (a Criterion passes through)."""
+        from .stats import Criterion
+
+        if isinstance(which, Criterion):
+            return which
+        if which not in self.criteria:
+            raise ConfigError(f"no criterion named '{which}'{did_you_mean(which, self.criteria)} "
+                              f"(installed: {', '.join(self.criteria)})")
+        return self.criteria[which]()
 
     def feasibility_model(self, spec="logistic"):
         spec = {"name": spec} if isinstance(spec, str) else dict(spec)

@@ -12,8 +12,9 @@
 
 Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations`` per
 fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully;
-``early_stop: false`` fits them all even where screening or a fit shows they cannot win),
-``refinement`` (``criterion``: bic or aic; ``method``: simulation, the default, or
+``early_stop: false`` fits them all even where screening or a fit shows they cannot win;
+``algorithm``: levenberg-marquardt, the default, or paper 000's algorithm1 or algorithm3),
+``refinement`` (``criterion``: bic, aic, aicc or a plugin's; ``method``: simulation, the default, or
 full-discretisation for paper 004's states-and-parameters least squares), ``executor``
 (``kind`` and that kind's options), ``second`` (``model``/``data`` of another configuration where
 the learned component is placed), ``report`` (``title`` of report.html, ``plots: false``).
@@ -32,16 +33,20 @@ from pathlib import Path
 import yaml
 
 from .errors import ConfigError, MclError
-from .registry import did_you_mean
+from .errors import did_you_mean
 
 #: no ``templates`` in a run file: discovery picks law families by each component's role
 DEFAULT_TEMPLATES = None
-CRITERIA = ("bic", "aic")
+CRITERIA = ("bic", "aic", "aicc")   # the built-in criteria (plugins may add more)
+FITTING_ALGORITHMS = ("levenberg-marquardt", "algorithm1", "algorithm3")   # mcl.fit.FITTERS
 METHODS = ("simulation", "full-discretisation")   # the built-in fitters (plugins may add more)
 
 _PATH = {"type": "string", "minLength": 1}
 _PATHS = {"anyOf": [_PATH, {"type": "array", "items": _PATH}]}
 _NAME = {"type": "string", "pattern": r"^[A-Za-z_][\w]*(\.[A-Za-z_][\w]*)*$"}
+#: the measurement noise, when known: one level for every output or a level per output
+_NOISE = {"anyOf": [{"type": "number", "exclusiveMinimum": 0},
+                    {"type": "object", "minProperties": 1, "additionalProperties": {"type": "number", "exclusiveMinimum": 0}}]}
 _MODEL = {"type": "object", "additionalProperties": False, "required": ["name"],
           "properties": {"name": _NAME, "sources": _PATHS, "libraries": _PATHS, "fmu": _PATH}}
 
@@ -53,17 +58,19 @@ def schema(option_schemas: dict, kinds: dict) -> dict:
         "properties": {
             "model": _MODEL,
             "data": {"type": "object", "additionalProperties": False, "required": ["train"],
-                     "properties": {"train": _PATH, "validate": _PATH}},
+                     "properties": {"train": _PATH, "validate": _PATH, "noise": _NOISE}},
             "unknown": _NAME,
+            "free": {"anyOf": [{"const": "auto"}, {"type": "array", "items": _NAME, "minItems": 1}]},
             "output": _PATH,
             "templates": {"type": "array", "minItems": 1, "items": _kind_schema(
                 "name", kinds["template"], option_schemas.get("template", {}), allow_string=True)},
             "fitting": {"type": "object", "additionalProperties": False, "properties": {
                 "max_simulations": {"type": "integer", "minimum": 5},
+                "algorithm": {"enum": list(FITTING_ALGORITHMS)},
                 "screen": {"type": "integer", "minimum": 1},
                 "early_stop": {"type": "boolean"}}},
             "refinement": {"type": "object", "additionalProperties": False, "properties": {
-                "criterion": {"enum": list(CRITERIA)}, "method": {"enum": kinds.get("fitter", list(METHODS))}}},
+                "criterion": {"enum": kinds.get("criterion", list(CRITERIA))}, "method": {"enum": kinds.get("fitter", list(METHODS))}}},
             "executor": _kind_schema("kind", kinds["executor"], option_schemas.get("executor", {})),
             "second": {"type": "object", "additionalProperties": False, "required": ["model", "data"],
                        "properties": {"model": _MODEL, "data": _PATH, "component": _NAME}},
@@ -100,6 +107,9 @@ class RunSpec:
     max_simulations: int = 60
     screen: int = 3
     early_stop: bool = True     # drop candidates screening says cannot compete; stop hopeless fits
+    algorithm: str = "levenberg-marquardt"   # the optimiser of every fit (mcl.fit.FITTERS)
+    noise: object = None        # the user's noise level(s): a number or {output: level}; None: estimated
+    free: object = None         # nominal parameters refitted with the learned laws: names, "auto" or None
     criterion: str = "bic"
     refinement_method: str = "simulation"
     executor: dict = field(default_factory=lambda: {"kind": "local"})
@@ -292,13 +302,14 @@ def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
     """The run file checked without touching the model or the data (no compile)."""
     import jsonschema
 
-    from .api import registry as default_registry
+    from .services import registry as default_registry
 
     path = Path(path)
     raw, lines = _read_yaml(path)
     reg = registry or default_registry()
     problems = _Problems(path, lines)
-    kinds = {"template": list(reg.templates), "executor": list(reg.executors), "fitter": list(reg.fitters)}
+    kinds = {"template": list(reg.templates), "executor": list(reg.executors), "fitter": list(reg.fitters),
+             "criterion": list(reg.criteria)}
     validator = jsonschema.Draft202012Validator(schema(reg.option_schemas, kinds))
     for error in sorted(validator.iter_errors(raw), key=lambda e: list(map(str, e.absolute_path))):
         _describe(error, problems)
@@ -312,10 +323,12 @@ def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
                    output=output, templates=raw.get("templates", DEFAULT_TEMPLATES),
                    max_simulations=fitting.get("max_simulations", 60), screen=fitting.get("screen", 3),
                    early_stop=fitting.get("early_stop", True),
+                   algorithm=fitting.get("algorithm", "levenberg-marquardt"),
                    criterion=refinement.get("criterion", "bic"),
                    refinement_method=refinement.get("method", "simulation"),
                    executor=dict(raw.get("executor") or {"kind": "local"}), second=raw.get("second"),
-                   report=dict(raw.get("report") or {}), libraries=libraries)
+                   report=dict(raw.get("report") or {}), libraries=libraries,
+                   noise=(raw.get("data") or {}).get("noise"), free=raw.get("free"))
     return spec, lines
 
 
@@ -418,35 +431,53 @@ def _check_against_model(spec: RunSpec, series: dict, problems: _Problems) -> No
     """Each series (key -> (TimeSeries, label)) against the compiled model; the unknown
     component and the second configuration against the component graphs. A model that does not
     compile raises its own error."""
-    from .api import compile_model
-    from .graph import build_graph
+    from .services import compile_model
 
     model = compile_model(spec.sources, spec.model_name, libraries=spec.libraries)
     for key, (ts, label) in series.items():
         for why in model_column_problems(model, ts, spec.model_name, label):
             problems.add(f"data.{key}", why)
+    if isinstance(spec.noise, dict) and series:
+        measured = [c for c in next(iter(series.values()))[0].names if c not in model.input_names]
+        for name in spec.noise:
+            if name not in measured:
+                problems.add(f"data.noise.{name}", f"not a measured output{did_you_mean(name, measured)} "
+                                                   f"(measured: {', '.join(measured)})")
     if spec.unknown != "auto":
-        comps = build_graph(spec.sources, spec.model_name, libraries=spec.libraries).components
-        if spec.unknown not in comps:
-            problems.add("unknown", f"no component '{spec.unknown}' in {spec.model_name}"
-                                    f"{did_you_mean(spec.unknown, comps)}")
+        _check_component(problems, "unknown", model, spec.unknown, spec.model_name)
     if spec.second:
         sec, base = spec.second, spec.path.parent if spec.path else Path(".")
         try:
-            graph = build_graph([_at(base, s) for s in _strings(sec["model"].get("sources"))],
-                                sec["model"]["name"], libraries=spec.libraries)
+            second = compile_model([_at(base, s) for s in _strings(sec["model"].get("sources"))],
+                                   sec["model"]["name"], libraries=spec.libraries)
             target = sec.get("component", spec.unknown)
-            if target != "auto" and target not in graph.components:
-                problems.add("second.component", f"no component '{target}' in {sec['model']['name']}")
+            if target != "auto":
+                _check_component(problems, "second.component", second, target, sec["model"]["name"])
         except MclError as exc:
             problems.add("second.model.name", str(exc))
+
+
+def _check_component(problems, key: str, model, name: str, model_name: str) -> None:
+    """``name`` is a component of the compiled ``model`` whose law discovery can question."""
+    structure = getattr(model, "structure", None)
+    if structure is None:
+        return
+    comps = structure.components
+    if name not in comps:
+        problems.add(key, f"no component '{name}' in {model_name}{did_you_mean(name, comps)}")
+    elif name not in {c.name for c in structure.candidates()}:
+        c = comps[name]
+        why = ("it has signal inputs or outputs (a source or a sensor)" if c.inputs else
+               f"it has {len(c.connectors)} connector(s), not two of one kind with one potential and one flow each")
+        problems.add(key, f"'{name}' ({c.cls or 'its class'}) cannot take a learned law: {why}")
 
 
 #: run-file keys as the arguments of :class:`mcl.Discovery` name them
 ARGUMENTS = {"model.name": "model", "model.sources": "sources", "model.libraries": "libraries",
              "fitting.max_simulations": "max_simulations", "fitting.screen": "screen",
-             "fitting.early_stop": "early_stop", "refinement.criterion": "criterion",
-             "refinement.method": "refinement", "data.train": "train", "data.validate": "validate"}
+             "fitting.early_stop": "early_stop", "fitting.algorithm": "algorithm", "refinement.criterion": "criterion",
+             "refinement.method": "refinement", "data.train": "train", "data.validate": "validate",
+             "data.noise": "noise"}
 
 
 def check_arguments(args: dict, registry=None) -> None:
@@ -454,7 +485,7 @@ def check_arguments(args: dict, registry=None) -> None:
     schema, the same messages, named by argument); a ConfigError with every problem."""
     import jsonschema
 
-    from .api import registry as default_registry
+    from .services import registry as default_registry
 
     reg = registry or default_registry()
     plain = lambda x: str(x) if isinstance(x, os.PathLike) else x
@@ -465,7 +496,8 @@ def check_arguments(args: dict, registry=None) -> None:
            "unknown": args.get("unknown", "auto"),
            "output": str(args["output"]) if args.get("output") is not None else "<temporary>",
            "fitting": {"max_simulations": args.get("max_simulations", 60), "screen": args.get("screen", 3),
-                       "early_stop": args.get("early_stop", True)},
+                       "early_stop": args.get("early_stop", True),
+                       "algorithm": args.get("algorithm", "levenberg-marquardt")},
            "refinement": {"criterion": args.get("criterion", "bic"), "method": args.get("refinement", "simulation")},
            "executor": {"kind": executor} if isinstance(executor, str) else executor}
     for key in ("sources", "libraries"):
@@ -474,11 +506,14 @@ def check_arguments(args: dict, registry=None) -> None:
     if templates is not None:
         raw["templates"] = [templates] if isinstance(templates, (str, dict)) else \
             list(templates) if isinstance(templates, (list, tuple)) else templates
-    for key in ("second", "report"):
+    for key in ("second", "report", "free"):
         if args.get(key) is not None:
             raw[key] = args[key]
+    if args.get("noise") is not None:
+        raw["data"]["noise"] = args["noise"]
     problems = _Problems(None, {}, ARGUMENTS)
-    kinds = {"template": list(reg.templates), "executor": list(reg.executors), "fitter": list(reg.fitters)}
+    kinds = {"template": list(reg.templates), "executor": list(reg.executors), "fitter": list(reg.fitters),
+             "criterion": list(reg.criteria)}
     validator = jsonschema.Draft202012Validator(schema(reg.option_schemas, kinds))
     for error in sorted(validator.iter_errors(raw), key=lambda e: list(map(str, e.absolute_path))):
         _describe(error, problems)

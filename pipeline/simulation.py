@@ -97,6 +97,22 @@ class SimulationResult:
         """The outputs as a pandas DataFrame indexed by ``time``."""
         return self.as_series().to_frame()
 
+    def __repr__(self) -> str:
+        state = "ok" if self.ok else f"failed: {self.reason}"
+        return (f"SimulationResult({len(self.time)} points, t = {self.time[0]:g}..{self.time[-1]:g}, "
+                f"outputs {', '.join(self.output_names)}; {state})") if len(self.time) else "SimulationResult(empty)"
+
+    def _repr_html_(self) -> str:
+        """A table in notebooks: each output's range and last value, and whether the run succeeded."""
+        import html
+
+        head = (f"<b>{'simulation' if self.ok else 'failed simulation: ' + html.escape(str(self.reason))}</b> "
+                f"({self.engine}, {len(self.time)} points, {self.seconds:.3g} s)")
+        rows = "".join(f"<tr><td>{html.escape(n)}</td><td>{np.nanmin(self.outputs[:, k]):.4g}</td>"
+                       f"<td>{np.nanmax(self.outputs[:, k]):.4g}</td><td>{self.outputs[-1, k]:.4g}</td></tr>"
+                       for k, n in enumerate(self.output_names)) if self.ok and len(self.time) else ""
+        return (f"<div>{head}<table><tr><th>output</th><th>min</th><th>max</th><th>last</th></tr>{rows}</table></div>")
+
     @classmethod
     def failed(cls, reason, time, output_names, engine, seconds=0.0):
         t = np.asarray(time, dtype=float)

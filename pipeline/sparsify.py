@@ -136,8 +136,14 @@ class BackwardElimination:
     def __init__(self, criterion: str = "bic", threshold: float = 0.1, prioritiser=None,
                  segments: int = 1, lm_options: dict | None = None, validation: IdentificationProblem | None = None,
                  batch: int = 1, variance: str = "known", exchange: bool = False, on_step=None):
-        if criterion not in ("threshold", "aic", "bic", "cv"):
-            raise ConfigError(f"criterion '{criterion}': choose threshold, aic, bic or cv")
+        from .stats import Criterion, criterion as information_criterion
+
+        # an information criterion (an object, or a built-in's name) scores by its complexity;
+        # threshold and cv are the paper's own acceptance rules
+        self.information = criterion if isinstance(criterion, Criterion) else (
+            information_criterion(criterion) if criterion not in ("threshold", "cv") else None)
+        if self.information is not None:
+            criterion = "ic"
         if criterion == "cv" and validation is None:
             raise ConfigError("criterion 'cv' needs a validation problem (held-out measurements)")
         self.criterion, self.threshold = criterion, threshold
@@ -154,9 +160,9 @@ class BackwardElimination:
     def _score(self, problem, X, a, active, cost, dense_cost) -> float:
         n = max(int(problem.M.sum()), 1)
         k = int(active.sum())
-        if self.criterion in ("aic", "bic"):
+        if self.information is not None:
             fit = cost if self.variance == "known" else n * np.log(cost / n)
-            return fit + k * self._penalty(problem)
+            return fit + self.information.complexity(n, k)
         if self.criterion == "threshold":
             return cost / dense_cost
         Xv = self.validation.initial_states()
@@ -164,11 +170,7 @@ class BackwardElimination:
                                    **self.lm_options).cost
 
     def _penalty(self, problem) -> float:
-        if self.criterion not in ("aic", "bic"):
-            return 0.0
-        from .stats import criterion
-
-        return criterion(self.criterion).penalty(int(problem.M.sum()))
+        return 0.0 if self.information is None else self.information.penalty(int(problem.M.sum()))
 
     def _accept(self, new: float, old: float) -> bool:
         if self.criterion == "threshold":

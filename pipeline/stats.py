@@ -339,53 +339,102 @@ def rss(a) -> float:
     return float(np.sum(np.square(a[np.isfinite(a)])))
 
 
-@dataclass(frozen=True)
 class Criterion:
-    """An information criterion n log(RSS/n) + k * penalty(n), for Gaussian errors of unknown
-    variance: BIC (penalty log n; Schwarz) or AIC (penalty 2; Akaike). One object serves
-    discovery's ranking and sparse refinement's pruning, so both read a difference the same way."""
+    """An information criterion n log(RSS/n) + complexity(n, k), for Gaussian errors of unknown
+    variance. One object serves discovery's ranking and sparse refinement's pruning, so both read
+    a difference the same way. Subclasses give ``name``, the per-parameter :meth:`penalty` (and
+    :meth:`complexity` when it is not k times that) and how a lead reads (:meth:`strength`);
+    third parties add theirs through the hook ``mcl_criteria``."""
 
-    name: str
+    name = ""
 
     def penalty(self, n: int) -> float:
-        return float(np.log(max(n, 1))) if self.name == "bic" else 2.0
+        """What one more parameter costs with ``n`` observations."""
+        raise NotImplementedError
+
+    def complexity(self, n: int, k: int, dictionary: int | None = None) -> float:
+        return k * self.penalty(n)
 
     def score(self, rss: float, n: int, k: int, dictionary: int | None = None) -> float:
-        """The criterion of a fit with ``k`` parameters; with ``dictionary`` (the k were chosen
-        among that many terms) BIC adds the extended-BIC term 2 log C(dictionary, k) of Chen and
-        Chen (2008): choosing among more terms must explain more, so of two laws that fit alike
-        the one from the smaller family wins."""
-        from math import comb, log
-
+        """The criterion of a fit with ``k`` parameters (chosen among ``dictionary`` terms)."""
         n = max(int(n), 1)
-        extra = 2.0 * log(comb(dictionary, k)) if dictionary and self.name == "bic" and 0 <= k <= dictionary else 0.0
-        return float(n * np.log(max(rss, 1e-300) / n) + k * self.penalty(n) + extra)
+        return float(n * np.log(max(rss, 1e-300) / n) + self.complexity(n, k, dictionary))
 
     @property
     def label(self) -> str:
         return "Δ" + self.name.upper()
 
     def strength(self, delta: float) -> str:
-        """How strongly a lead of ``delta`` over the runner-up speaks for the winner: Kass and
-        Raftery's scale for BIC, Burnham and Anderson's for AIC."""
-        if self.name == "bic":
-            return ("decisive" if delta > 10 else "strong" if delta > 6 else
-                    "positive" if delta > 2 else "weak")
+        """How strongly a lead of ``delta`` over the runner-up speaks for the winner (Burnham and
+        Anderson's scale for criteria of Akaike's kind)."""
         return ("the others have essentially no support" if delta > 10 else
                 "the others have considerably less support" if delta > 4 else
                 "the others have some support" if delta > 2 else "the others have substantial support")
 
+    def __eq__(self, other) -> bool:
+        return isinstance(other, Criterion) and other.name == self.name
 
-CRITERIA = {"bic": Criterion("bic"), "aic": Criterion("aic")}
+    def __hash__(self) -> int:
+        return hash(self.name)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
 
 
-def criterion(name: str) -> Criterion:
-    """The :class:`Criterion` called ``name`` (bic or aic)."""
-    if name not in CRITERIA:
-        from .errors import ConfigError
+class BIC(Criterion):
+    """Schwarz's criterion, penalty log n per parameter; with ``dictionary`` (the k were chosen
+    among that many terms) the extended-BIC term 2 log C(dictionary, k) of Chen and Chen (2008):
+    choosing among more terms must explain more, so of two laws that fit alike the one from the
+    smaller family wins. Leads read on Kass and Raftery's scale."""
 
-        raise ConfigError(f"criterion '{name}': choose {' or '.join(CRITERIA)}")
-    return CRITERIA[name]
+    name = "bic"
+
+    def penalty(self, n: int) -> float:
+        return float(np.log(max(n, 1)))
+
+    def complexity(self, n: int, k: int, dictionary: int | None = None) -> float:
+        from math import comb, log
+
+        extra = 2.0 * log(comb(dictionary, k)) if dictionary and 0 <= k <= dictionary else 0.0
+        return k * self.penalty(n) + extra
+
+    def strength(self, delta: float) -> str:
+        return "decisive" if delta > 10 else "strong" if delta > 6 else "positive" if delta > 2 else "weak"
+
+
+class AIC(Criterion):
+    """Akaike's criterion, penalty 2 per parameter."""
+
+    name = "aic"
+
+    def penalty(self, n: int) -> float:
+        return 2.0
+
+
+class AICc(AIC):
+    """Akaike's criterion corrected for small samples (Hurvich and Tsai): 2k + 2k(k+1)/(n-k-1)."""
+
+    name = "aicc"
+
+    def complexity(self, n: int, k: int, dictionary: int | None = None) -> float:
+        return 2.0 * k + 2.0 * k * (k + 1) / max(n - k - 1, 1)
+
+
+#: the built-in criteria (registered through the hook ``mcl_criteria`` like any plugin's)
+BUILTIN_CRITERIA = (BIC, AIC, AICc)
+CRITERIA = {c.name: c() for c in BUILTIN_CRITERIA}
+
+
+def criterion(which) -> Criterion:
+    """``which`` when it is a :class:`Criterion` already, else the built-in one called so (a
+    plugin's criteria are resolved by name through :meth:`mcl.registry.Registry.criterion`)."""
+    if isinstance(which, Criterion):
+        return which
+    if which not in CRITERIA:
+        from .errors import ConfigError, did_you_mean
+
+        raise ConfigError(f"criterion '{which}'{did_you_mean(which, CRITERIA)}: choose {', '.join(CRITERIA)}")
+    return CRITERIA[which]
 
 
 def bic(rss: float, n: int, k: int) -> float:

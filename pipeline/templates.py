@@ -76,7 +76,7 @@ class Monomial:
         return sum(p for _, p in self.powers)
 
 
-_FUNCTIONS = {"tanh": np.tanh, "sinh": np.sinh, "cosh": np.cosh, "exp": np.exp, "abs": np.abs,
+_FUNCTIONS = {"tanh": np.tanh, "sinh": np.sinh, "cosh": np.cosh, "exp": np.exp, "abs": np.abs, "sign": np.sign,
               "sqrt": np.sqrt, "atan": np.arctan, "log": np.log}
 _BINOPS = {ast.Add: np.add, ast.Sub: np.subtract, ast.Mult: np.multiply, ast.Div: np.divide, ast.Pow: np.power}
 
@@ -153,7 +153,7 @@ class Expression:
         """The term as a CasADi expression of ``env``'s symbols (variables and scale names)."""
         import casadi as ca
 
-        funcs = {"tanh": ca.tanh, "sinh": ca.sinh, "cosh": ca.cosh, "exp": ca.exp, "abs": ca.fabs,
+        funcs = {"tanh": ca.tanh, "sinh": ca.sinh, "cosh": ca.cosh, "exp": ca.exp, "abs": ca.fabs, "sign": ca.sign,
                  "sqrt": ca.sqrt, "atan": ca.atan, "log": ca.log}
         ops = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
                ast.Div: lambda a, b: a / b, ast.Pow: lambda a, b: a ** b}
@@ -247,6 +247,11 @@ class Template:
     def uses(self) -> set[str]:
         """Which of v, i, dv, di the law uses."""
         return {"v", "i"}
+
+    def uses_where(self, active) -> set[str]:
+        """Which of v, i, dv, di the law uses with only the ``active`` parameters (a pruned law:
+        a term pruned away needs no rate)."""
+        return self.uses
 
     def parameter_descriptions(self) -> list[str]:
         """What each parameter is, for the Modelica class (one per parameter name)."""
@@ -389,6 +394,10 @@ class PolynomialTemplate(Template):
     @property
     def uses(self) -> set[str]:
         return set().union(*(m.variables for m in self.terms)) | {"v", "i"}
+
+    def uses_where(self, active) -> set[str]:
+        kept = [m for m, a in zip(self.terms, active) if a]
+        return set().union(*(m.variables for m in kept)) | {"v", "i"}
 
     def parameter_names(self) -> list[str]:
         return [f"{self.prefix}{k + 1}" for k in range(len(self.terms))] + list(self.scales)
@@ -639,7 +648,7 @@ def make_template(registry_templates: dict[str, type], spec) -> Template:
     spec = {"name": spec} if isinstance(spec, str) else dict(spec)
     name = spec.pop("name", "polynomial")
     if name not in registry_templates:
-        from .registry import did_you_mean
+        from .errors import did_you_mean
 
         raise ConfigError(f"unknown template '{name}'{did_you_mean(name, registry_templates)} "
                           f"(installed: {', '.join(registry_templates)})")

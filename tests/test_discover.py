@@ -154,7 +154,9 @@ def test_second_configuration_resume_and_export(tmp_path, capsys):
     assert main(["export", str(out), "-o", str(tmp_path / "lib"), "--name", "MyParts"]) == 0
     lib = tmp_path / "lib" / "MyParts"
     text = (lib / "package.mo").read_text()
-    assert "learned for v in [" in text and '"coefficient of v^3 (right-hand side)"' in text
+    # a native class: the nominal interface, coefficients with units, the law and its range
+    assert "extends MCL.Interfaces.TwoPin;" in text and "learned for v in [" in text
+    assert 'parameter Real c2(unit="A/V3")' in text and '"coefficient of v^3"' in text
     (tmp_path / "Use.mo").write_text(
         "model Use\n  output Real y;\n  MCL.Electrical.Ground G;\n  MCL.Electrical.VoltageSource V;\n"
         f"  MyParts.{report['cause']['learned_class']} R;\nequation\n  V.u = 1;\n"

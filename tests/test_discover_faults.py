@@ -178,10 +178,10 @@ class KeepAllTerms:
 
 
 def test_a_third_party_fitter_is_chosen_by_the_run_file(tmp_path, monkeypatch):
-    import mcl.api
+    import mcl.services
     from mcl.registry import Registry
 
-    monkeypatch.setattr(mcl.api, "_registry", Registry(extra=[KeepAllTerms()]))
+    monkeypatch.setattr(mcl.services, "_registry", Registry(extra=[KeepAllTerms()]))
     f = lambda v: 0.5 * v + 0.6 * v**3
     slider(tmp_path / "train.csv", 19, f)
     slider(tmp_path / "validate.csv", 20, f)

@@ -11,6 +11,7 @@ import zipfile
 import pytest
 
 import mcl.api
+import mcl.services
 from helpers import LIB
 from mcl import hookimpl
 from mcl.cli import main
@@ -188,7 +189,7 @@ class KillPlugin:
 
 @pytest.mark.slow
 def test_a_killed_candidate_is_failed_shown_and_retried(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(mcl.api, "_registry", Registry(extra=[KillPlugin()]))
+    monkeypatch.setattr(mcl.services, "_registry", Registry(extra=[KillPlugin()]))
     run = setup_run(tmp_path, cubic=0.3)
     run.write_text(run.read_text() + "executor: {kind: kill-one}\n")
     assert main(["run", str(run)]) == 0

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,40 @@ class Structure:
             comps[n] = Component(c["name"], c["cls"], conns, list(c["parameters"]), list(c["inputs"]),
                                  c.get("declaration", ""))
         return cls(d["model"], comps, [list(n) for n in d["nets"]])
+
+    def draw(self, path) -> Path:
+        """Draw the components and their nets (PNG, SVG or PDF by extension): candidates orange."""
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        import networkx as nx
+
+        g = nx.Graph()
+        for c in self.components.values():
+            g.add_node(c.name, kind="candidate" if c.two_connector and not c.inputs else "component")
+        for k, net in enumerate(self.nets):
+            owners = sorted({".".join(split_name(conn)[:-1]) for conn in net} & set(self.components))
+            if len(owners) > 2:          # a node joining several: drawn as a dot of its own
+                g.add_node(f"net{k}", kind="net")
+                g.add_edges_from((f"net{k}", o) for o in owners)
+            elif len(owners) == 2:
+                g.add_edge(*owners)
+        pos = nx.kamada_kawai_layout(g) if len(g) > 2 else nx.spring_layout(g, seed=0)
+        colour = {"candidate": "tab:orange", "component": "tab:gray", "net": "black"}
+        size = {"candidate": 900, "component": 900, "net": 40}
+        fig, ax = plt.subplots(figsize=(9, 7))
+        nodes = list(g.nodes(data="kind"))
+        nx.draw_networkx(g, pos, ax=ax, nodelist=[n for n, _ in nodes], node_color=[colour[k] for _, k in nodes],
+                         node_size=[size[k] for _, k in nodes], labels={n: n for n, k in nodes if k != "net"},
+                         font_size=8)
+        ax.set_title(f"{self.model}: orange = components whose law discovery may question")
+        ax.axis("off")
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, bbox_inches="tight", dpi=110)
+        plt.close(fig)
+        return path
 
     def describe(self) -> str:
         """A text listing: components with class and connectors, then the nets."""

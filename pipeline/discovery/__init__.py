@@ -17,6 +17,7 @@ from ..errors import ConfigError, NotFittedError
 from ..progress import console
 from ..runfile import RunSpec
 from .families import family_of
+from .law import LearnedLaw
 
 __all__ = ["Discovery"]
 
@@ -39,9 +40,9 @@ class Discovery:
                  max_simulations: int = 60, screen: int = 3, criterion: str = "bic",
                  refinement: str = "simulation", executor="local", second: dict | None = None,
                  report: dict | None = None, output=None, force: bool = False, verbose: bool = True,
-                 early_stop: bool = True):
+                 early_stop: bool = True, algorithm: str = "levenberg-marquardt", noise=None, free=None):
         self.model, self.sources, self.unknown = model, sources, unknown
-        self.early_stop = early_stop
+        self.early_stop, self.algorithm, self.noise, self.free = early_stop, algorithm, noise, free
         self.templates, self.libraries = templates, libraries
         self.max_simulations, self.screen, self.criterion = max_simulations, screen, criterion
         self.refinement, self.executor, self.second = refinement, executor, second
@@ -52,7 +53,8 @@ class Discovery:
     def from_spec(cls, spec: RunSpec, force: bool = False, verbose: bool = True) -> "Discovery":
         self = cls(spec.model_name, spec.sources, spec.unknown, spec.templates, spec.libraries,
                    spec.max_simulations, spec.screen, spec.criterion, spec.refinement_method,
-                   spec.executor, spec.second, spec.report, spec.output, force, verbose, spec.early_stop)
+                   spec.executor, spec.second, spec.report, spec.output, force, verbose, spec.early_stop,
+                   spec.algorithm, spec.noise, spec.free)
         self._spec = spec
         return self
 
@@ -77,7 +79,8 @@ class Discovery:
                        max_simulations=self.max_simulations, screen=self.screen, early_stop=self.early_stop,
                        criterion=self.criterion,
                        refinement_method=self.refinement, executor=executor, second=self.second,
-                       report=dict(self.report_options or {}), libraries=as_paths(self.libraries))
+                       report=dict(self.report_options or {}), libraries=as_paths(self.libraries),
+                       algorithm=self.algorithm, noise=self.noise, free=self.free)
 
     def fit(self, train, validate=None, time: str | None = None) -> "Discovery":
         """Run the discovery on ``train`` (and held-out ``validate``) data: a pandas DataFrame,
@@ -105,12 +108,10 @@ class Discovery:
 
     def _check(self, spec: RunSpec) -> None:
         """The options an API user gives, checked like a run file's (kinds, templates)."""
-        from ..api import registry
-        from ..runfile import CRITERIA
+        from ..services import registry
 
         reg = registry()
-        if spec.criterion not in CRITERIA:
-            raise ConfigError(f"criterion '{spec.criterion}': choose one of {', '.join(CRITERIA)}")
+        reg.criterion(spec.criterion)
         reg.fitter(spec.refinement_method)
         reg.executor_class(spec.executor)
         for t in spec.templates or []:
@@ -124,7 +125,8 @@ class Discovery:
                          "max_simulations": self.max_simulations, "screen": self.screen,
                          "criterion": self.criterion, "refinement": self.refinement,
                          "executor": self.executor, "second": self.second, "report": self.report_options,
-                         "output": self.output, "early_stop": self.early_stop})
+                         "output": self.output, "early_stop": self.early_stop, "algorithm": self.algorithm,
+                         "noise": self.noise, "free": self.free})
 
     def __getattr__(self, name: str):
         # called only for attributes never set: the results (ending in _) before fit
@@ -136,12 +138,81 @@ class Discovery:
         self.report_, self.run_dir_ = report, Path(run_dir)
         self.misfit_, self.cause_, self.gain_ = report["misfit"], report["cause"], report["gain"]
         self.causes_ = report.get("causes") or ([report["cause"]] if report.get("cause") else [])
-        self.law_ = (report["cause"] or {}).get("law")
+        self.laws_ = [LearnedLaw(c) for c in self.causes_]
+        self.law_ = self.laws_[0] if self.laws_ else None
         self.candidates_ = report["candidates"]
+        self.model_ = report.get("_model")       # the extended model, compiled (None when read back)
 
     def _fitted(self) -> None:
         if not hasattr(self, "report_"):
             raise NotFittedError("this Discovery is not fitted yet: call fit(train) first")
+
+    # -- the estimator's methods: parameters, prediction, score ----------------------------------
+    def get_params(self, deep: bool = True) -> dict:
+        """The constructor's options (scikit-learn's convention)."""
+        import inspect
+
+        return {k: getattr(self, "report_options" if k == "report" else k)
+                for k in inspect.signature(type(self).__init__).parameters if k != "self"}
+
+    def set_params(self, **params) -> "Discovery":
+        """Change constructor options (a fitted result stays until the next fit)."""
+        known = self.get_params()
+        for k, v in params.items():
+            if k not in known:
+                from ..errors import did_you_mean
+
+                raise ConfigError(f"Discovery has no option '{k}'{did_you_mean(k, known)}")
+            setattr(self, "report_options" if k == "report" else k, v)
+        self._spec = None
+        return self
+
+    def extended_model(self):
+        """The model with the learned laws in place (the compiled one of this run, or the
+        written Modelica compiled again)."""
+        self._fitted()
+        if self.model_ is None:
+            from ..services import compile_model
+
+            ext = self.report_.get("extended") or {}
+            if not ext.get("model"):
+                return None
+            self.model_ = compile_model([self.run_dir_ / s for s in ext.get("sources", [])], ext["model"],
+                                        libraries=self.spec().libraries)
+        return self.model_
+
+    def predict(self, inputs, time: str | None = None, model: str = "extended"):
+        """The outputs of the extended model (``model="nominal"``: the model as given) on new
+        ``inputs`` (a DataFrame, structured array, mapping, TimeSeries or CSV, with a time
+        column): a DataFrame indexed by time."""
+        from ..services import compile_model, simulate
+
+        self._fitted()
+        data = as_timeseries(inputs, "inputs", time=time)
+        m = self.extended_model() if model == "extended" else compile_model(
+            self.spec().sources, self.model, libraries=self.spec().libraries)
+        if m is None:          # nothing was learned: the model as given
+            m = compile_model(self.spec().sources, self.model, libraries=self.spec().libraries)
+        res = simulate(m, data)
+        if not res.ok:
+            raise ConfigError(f"the {model} model does not simulate these inputs: {res.reason}")
+        return res.to_frame()
+
+    def score(self, data, time: str | None = None) -> float:
+        """R^2 of the extended model's outputs on ``data`` (measured outputs against the
+        simulation; 1 is perfect, scikit-learn's convention)."""
+        import numpy as np
+
+        self._fitted()
+        ts = as_timeseries(data, "data", time=time)
+        pred = self.predict(ts)
+        outs = [c for c in pred.columns if c in ts.names]
+        y = ts.select(outs).values
+        f = pred[outs].to_numpy()
+        ok = np.isfinite(y)
+        ss_res = float(np.sum((y[ok] - f[ok]) ** 2))
+        ss_tot = float(np.sum((y[ok] - np.nanmean(np.where(ok, y, np.nan), axis=0)[np.nonzero(ok)[1]]) ** 2))
+        return 1.0 - ss_res / ss_tot if ss_tot > 0 else float("nan")
 
     def export(self, directory, name: str = "MCLLearned") -> Path:
         """The learned component as a Modelica library ``directory/name`` (and its FMU)."""
@@ -210,5 +281,23 @@ class Discovery:
         return f"Discovery(model={self.model!r}, unknown={self.unknown!r}) [{state}]"
 
     def _repr_html_(self) -> str:
-        items = "".join(f"<li>{html.escape(line)}</li>" for line in self.summary())
-        return f"<div><b>Discovery of {html.escape(self.model)}</b><ul>{items}</ul></div>"
+        """A table in notebooks: misfit, each cause with its law and evidence, the gain."""
+        head = f"<b>Discovery of {html.escape(self.model)}</b>"
+        if not hasattr(self, "report_"):
+            return f"<div>{head} (not fitted)</div>"
+        m, g = self.misfit_, self.gain_
+        rows = [("misfit", m.get("significance") or ("significant" if m["significant"] else "not significant"))]
+        for k, c in enumerate(self.causes_):
+            rows.append((f"cause {k + 1}" if len(self.causes_) > 1 else "cause",
+                         f"{c['component']} ({c.get('class', '')}): {c['law']['equation']} "
+                         f"[{c['evidence']['strength']}]"))
+            for e in c.get("equivalents", []):
+                rows.append(("equivalent", f"{e['component']}: {e['reason']}"))
+        if not self.causes_:
+            rows.append(("cause", self.report_.get("no_cause", "none")))
+        rows.append(("training RMS", f"{g['train_rms_before']:.4g} → {g['train_rms_after']:.4g}"))
+        if g.get("validation_rms_before") is not None:
+            rows.append(("validation RMS", f"{g['validation_rms_before']:.4g} → {g['validation_rms_after']:.4g}"))
+        body = "".join(f"<tr><th style='text-align:left'>{html.escape(a)}</th><td style='text-align:left'>"
+                       f"{html.escape(str(b))}</td></tr>" for a, b in rows)
+        return f"<div>{head}<table>{body}</table></div>"

@@ -110,6 +110,8 @@ class Context:
     method: str                 # simulation | full-discretisation
     progress_dir: str           # running and finished fits publish their RSS here ('' = no early stop)
     n_obs: int = 0
+    algorithm: str = "levenberg-marquardt"   # the optimiser (mcl.fit.FITTERS)
+    max_work: int | None = None  # solver steps a candidate's simulation may take (50x the nominal's)
 
     def give_up(self, reachable: float, current: float, item) -> bool:
         """A fit stops when it cannot win or tie. Given the RSS the other fits have reached and
@@ -148,7 +150,7 @@ class Law:
 def start_of(ctx: Context, item: Item):
     """(template, w0, nominal form) of ``item``'s law: started at its fit to the nominal law
     along the base model's run (or at the spec's own ``start``)."""
-    from ..api import registry
+    from ..services import registry
 
     template = registry().template(item.spec)
     env = ctx.signals[item.component].env()
@@ -176,7 +178,7 @@ def build(ctx: Context, item) -> tuple[list[Law], object]:
 
 def fit_task(ctx: Context, item) -> dict:
     """Executor task: one candidate built, fitted and pruned; its result as a dict."""
-    from ..api import registry, simulate
+    from ..services import registry, simulate
     from .fitters import FitOutcome, fit_and_prune
 
     try:
@@ -196,7 +198,8 @@ def fit_task(ctx: Context, item) -> dict:
             held += [k == 0 for k in range(len(law.names))]
             prunable += [0 < k < n_terms for k in range(len(law.names))]
         fit = FitOutcome(*fit_and_prune(model, ctx.train, names, w0, 2 * ctx.budget, ctx.criterion, give_up=give_up,
-                                        progress=progress, held=held, prunable=prunable))
+                                        progress=progress, held=held, prunable=prunable, algorithm=ctx.algorithm,
+                                        max_work=ctx.max_work))
     else:
         # the shape stage (a network, then distilled laws with fitted scales) always simulates:
         # it refines the best law and is not stopped for being behind it; a network has many
@@ -205,7 +208,8 @@ def fit_task(ctx: Context, item) -> dict:
         fitter = registry().fitter("simulation" if shape else ctx.method)
         fit = fitter.fit(model, ctx.train, names, w0, template, ctx.criterion,
                          ctx.budget * (3 if item.index == NEURAL_INDEX else 1), give_up=give_up,
-                         prune=bool(getattr(template, "terms", None)), progress=progress)
+                         prune=bool(getattr(template, "terms", None)), progress=progress,
+                         algorithm=ctx.algorithm, max_work=ctx.max_work)
     res = fit.result if fit.result is not None else simulate(model, ctx.train, dict(zip(names, fit.w)))
     out = {"component": item.component, "template": item.spec, "rss": fit.rss, "score": fit.score,
            "simulations": fit.simulations, "pruning": fit.path, "visited": fit.visited if len(laws) == 1 else [],

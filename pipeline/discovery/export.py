@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import re
 import shutil
+import textwrap
 from pathlib import Path
 
 from ..errors import ConfigError
@@ -69,7 +70,7 @@ def export_library(run_dir, output, name: str = "MCLLearned", force: bool = Fals
     m = re.search(rf"^\s*model {re.escape(cls)}\b.*?^\s*end {re.escape(cls)};", source.read_text(), re.S | re.M)
     if not m:
         raise ConfigError(f"class {cls} not found", where=str(source))
-    body = "\n".join("  " + line.strip() if line.strip() else "" for line in m.group(0).splitlines())
+    body = textwrap.indent(textwrap.dedent(m.group(0)), "  ")   # the class's own indentation kept
     # the libraries the run compiled with (recorded in its extended package), else the path's
     recorded = re.search(r"annotation\(uses\((?:[^()]|\([^()]*\))*\)\)", source.read_text())
     uses = recorded.group(0) if recorded else uses_annotation(body)

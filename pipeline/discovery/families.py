@@ -75,7 +75,13 @@ def families(role: str, env: dict | None = None) -> list[dict]:
     return out
 
 
-_SHAPES = ("tanh({x}/{s})", "sinh({x}/{s})", "{x}/sqrt(1 + ({x}/{s})^2)", "exp({x}/{s}) - 1")
+#: the shapes of the laws engineers meet, each with a scale s (fitted): Coulomb friction and
+#: saturation (tanh, x/sqrt(1+(x/s)^2)), sinh and exp(x/s) - 1 (diodes, Shockley; exponential
+#: growth), a soft dead zone x - s tanh(x/s), the Stribeck bump tanh(x/s) exp(-(x/s)^2), and the
+#: signed square root of orifices and Torricelli outflows, sqrt(|x|) tanh(x/s) (s small: the
+#: rounding at 0)
+_SHAPES = ("tanh({x}/{s})", "sinh({x}/{s})", "{x}/sqrt(1 + ({x}/{s})^2)", "exp({x}/{s}) - 1",
+           "{x} - {s}*tanh({x}/{s})", "tanh({x}/{s})*exp(-({x}/{s})^2)", "sqrt(abs({x}))*tanh({x}/{s})")
 
 
 def basis(x: np.ndarray, name: str) -> list[tuple[str, float | None]]:
@@ -83,7 +89,7 @@ def basis(x: np.ndarray, name: str) -> list[tuple[str, float | None]]:
     polynomials, |x| x, and the shapes of friction, saturation and exponential laws at scales
     spread over the visited span (the scale of a chosen shape is then fitted)."""
     span = float(np.max(np.abs(x))) or 1.0
-    terms = [(t, None) for t in ("{x}", "{x}^2", "{x}^3", "{x}*abs({x})")]
+    terms = [(t, None) for t in ("{x}", "{x}^2", "{x}^3", "{x}*abs({x})", "sqrt(abs({x}))*sign({x})")]
     return terms + [(shape, k * span) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
 
 

@@ -62,10 +62,13 @@ class CandidateFitter:
     name = ""
     description = ""
 
-    def fit(self, model, data: TimeSeries, names: list[str], w0, template, criterion: str, budget: int,
-            give_up=None, prune: bool = True, progress=None) -> FitOutcome:
+    def fit(self, model, data: TimeSeries, names: list[str], w0, template, criterion, budget: int,
+            give_up=None, prune: bool = True, progress=None, algorithm: str = "levenberg-marquardt",
+            max_work: int | None = None) -> FitOutcome:
         """``give_up(reachable_rss, current_rss)`` stops a fit that cannot win; ``progress(rss)``
-        is told the RSS of each better point reached (so that other fits can compare)."""
+        is told the RSS of each better point reached (so that other fits can compare);
+        ``algorithm`` names the optimiser (:data:`mcl.fit.FITTERS`), ``max_work`` bounds each
+        simulation's solver steps (a law that makes the model crawl fails instead)."""
         raise NotImplementedError
 
 
@@ -73,27 +76,30 @@ class SimulationFitter(CandidateFitter):
     name = "simulation"
     description = "Levenberg-Marquardt on simulations with sensitivities, then backward elimination"
 
-    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None):
+    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None,
+            algorithm="levenberg-marquardt", max_work=None):
         n_terms = len(getattr(template, "terms", names))
         return FitOutcome(*fit_and_prune(model, data, names, w0, budget, criterion, give_up=give_up,
-                                         prune=prune, n_terms=n_terms, progress=progress))
+                                         prune=prune, n_terms=n_terms, progress=progress, algorithm=algorithm,
+                                         max_work=max_work))
 
 
 class FullDiscretisationFitter(CandidateFitter):
     name = "full-discretisation"
     description = "paper 004: least squares over states and parameters, stage-wise backward elimination"
 
-    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None):
+    def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None,
+            algorithm="levenberg-marquardt", max_work=None):
         if not getattr(template, "terms", None) or getattr(template, "scales", None):
             # a network, or a law with fitted scales, has no terms to prune stage-wise by degree
             return SimulationFitter().fit(model, data, names, w0, template, criterion, budget, give_up, prune,
-                                          progress)
+                                          progress, algorithm, max_work)
         return FitOutcome(*refine_candidate(model, data, names, w0, criterion, template))
 
 
-def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion: str,
+def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion,
                   give_up=None, prune: bool = True, n_terms: int | None = None, progress=None,
-                  held=None, prunable=None):
+                  held=None, prunable=None, algorithm: str = "levenberg-marquardt", max_work: int | None = None):
     """LM fit of the law parameters, then backward elimination of terms.
 
     ``held`` marks the parameters kept at their start value (each law's scale: G(w) = 0 and
@@ -101,7 +107,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     remove (default the first ``n_terms`` but the held); ``prune=False`` keeps every parameter (a
     network has no terms to remove). ``give_up`` (see :class:`mcl.fit.LevenbergMarquardt`)
     stops a candidate that cannot win; ``progress`` hears of each better RSS."""
-    from ..fit import FitProblem, LevenbergMarquardt
+    from ..fit import FitProblem, fitter
 
     n = len(names)
     w0 = np.asarray(w0, float)
@@ -120,11 +126,12 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         free = active_mask & ~held
         params = [nm for nm, on in zip(names, free) if on]
         fixed = {nm: (float(w0[k]) if held[k] else 0.0) for k, nm in enumerate(names) if not free[k]}
-        problem = FitProblem(model, window, params, fixed=fixed, options=FIT_OPTIONS)
+        problem = FitProblem(model, window, params, fixed=fixed, options={**FIT_OPTIONS, "max_work": max_work})
         whole = window is data      # only a fit to all the data compares with other candidates
         report = None if progress is None or not whole else (lambda cost: progress(cost * len(data.time)))
-        res = LevenbergMarquardt(max_simulations=limit, tol=FIT_TOL, give_up=give_up if whole else None,
-                                 progress=report, restore=restore, axis=None).fit(problem, np.asarray(start)[free])
+        algo = fitter(algorithm, limit, tol=FIT_TOL, give_up=give_up if whole else None, progress=report,
+                      restore=restore)
+        res = algo.fit(problem, np.asarray(start)[free])
         w = np.where(held, w0, 0.0)
         w[free] = res.w
         rss = res.cost * len(window.time)   # J of eq. (3) is the mean over samples of the RSS
@@ -199,7 +206,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         if not ok:
             break
         active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
-    from ..api import simulate
+    from ..services import simulate
 
     final = simulate(model, data, dict(zip(names, w)))    # the score at the default tolerances
     sims += 1
@@ -224,7 +231,7 @@ def horizons(data: TimeSeries, first: float = 1 / 8, min_samples: int = 100) -> 
 def refine_candidate(model, data: TimeSeries, names: list[str], w0, criterion: str, template):
     """Paper 004's refinement (:func:`mcl.refine.refine`), scored like :func:`fit_and_prune`:
     RSS and BIC/AIC of a simulation of the refined law on the training data."""
-    from ..api import simulate
+    from ..services import simulate
     from ..refine import refine
 
     w, active, path = refine(model, data, names, w0, criterion, terms=getattr(template, "terms", None))

@@ -81,16 +81,20 @@ def qualified(component: str, names: list[str], taken) -> list[str]:
 
 
 def with_law(dae: Dae, comp: Component, template, w0, nominal: NominalForm | None = None,
-             rates: dict | None = None) -> tuple[Dae, list[str]]:
+             rates: dict | None = None, active=None) -> tuple[Dae, list[str]]:
     """``dae`` with ``comp``'s terminal law changed to ``template`` (parameters at ``w0``);
     returns the new DAE (before alias elimination, like the compiled one) and the law's
     parameter names, qualified with the component's name. ``rates``: the component's across
-    value and flow as functions of the states (:func:`rate_variables`), for laws in their rates."""
+    value and flow as functions of the states (:func:`rate_variables`), for laws in their rates.
+    ``active``: which parameters are in the law (a pruned law); a rate only pruned terms use is
+    not needed (their coefficient is nought)."""
     nominal = nominal or NominalForm({}, 1.0)
     dae, D, env = _deviation(dae, comp, mode_of(template))
     explicit = template.explicit is not None
-    needs = set(template.uses) | (set(nominal.coefficients) if explicit else set())
+    uses = template.uses if active is None else template.uses_where(active)
+    needs = set(uses) | (set(nominal.coefficients) if explicit else set())
     env = _derivatives(dae, comp, env, needs, rates)
+    env.update({v: ca.SX(0) for v in template.uses - set(env)})
     names = qualified(comp.name, template.parameter_names(), set(dae.p_names))
     w = ca.SX.sym("w", len(names))
     ws = ca.vertsplit(w)

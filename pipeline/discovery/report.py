@@ -1,4 +1,11 @@
-"""report.json and report.html: numbers for programs, plots for people."""
+"""report.json and report.html: numbers for programs, plots for people.
+
+report.html tells the story a reviewer signs off: what the model gets wrong (where, how much,
+against what noise, estimated how), which components are to blame and why, the laws they follow
+(curves in the equations' own words, signs and units, with the nominal law beside them and a
+confidence band), the gain on training and held-out data, what was tried, the files written, the
+settings and the software. Solver messages are put in plain words, the raw text a click away.
+"""
 from __future__ import annotations
 
 import base64
@@ -34,9 +41,9 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def _clean(obj):
-    """JSON-safe: numpy scalars to Python, non-finite floats to null."""
+    """JSON-safe: numpy scalars to Python, non-finite floats to null, objects to their names."""
     if isinstance(obj, dict):
-        return {k: _clean(v) for k, v in obj.items()}
+        return {k: _clean(v) for k, v in obj.items() if not str(k).startswith("_")}
     if isinstance(obj, (list, tuple)):
         return [_clean(v) for v in obj]
     if isinstance(obj, (np.floating, float)):
@@ -45,12 +52,14 @@ def _clean(obj):
         return int(obj)
     if isinstance(obj, np.bool_):
         return bool(obj)
+    if hasattr(obj, "name") and not isinstance(obj, (str, int, bool)) and obj is not None:
+        return str(obj.name)
     return obj
 
 
 def misfit_in_time(time, residual, sigma: float, factor: float = 3.0, max_spans: int = 5) -> list[list[float]]:
     """Where the misfit is: the time spans in which |residual| (any output, NaN = not measured)
-    exceeds ``factor`` times the noise, longest first (at most ``max_spans``)."""
+    exceeds ``factor`` times the noise: the longest ``max_spans``, in time order."""
     r = np.asarray(residual, float).reshape(len(time), -1)
     with np.errstate(invalid="ignore"):
         bad = np.nanmax(np.where(np.isfinite(r), np.abs(r), 0.0), axis=1) > factor * max(sigma, 1e-300)
@@ -64,7 +73,7 @@ def misfit_in_time(time, residual, sigma: float, factor: float = 3.0, max_spans:
             k = j + 1
         else:
             k += 1
-    return sorted(spans, key=lambda s: s[0] - s[1])[:max_spans]
+    return sorted(sorted(spans, key=lambda s: s[0] - s[1])[:max_spans])
 
 
 def _g(x, digits: int = 3) -> str:
@@ -75,6 +84,43 @@ def _factor(before, after) -> str:
     if before is None or after is None or after <= 0:
         return "-"
     return f"{before / after:.3g}x smaller" if after < before else f"{after / before:.3g}x larger"
+
+
+def plain(reason: str) -> str:
+    """A solver's or compiler's message in plain words (the raw text stays beside it)."""
+    text = str(reason or "")
+    for key, words in (("TOO_MUCH_WORK", "the solver needed too many steps (the law makes the model crawl)"),
+                       ("CONV_FAILURE", "the solver could not converge (the law makes the model too stiff or singular)"),
+                       ("ERR_FAILURE", "the solver could not meet its accuracy (a near-discontinuity)"),
+                       ("RHSFUNC_FAIL", "the model could not be evaluated (an algebraic loop did not converge)"),
+                       ("work budget", "it needed far more solver work than the nominal model (stopped)"),
+                       ("time limit", "it took longer than the time allowed (stopped)"),
+                       ("non-finite", "the simulation diverged (values became infinite)"),
+                       ("no start point", "no parameter values near the start simulate"),
+                       ("crashed", "the worker computing it crashed"),
+                       ("timed out", "it took longer than the time allowed (stopped)")):
+        if key in text:
+            return words
+    return text.split(":")[0] if len(text) > 80 else text
+
+
+def _details(short: str, raw: str) -> str:
+    if short == raw:
+        return html.escape(short)
+    return f"{html.escape(short)} <details><summary>detail</summary><code>{html.escape(raw)}</code></details>"
+
+
+# -- figures -------------------------------------------------------------------------------------
+def _inputs_figure(plt, data, units):
+    names = list(data.names)
+    fig, axes = plt.subplots(len(names), 1, figsize=(12, 1.6 + 1.2 * len(names)), squeeze=False, sharex=True)
+    for ax, n in zip(axes[:, 0], names):
+        ok = np.isfinite(data.column(n))
+        ax.plot(data.time[ok], data.column(n)[ok], color="tab:gray", lw=1)
+        ax.set_ylabel(axis_label(n, units))
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time [s]")
+    return fig
 
 
 def _outputs_figure(plt, time, y_meas, y_nominal, y_extended, outputs, units, sigma, title):
@@ -107,37 +153,49 @@ def _outputs_figure(plt, time, y_meas, y_nominal, y_extended, outputs, units, si
     return fig
 
 
+def _label(name, unit) -> str:
+    return f"{name} [{unit}]" if unit else name
+
+
 def _law_figure(plt, cause):
+    """The learned law against the variable it is in, in the equation's words, sign and units,
+    with its 95% band and the nominal law along the training run."""
     law = cause["law"]
     xs, fs = np.array(law["curve"]).T
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
     if law.get("nominal"):
         vn, fn = np.array(law["nominal"]).T
-        ax.plot(vn, fn, ".", color="tab:red", ms=3, label="nominal model (along the training run)")
+        if law.get("nominal_is_function"):
+            ax.plot(vn, fn, "--", color="tab:red", lw=1.5, label="nominal law")
+        else:
+            ax.plot(vn, fn, ".", color="tab:red", ms=3, label="nominal model along the training run")
+    if law.get("band"):
+        band = 1.96 * np.asarray(law["band"], float)
+        ax.fill_between(xs, fs - band, fs + band, color="tab:green", alpha=0.2, label="95% band")
     ax.plot(xs, fs, color="tab:green", lw=2, label="learned law")
-    x_name = {"across": law["across"], "der(across)": f"der({law['across']})", "flow": law["flow"]}
-    ax.set_xlabel(x_name.get(law.get("variable", "across"), law["across"]))
-    ax.set_ylabel(law["across"] if law.get("variable") == "flow" else law["flow"])
+    ax.set_xlabel(_label(law.get("x", law["across"]), law.get("x_unit")))
+    ax.set_ylabel(_label(law.get("y", law["flow"]), law.get("y_unit")))
     ax.set_title(law["equation"], fontsize=9)
     ax.grid(alpha=0.3)
-    ax.legend()
+    ax.legend(fontsize=8)
     return fig
 
 
-def _feasibility_figure(plt, cause):
+def _search_figure(plt, cause):
+    """Where the fit searched: the two coefficients that moved most, each point green where the
+    model simulated and red where it failed (the region the law must stay in)."""
     visited = np.array(cause.get("visited") or [], dtype=float)
     if not visited.size or visited.shape[1] < 3:
         return None
     W, ok = visited[:, :-1], visited[:, -1] > 0.5
-    W = W / np.where(W[:, :1] == 0, 1.0, W[:, :1])           # the law is unchanged by scaling w
     spread = np.argsort(-np.std(W[:, 1:], axis=0))[:2] + 1
+    terms = cause.get("terms") or [f"w{k + 1}" for k in range(W.shape[1])]
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    names = cause.get("parameters") or [f"w{k + 1}" for k in range(W.shape[1])]
     ax.scatter(W[ok, spread[0]], W[ok, spread[-1]], c="tab:green", s=14, label="simulated")
-    ax.scatter(W[~ok, spread[0]], W[~ok, spread[-1]], c="tab:red", marker="x", s=20, label="failed")
-    ax.set_xlabel(f"{names[spread[0]]} / {names[0]}")
-    ax.set_ylabel(f"{names[spread[-1]]} / {names[0]}")
-    ax.legend()
+    ax.scatter(W[~ok, spread[0]], W[~ok, spread[-1]], c="tab:red", marker="x", s=20, label="failed to simulate")
+    ax.set_xlabel(f"coefficient of {terms[spread[0]]}")
+    ax.set_ylabel(f"coefficient of {terms[spread[-1]]}")
+    ax.legend(fontsize=8)
     return fig
 
 
@@ -156,11 +214,19 @@ def _ranking_figure(plt, report, cands):
     return fig
 
 
+# -- tables --------------------------------------------------------------------------------------
+def _table(header, rows) -> str:
+    head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{c}</td>" for c in row) + "</tr>" for row in rows)
+    return f"<table><tr>{head}</tr>{body}</table>"
+
+
 def _summary_rows(report) -> str:
     m, g = report["misfit"], report["gain"]
     causes = report.get("causes") or ([report["cause"]] if report.get("cause") else [])
-    rows = [("misfit", f"{'significant' if m['significant'] else 'not significant'}: training RMS "
-                       f"{_g(m['train_rms'])} vs noise {_g(m['noise_estimate'])}"),
+    noise = "; ".join(f"{o}: {_g(n['sigma'])} ({n['method']})" for o, n in (m.get("noise") or {}).items())
+    rows = [("misfit", m.get("significance") or ("significant" if m["significant"] else "not significant")),
+            ("noise", noise or _g(m["noise_estimate"])),
             ("where", ", ".join(f"{a:.3g}-{b:.3g} s" for a, b in sorted(m.get("where", []))) or "-")]
     if not causes:
         rows.append(("cause", f"no convincing cause ({report.get('no_cause', 'none found')})"))
@@ -175,35 +241,78 @@ def _summary_rows(report) -> str:
             rows.append(("equivalent", f"{e['component']} ({e.get('class') or ''}): {e['reason']}"))
         if cause.get("after"):
             rows.append(("misfit left", f"training RMS {_g(cause['after']['train_rms'])}: {cause['after']['misfit_left']}"))
-    rows.append(("not evaluated", "; ".join(f"{f['component']} ({f['stage']}: {f['reason']})"
-                                            for f in report.get("failed", [])) or "-"))
+    failed = report.get("failed", [])
+    rows.append(("not evaluated", "; ".join(f"{f['component']} ({f['stage']}: {plain(f['reason'])})" for f in failed) or "-"))
     body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in rows)
-    gain = "".join(f"<tr><th>{k}</th><td>{_g(b)}</td><td>{_g(a)}</td><td>{_factor(b, a)}</td></tr>" for k, b, a in (
-        ("training RMS", g["train_rms_before"], g["train_rms_after"]),
-        ("validation RMS", g["validation_rms_before"], g["validation_rms_after"])))
-    return (f"<table>{body}</table><h2>Before and after</h2><table><tr><th></th><th>nominal model</th>"
-            f"<th>extended model</th><th>improvement</th></tr>{gain}</table>")
+    calibrated = g.get("train_rms_calibrated") is not None
+    gain_rows = []
+    for name, b, a, c in (("training RMS", g["train_rms_before"], g["train_rms_after"], g.get("train_rms_calibrated")),
+                          ("validation RMS", g["validation_rms_before"], g["validation_rms_after"],
+                           g.get("validation_rms_calibrated"))):
+        row = [name, _g(b), _g(a), _factor(b, a)] + ([_g(c), _factor(b, c)] if calibrated else [])
+        gain_rows.append(row)
+    header = ["", "nominal model", "with the learned laws", "improvement"] + (
+        ["laws + calibration", "improvement"] if calibrated else [])
+    return f"<table>{body}</table><h2>Before and after</h2>{_table(header, gain_rows)}"
+
+
+def _uncertainty_rows(report) -> str:
+    out = []
+    for cause in report.get("causes") or []:
+        params = cause["law"].get("parameters") or []
+        if not params:
+            continue
+        rows = [[html.escape(p["name"]), _g(p["value"], 4), _g(p["std_error"], 2),
+                 f"[{_g(p['ci95'][0], 4)}, {_g(p['ci95'][1], 4)}]", _g(p.get("bootstrap_std_error"), 2)]
+                for p in params]
+        out.append(f"<h3>{html.escape(cause['component'])}</h3>" + _table(
+            ["parameter", "value", "standard error", "95% interval", "block bootstrap s.e."], rows))
+    cal = report.get("calibration")
+    if cal and not cal.get("error"):
+        rows = [[html.escape(n), _g(v["before"], 4), _g(v["after"], 4), _g(v["std_error"], 2)]
+                for n, v in cal.get("values", {}).items()]
+        out.append("<h3>Calibration (nominal parameters refitted with the laws)</h3>" + _table(
+            ["parameter", "before", "after", "standard error"], rows))
+        if cal.get("not_determined"):
+            out.append(f"<p>Not determined by the data (left at their values): "
+                       f"{html.escape(', '.join(cal['not_determined']))}</p>")
+    return ("<h2>How sure the laws are</h2>" + "".join(out)) if out else ""
 
 
 def _tried_rows(report) -> str:
     rows = []
     for s in report.get("screening", []):
-        status = (s.get("not_applicable") and "not applicable" or s.get("reason") and f"failed: {s['reason']}"
-                  or s.get("not_fitted") or "fitted")
+        raw = s.get("not_applicable") or s.get("reason") or ""
+        status = (s.get("not_applicable") and f"not applicable: {raw}" or s.get("reason") and
+                  _details(f"failed: {plain(raw)}", raw) or s.get("not_fitted") or "fitted")
         fam = family_of(s["template"])
-        rows.append(f"<tr><td>{html.escape(s['component'])}</td><td>{html.escape(str(fam))}</td>"
-                    f"<td>{_g(s.get('predicted_rss'))}</td><td>{html.escape(str(status))[:140]}</td></tr>")
+        rows.append([html.escape(f"{s.get('round', 1)}"), html.escape(s["component"]), html.escape(str(fam)),
+                     _g(s.get("predicted_rss")), status if "<details>" in str(status) else html.escape(str(status))])
     if not rows:
         return ""
-    return ("<h2>What was tried</h2><table><tr><th>component</th><th>law family</th>"
-            "<th>predicted RSS after one step</th><th>status</th></tr>" + "".join(rows) + "</table>")
+    return "<h2>What was tried</h2>" + _table(["round", "component", "law family",
+                                               "predicted RSS after one step", "status"], rows)
+
+
+def _files_and_settings(report) -> str:
+    ext = report.get("extended") or {}
+    links = [(label, ext.get(key)) for label, key in (("extended model (Modelica)", "modelica"), ("FMU", "fmu"))]
+    items = "".join(f"<li>{html.escape(label)}: <a href='{html.escape(path)}'>{html.escape(path)}</a></li>"
+                    for label, path in links if path)
+    items += "<li>numbers: <a href='report.json'>report.json</a></li>"
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in ext.get("notes", []))
+    settings = [[html.escape(k), html.escape(str(v))] for k, v in (report.get("settings") or {}).items()]
+    software = [[html.escape(k), html.escape(v)] for k, v in (report.get("software") or {}).items()]
+    cost = f"{_g(report.get('cpu_seconds'))} CPU seconds ({_g(report.get('seconds'))} s on the clock)"
+    return (f"<h2>Files</h2><ul>{items}{notes}</ul><h2>Settings</h2>{_table(['setting', 'value'], settings)}"
+            f"<p>{html.escape(cost)}</p><h2>Software</h2>{_table(['package', 'version'], software)}")
 
 
 def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_extended,
                  title: str | None = None, plots: bool = True, validate=None, validation=None) -> None:
-    """report.json, and report.html: the story (misfit, where, cause, law, before/after on the
-    training and validation data, what was tried). ``validation`` is (nominal, extended)
-    outputs on the ``validate`` data."""
+    """report.json, and report.html: the story (misfit, where, causes, laws, before/after on the
+    training and validation data, how sure, what was tried, files, settings). ``validation`` is
+    (nominal, extended) outputs on the ``validate`` data."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -217,23 +326,28 @@ def write_report(directory: Path, report: dict, train, outputs, y_nominal, y_ext
     figs = [("Training data: where and how much the model is wrong (shaded: beyond 3 x noise)",
              _png(_outputs_figure(plt, train.time, train.select(outputs).values, y_nominal, y_extended, outputs,
                                   units, sigma, "training data")))]
+    inputs = [n for n in train.names if n not in outputs]
+    if inputs:
+        figs.append(("The inputs that drove the system (training data)", _png(_inputs_figure(plt, train.select(inputs),
+                                                                                           units))))
     if validate is not None and validation is not None and validation[0] is not None:
         figs.append(("Validation data (not used for fitting)",
                      _png(_outputs_figure(plt, validate.time, validate.select(outputs).values, validation[0],
                                           validation[1], outputs, units, sigma, "validation data"))))
     for cause in report.get("causes") or ([report["cause"]] if report.get("cause") else []):
-        figs.append((f"Learned law of {cause['component']} over the range the data visits", _png(_law_figure(plt, cause))))
-        fig = _feasibility_figure(plt, cause)
+        figs.append((f"Learned law of {cause['component']} over the range the data visit", _png(_law_figure(plt, cause))))
+        fig = _search_figure(plt, cause)
         if fig is not None:
-            figs.append((f"Feasibility map of {cause['component']}: parameter values visited while fitting", _png(fig)))
+            figs.append((f"Where the fit of {cause['component']}'s law searched", _png(fig)))
     cands = [c for c in report.get("candidates", []) if c.get("score") is not None and math.isfinite(c["score"])
              and c.get("round", 1) == 1]
     if cands:
-        figs.append(("Candidate ranking", _png(_ranking_figure(plt, report, cands))))
+        figs.append(("Candidates of the first search, ranked", _png(_ranking_figure(plt, report, cands))))
     imgs = "".join(f"<h2>{html.escape(t)}</h2><img src='data:image/png;base64,{b}'/>" for t, b in figs)
     heading = html.escape(title or report["model"])
     page = (f"<!doctype html><html><head><meta charset='utf-8'><title>mcl: {heading}</title>"
             "<style>body{font-family:sans-serif;max-width:1100px;margin:auto}td,th{padding:4px 12px;"
-            "text-align:left;vertical-align:top}img{max-width:100%}</style></head><body>"
-            f"<h1>{heading}</h1>{_summary_rows(report)}{imgs}{_tried_rows(report)}</body></html>")
+            "text-align:left;vertical-align:top}img{max-width:100%}details{display:inline}</style></head><body>"
+            f"<h1>{heading}</h1>{_summary_rows(report)}{_uncertainty_rows(report)}{imgs}{_tried_rows(report)}"
+            f"{_files_and_settings(report)}</body></html>")
     _write_atomic(directory / "report.html", page)

@@ -34,7 +34,7 @@ import numpy as np
 from ..data import TimeSeries
 from ..errors import ConfigError
 from ..progress import log
-from ..stats import noise_estimate, rms
+from ..stats import misfit_significance, noise_levels, rms
 from .candidates import Base
 from .families import spec_name
 from .fitters import residual
@@ -53,7 +53,7 @@ def _outputs_of(model, result, outputs) -> np.ndarray | None:
 def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
     """The base model with each of ``bests``' laws put in at its fitted values (pruned terms
     at 0), its components excluded from further search."""
-    from ..api import registry, simulate
+    from ..services import registry, simulate
 
     if not bests:
         return base
@@ -63,7 +63,8 @@ def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
         comp = base.structure.components[best["component"]]
         nominal = NominalForm(best["nominal_form"], 0.0) if best.get("nominal_form") is not None else None
         rates = rate_variables(dae, [comp], {comp.name: mode_of(template)})[comp.name]
-        dae, _ = with_law(dae, comp, template, np.asarray(best["w"]) * np.asarray(best["active"]), nominal, rates)
+        dae, best["_names"] = with_law(dae, comp, template, np.asarray(best["w"]) * np.asarray(best["active"]),
+                                       nominal, rates, active=best["active"])
     model = compiled(dae, base.model.name, outputs=train.names, info=base.model.info, structure=base.structure)
     result = simulate(model, train)
     if not result.ok:
@@ -78,15 +79,17 @@ class Causes:
     before (each round a search and a verdict; a round may name two at once, a pair of laws
     fitted together), until the misfit is at the noise level or no further law convinces."""
 
-    def __init__(self, spec, train, validate, outputs, part: Path, rundir, reg, sigma: float):
+    def __init__(self, spec, train, validate, outputs, part: Path, rundir, reg, noise: dict):
         self.spec, self.train, self.validate, self.outputs = spec, train, validate, outputs
-        self.part, self.rundir, self.reg, self.sigma = part, rundir, reg, sigma
+        self.part, self.rundir, self.reg, self.noise = part, rundir, reg, noise
+        self.sigma = overall(noise)
+        self.n_params = 0             # parameters the causes found so far added
         self.y = train.select(outputs).values
         self.rounds: list[dict] = []
 
     def misfit(self, base: Base) -> tuple[np.ndarray, float | None]:
         """The training residual of ``base`` and its validation RMS."""
-        from ..api import simulate
+        from ..services import simulate
 
         resid = self.y - _outputs_of(base.model, base.result, self.outputs)
         val = None
@@ -105,23 +108,25 @@ class Causes:
         rss = float(np.nansum(resid**2))
         found = search(self.spec, base, self.train, self.validate, rpart, self.rundir, self.reg, self.sigma, resid)
         cands = found.candidates
-        bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss)
+        bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss,
+                                               found.signals)
         items = role_items(bests[0], found.roles, base.structure, cands, found.signals) if bests else []
         if items:
             cands += [c for c in found.fit.patient()(items) if not c.get("not_applicable")]
-            bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss)
+            bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss,
+                                               found.signals)
         self.rounds.append({"label": label, "round": len(self.rounds) + 1, "screening": found.screening,
                             "pairs": found.pairs, "candidates": cands, "roles": found.roles,
                             "nominal_score": nominal_score, "no_cause": why})
         if not bests:
-            log.info("      %s: %s", label, why)
+            log.info("      round %d: %s", len(self.rounds), why)
         return [{**b, "_signals": found.signals, "_base": base, "_round": label} for b in bests]
 
     def after(self, base: Base) -> dict:
         resid, val = self.misfit(base)
-        left = _significant(rms(resid), self.sigma)
-        return {"train_rms": rms(resid), "validation_rms": val,
-                "misfit_left": "significant" if left else "at the noise level"}
+        left = significance(resid, self.noise, self.outputs, self.train.time, self.n_params)
+        return {"train_rms": rms(resid), "validation_rms": val, "significance": left.reason,
+                "misfit_left": "significant" if left.significant else "at the noise level"}
 
     def find(self, nominal: Base, val0) -> tuple[list[dict], Base]:
         found, base, val = [], nominal, val0
@@ -130,6 +135,7 @@ class Causes:
             if not bests:
                 break
             found += bests
+            self.n_params += sum(int(np.sum(b["active"])) - 1 for b in bests)
             base = with_causes(nominal, found, self.train)
             after = self.after(base)
             for b in bests:
@@ -144,7 +150,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
                   fingerprint: dict | None = None) -> dict:
     """Execute a validated :class:`mcl.runfile.RunSpec` on ``train`` (and ``validate``) data;
     returns the report dict. :class:`mcl.Discovery` is the public face of this function."""
-    from ..api import compile_model, registry, simulate
+    from ..services import compile_model, registry, simulate
     from .extend import describe, extend
     from .rundir import RunDirectory
 
@@ -152,15 +158,18 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     part = rundir.partial
     t_start, cpu_start = time.perf_counter(), cpu_seconds()
     reg = registry()
+    # the criterion resolved once, by name, through the registry (a plugin's as a built-in's)
+    spec = dataclasses.replace(spec, criterion=reg.criterion(spec.criterion))
     nominal = compile_model(spec.sources, spec.model_name, libraries=spec.libraries).with_outputs(train.names)
     if nominal.dae is None or nominal.structure is None:
         raise ConfigError(f"the compiler '{nominal.info.get('compiler')}' keeps no DAE of {spec.model_name}: "
                           "discovery needs the default compiler (casadi, on rumoca)")
-    if spec.unknown != "auto" and spec.unknown not in nominal.structure.components:
-        from ..registry import did_you_mean
+    if spec.unknown != "auto":      # a component that can take a law (a run file was checked for it)
+        from ..runfile import _Problems, _check_component
 
-        raise ConfigError(f"no component '{spec.unknown}' in {spec.model_name}"
-                          f"{did_you_mean(spec.unknown, list(nominal.structure.components))}", where="unknown")
+        problems = _Problems(None, {})
+        _check_component(problems, "unknown", nominal, spec.unknown, spec.model_name)
+        problems.raise_if_any()
     outputs = [o for o in nominal.output_names if o in train.names]
     log.info("[1/5] nominal model %s: simulating the training data", spec.model_name)
     sim0 = simulate(nominal, train)
@@ -169,18 +178,24 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     y_meas = train.select(outputs).values
     y0 = _outputs_of(nominal, sim0, outputs)
     resid = y_meas - y0
-    sigma = float(np.sqrt(np.mean([noise_estimate(y_meas[:, k], train.time) ** 2 for k in range(len(outputs))])))
+    noise = noise_levels(y_meas, train.time, outputs, spec.noise)
+    sigma = overall(noise)
     train_rms0 = rms(resid)
-    significant = _significant(train_rms0, sigma)
+    verdict = significance(resid, noise, outputs, train.time)
+    significant = verdict.significant
     report = {"model": spec.model_name, "outputs": outputs,
               "misfit": {"significant": significant, "train_rms": train_rms0, "noise_estimate": sigma,
+                         "significance": verdict.reason, "level_p": verdict.level_p,
+                         "whiteness_p": verdict.whiteness_p,
+                         "noise": {o: {"sigma": n.sigma, "method": n.method, "reliable": n.reliable}
+                                   for o, n in noise.items()},
                          "per_output_rms": {o: rms(resid[:, k]) for k, o in enumerate(outputs)}},
               "cause": None, "causes": [], "candidates": [], "gain": None,
               "units": {n: u for n, u in nominal.info.get("units", {}).items() if n in outputs},
               "components": len(nominal.structure.components), "software": software_versions(),
+              "settings": settings(spec),
               "inputs": fingerprint or {}}
-    log.info("      residual RMS %.4g vs noise %.4g: %s", train_rms0, sigma,
-             "significant" if significant else "not significant")
+    log.info("      %s", verdict.reason)
     from .report import misfit_in_time
 
     report["misfit"]["where"] = misfit_in_time(train.time, resid, sigma) if significant else []
@@ -189,7 +204,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         sv = simulate(nominal, validate)
         val0 = rms(residual(validate, nominal, sv, outputs)) if sv.ok else None
         val_y = [_outputs_of(nominal, sv, outputs), None]
-    causes = Causes(spec, train, validate, outputs, part, rundir, reg, sigma)
+    causes = Causes(spec, train, validate, outputs, part, rundir, reg, noise)
     found, base = causes.find(Base(nominal, sim0), val0) if significant else ([], Base(nominal, sim0))
     rounds = causes.rounds
     report["failed"] = [f for r in rounds for f in failures(r["screening"], r["candidates"])]
@@ -204,16 +219,22 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         cause["after"], cause["round"] = best["_after"], best["_round"]
         val_base = best["_after"]["validation_rms"]
         report["causes"].append(cause)
+    if found:
+        _how_sure(report, found, base, spec, train, validate, outputs)
     _summarise_rounds(report, rounds)
     extended_y = None
     if report["causes"]:
         report["cause"] = report["causes"][0]
+        report["_model"] = base.model         # the extended model, for Discovery.predict (not written)
         extended_y, ext_val, files = extend(report["causes"], base, spec, part, train, validate, outputs)
         report["extended"] = files
         if val_y is not None:
             val_y[1] = ext_val
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": rms(y_meas - extended_y) if extended_y is not None else None,
                           "validation_rms_before": val0, "validation_rms_after": val_base}
+        cal = report.get("calibration") or {}
+        if cal.get("train_rms") is not None:      # the law alone (above) and with the calibration
+            report["gain"].update(train_rms_calibrated=cal["train_rms"], validation_rms_calibrated=cal.get("validation_rms"))
     if report["gain"] is None:
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
                           "validation_rms_before": val0, "validation_rms_after": val0}
@@ -236,8 +257,36 @@ def cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def _significant(train_rms: float, sigma: float) -> bool:
-    return bool(train_rms > 1.5 * sigma and train_rms > 1e-12)
+def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate, outputs) -> None:
+    """Each cause's parameters with standard errors and its curve's band (the laws together, in
+    the extended model); with ``free:``, the laws refitted with the nominal parameters."""
+    from .calibrate import calibrate, uncertainty
+
+    params = base.model.parameters
+    laws = [{"names": b["_names"], "active": b["active"], "held": [k == 0 for k in range(len(b["_names"]))],
+             "template": b["template"], "w": b["w"], "curve_x": [x for x, _ in c["law"]["curve"]]}
+            for b, c in zip(found, report["causes"])]
+    uncertainty(base.model, train, params, laws)
+    for law, cause in zip(laws, report["causes"]):
+        cause["law"]["parameters"] = law.get("parameters", [])
+        if law.get("band"):
+            cause["law"]["band"] = law["band"]
+    if spec.free:
+        names = [n for law in laws for n, on, held in zip(law["names"], law["active"], law["held"]) if on and not held]
+        held = [n for law in laws for n in law["names"] if n not in names]
+        report["calibration"] = {k: v for k, v in calibrate(base.model, train, validate, params, names, spec.free,
+                                                            outputs, held).items() if k != "params"}
+
+
+def overall(noise: dict) -> float:
+    """One noise level for all outputs (root mean square of each output's)."""
+    return float(np.sqrt(np.mean([n.sigma ** 2 for n in noise.values()])))
+
+
+def significance(resid, noise: dict, outputs, t, n_params: int = 0):
+    """Whether a residual is a misfit or the noise (:func:`mcl.stats.misfit_significance`): too
+    large for the noise, or not white."""
+    return misfit_significance(resid, [noise[o] for o in outputs], t, n_params=n_params)
 
 
 def _summarise_rounds(report: dict, rounds: list[dict]) -> None:
@@ -257,6 +306,21 @@ def _summarise_rounds(report: dict, rounds: list[dict]) -> None:
         report["roles"] = rounds[0]["roles"]
         if not report["causes"]:
             report["no_cause"] = rounds[0]["no_cause"]
+
+
+def settings(spec) -> dict:
+    """The run's settings, as the report shows them."""
+    from ..stats import criterion as criterion_of
+
+    return {"model": spec.model_name, "sources": ", ".join(map(str, spec.sources)) or "(library path)",
+            "libraries": ", ".join(map(str, spec.libraries)) or "-", "unknown": spec.unknown,
+            "laws": "pinned templates" if spec.templates else "law families chosen by each component's role",
+            "criterion": criterion_of(spec.criterion).name, "fitting": spec.refinement_method,
+            "algorithm": spec.algorithm, "simulations per fit": spec.max_simulations,
+            "screened in for fitting": spec.screen, "early stop": spec.early_stop,
+            "executor": spec.executor.get("kind", "local"),
+            "noise": "estimated from the data" if spec.noise is None else spec.noise,
+            "calibration": spec.free or "-"}
 
 
 def software_versions() -> dict:

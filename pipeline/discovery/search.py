@@ -30,6 +30,9 @@ from .screen import law_signals, linear_response, predicted_rss
 #: times the noise's share of the RSS; a pair is fitted when it promises at most half the best
 #: single law's RSS
 PAIR_WHEN, PAIR_GAIN = 2.0, 0.5
+#: a candidate's simulation may take this many times the nominal model's solver steps: a law
+#: that makes the model crawl (stiff, near singular) fails fast and is recorded as such
+WORK = 50
 
 
 def balanced(base: Base, train: TimeSeries, comp) -> bool:
@@ -79,7 +82,7 @@ class Screening:
     Gauss-Newton prediction of any law, or any pair of laws."""
 
     def __init__(self, items: list[Item], base: Base, train: TimeSeries, resid: np.ndarray):
-        from ..api import registry, simulate
+        from ..services import registry, simulate
         from ..simulation import SimulationOptions
 
         reg = registry()
@@ -148,7 +151,7 @@ class Screening:
 def substeps(model, train: TimeSeries) -> int:
     """Points per data interval for the linearised response (:mod:`mcl.sensitivity`): enough
     that the model's fastest mode moves little in one step."""
-    from ..api import simulate
+    from ..services import simulate
     from ..sensitivity import MAX_STEP, SUBSTEPS, Linearisation
 
     res = simulate(model, train)
@@ -206,7 +209,7 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     tanh, sinh, |x| x, x/sqrt(1 + x^2), exp and polynomial terms (:func:`families.distillations`)
     and fitted and pruned like any candidate. Skipped when the polynomial law already fits to
     the noise, or when it is not a law of one variable."""
-    from ..api import registry
+    from ..services import registry
 
     done = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
     if not done or (done[0].get("train_rms") is not None and done[0]["train_rms"] < 1.2 * sigma):
@@ -278,8 +281,11 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
     for k, s_ in enumerate(screening):
         if k not in keep and s_.get("predicted_rss") is not None:
             s_["not_fitted"] = "screening predicts it cannot compete"
+    steps = getattr(base.result, "steps", 0) or 0
     ctx = Context(base, signals, rates, train, validate, spec.max_simulations, spec.criterion,
-                  spec.refinement_method, str(part / "progress") if spec.early_stop else "", n_obs)
+                  spec.refinement_method, str(part / "progress") if spec.early_stop else "", n_obs,
+                  algorithm=getattr(spec, "algorithm", "levenberg-marquardt"),
+                  max_work=WORK * steps if steps else None)
     fit = Batch(ctx, part, rundir, reg, spec.executor)
     by_key = {it.key: it for it in items}
     todo = [items[k] for k in keep] + [Pair(by_key[tuple(p["first"])], by_key[tuple(p["second"])]) for p in pairs]

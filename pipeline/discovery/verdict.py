@@ -26,24 +26,33 @@ def components_of(c: dict) -> list[str]:
     return c.get("components") or [c["component"]]
 
 
-def effect_kind(c: dict) -> str | None:
+def effect_kind(c: dict, env: dict | None = None) -> str | None:
     """Which role the learned law's additions to the nominal law point to: ``static`` (terms in
     the across value only), ``rate`` (its rate only), ``integral`` (the flow and its rate),
-    ``storage`` (both); None when nothing is added."""
+    ``storage`` (both); None when nothing is added. With ``env`` (the component's law variables
+    along the run), additions that carry less than a tenth of the added flow's energy there do
+    not count: a damper's law that is mostly a cubic in the position, with a small term in the
+    speed, points to the spring beside it."""
     from ..templates import Monomial
 
     nominal = set(c.get("nominal_form") or {})
-    extra = [t for t, on, w in zip(c.get("terms", [])[1:], c.get("active", [])[1:], c.get("w", [])[1:])
+    extra = [(t, w) for t, on, w in zip(c.get("terms", [])[1:], c.get("active", [])[1:], c.get("w", [])[1:])
              if on and w != 0 and t not in nominal]
     if not extra:
         return None
     scales = (c.get("template") or {}).get("scales", {}) if isinstance(c.get("template"), dict) else {}
-    used = set()
-    for t in extra:
-        try:
-            used |= Monomial.parse(t, scales).variables
-        except MclError:
-            return None
+    try:
+        monos = [(Monomial.parse(t, scales), w) for t, w in extra]
+    except MclError:
+        return None
+    if env is not None:
+        with np.errstate(all="ignore"):
+            energy = [float(np.nanmean((w * np.broadcast_to(m.value({**scales, **env}), np.shape(env["v"]))) ** 2))
+                      for m, w in monos]
+        total = sum(energy)
+        if np.isfinite(total) and total > 0:
+            monos = [mw for mw, e in zip(monos, energy) if e >= 0.1 * total]
+    used = set().union(*(m.variables for m, _ in monos))
     if used <= {"v"}:
         return "static"
     if used <= {"dv"}:
@@ -72,19 +81,23 @@ def equivalents(best: dict, ranked: list[dict], structure) -> list[dict]:
     return out
 
 
-def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: float):
+def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: float, signals: dict | None = None):
     """(causes, why not, score of the model without them): the winning law, or both laws of a
     winning pair, each with its lead over the best candidate that shares none of its components
-    (or the model without it), its equivalents, its role and the kind of its effect."""
+    (or the model without it), its equivalents, its role and the kind of its effect. A neural
+    law is never a cause (it is the reference the readable laws are distilled from)."""
     n_obs = int(np.isfinite(resid).sum())
     nominal_score = criterion_of(spec.criterion).score(rss0, n_obs, 0)
-    scored = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
+    env = {k: v.env() for k, v in (signals or {}).items()}
+    kind = lambda c: effect_kind(c, env.get(c["component"]))
+    scored = sorted((c for c in cands if c.get("score") is not None and spec_name(c.get("template") or "") != "neural"),
+                    key=lambda c: c["score"])
     ranked = [c for c in scored if c["score"] < nominal_score]
     if not ranked:
         return [], ("no candidate could be evaluated" if not scored
                     else "no candidate explains the training data better than the model without it"), nominal_score
     close = [c for c in ranked if c["score"] - ranked[0]["score"] <= EQUAL and "parts" not in c]
-    fits = [c for c in close if effect_kind(c) is not None and roles.get(c["component"]) == effect_kind(c)]
+    fits = [c for c in close if kind(c) is not None and roles.get(c["component"]) == kind(c)]
     best = fits[0] if fits and "parts" not in ranked[0] else ranked[0]
     if val0 is not None and not helps(best.get("validation_rms"), val0):
         return [], (f"the best candidate, {best['component']} ({spec_name(best['template']) if 'parts' not in best else 'two laws'}), "
@@ -98,7 +111,7 @@ def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: f
     delta = min(others + [nominal_score]) - best["score"]
     shared = {k: best.get(k) for k in ("score", "rss", "train_rms", "validation_rms", "simulations")}
     causes = [{**law, **shared, "delta": delta, "equivalents": equivalents(law, ranked if len(laws) == 1 else [], structure),
-               "effect_kind": effect_kind(law), "role": roles.get(law["component"]), "pair": len(laws) > 1}
+               "effect_kind": kind(law), "role": roles.get(law["component"]), "pair": len(laws) > 1}
               for law in laws]
     return causes, None, nominal_score
 
@@ -118,7 +131,7 @@ def role_items(best: dict, roles: dict, structure, cands: list[dict], signals) -
     whose new terms are in the position), the laws of that kind for the components in parallel
     with it whose role does fit, so that the verdict can name the part whose physics it is (a
     law of that kind fitted there already, to its end, is not fitted again)."""
-    kind = effect_kind(best)
+    kind = effect_kind(best, signals[best["component"]].env() if best["component"] in signals else None)
     if best.get("pair") or kind is None or roles.get(best["component"]) == kind or structure is None:
         return []
     tried = {(c["component"], c.get("family")) for c in cands

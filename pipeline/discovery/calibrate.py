@@ -1,0 +1,178 @@
+"""How sure the learned laws are, and the model calibrated with them (grey-box refit).
+
+:func:`uncertainty`: the learned laws' parameters at the optimum, with standard errors from the
+Jacobian of the outputs (cov = s^2 (J^T J)^-1, s^2 = RSS / (n - k)), checked by a bootstrap over
+blocks of the residual (the Gauss-Newton step each resampled residual asks for: blocks keep the
+residual's correlation, which the Jacobian's errors assume away); and a band around each learned
+curve (the delta method: Var f(x) = g(x)^T cov g(x), g the law's gradient in its parameters).
+
+:func:`calibrate`: the learned laws refitted together with the nominal parameters the user frees
+(``free: [M.m, D.d]``) or those the data determine (``free: auto``: each parameter whose standard
+error, with the others, is small against its value); a parameter the data cannot determine is
+reported as such and left at its value, not fitted to noise.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..data import TimeSeries
+from ..progress import log
+from ..stats import rms
+from .fitters import FIT_OPTIONS, residual
+
+#: a parameter is determined by the data when its standard error is below this share of its value
+DETERMINED = 0.1
+#: resamples of the block bootstrap
+RESAMPLES = 200
+
+
+def jacobian(model, data: TimeSeries, params: dict, names: list[str]):
+    """(residual vector over measured entries, its Jacobian in ``names``) at ``params``."""
+    from ..fit import FitProblem
+
+    fixed = {k: v for k, v in params.items() if k not in names}
+    problem = FitProblem(model, data, names, fixed=fixed, options=FIT_OPTIONS)
+    res = problem.simulate([params[n] for n in names], gradient=True)
+    if not res.ok:
+        return None, None
+    r = (data.select(problem.outputs).values - res.outputs[:, problem.idx])
+    S = res.sensitivities[:, problem.idx, :]
+    ok = np.isfinite(r)
+    return r[ok], S[ok]
+
+
+def covariance(r: np.ndarray, J: np.ndarray) -> np.ndarray:
+    """s^2 (J^T J)^+ with s^2 = RSS / (n - k): the parameters' covariance at a least-squares fit."""
+    n, k = J.shape
+    return float(r @ r) / max(n - k, 1) * np.linalg.pinv(J.T @ J)
+
+
+def bootstrap(r: np.ndarray, J: np.ndarray, blocks: int = 40, seed: int = 0) -> np.ndarray:
+    """Standard errors from the spread of the Gauss-Newton steps (J^T J)^+ J^T r* over residuals
+    r* resampled in blocks (``blocks`` of them, drawn with replacement: each block keeps the
+    residual's correlation within it)."""
+    n = len(r)
+    H = np.linalg.pinv(J.T @ J)
+    size = max(n // blocks, 1)
+    pieces = [np.arange(s, min(s + size, n)) for s in range(0, n, size)]
+    centred = r - r.mean()
+    rng = np.random.default_rng(seed)
+    steps = []
+    for _ in range(RESAMPLES):
+        rs = np.concatenate([centred[pieces[c]] for c in rng.integers(0, len(pieces), len(pieces))])[:n]
+        steps.append(H @ (J.T @ np.pad(rs, (0, n - len(rs)))))
+    return np.std(steps, axis=0)
+
+
+def uncertainty(model, data: TimeSeries, params: dict, laws: list[dict]) -> None:
+    """Standard errors, 95% intervals and curve bands of the learned laws ``laws`` (each with
+    ``names``: its parameters in ``model``, ``active``, ``held``, ``template``, ``curve_x``),
+    written into each law dict (``parameters`` and ``band``)."""
+    from ..services import registry
+
+    names = [n for law in laws for n, on, held in zip(law["names"], law["active"], law["held"]) if on and not held]
+    if not names:
+        return
+    r, J = jacobian(model, data, params, names)
+    if r is None:
+        return
+    cov, boot = covariance(r, J), bootstrap(r, J)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    at = {n: k for k, n in enumerate(names)}
+    for law in laws:
+        rows = []
+        for n, on, held in zip(law["names"], law["active"], law["held"]):
+            if on and not held:
+                k = at[n]
+                v = params[n]
+                rows.append({"name": n, "value": v, "std_error": float(se[k]), "bootstrap_std_error": float(boot[k]),
+                             "ci95": [v - 1.96 * float(se[k]), v + 1.96 * float(se[k])]})
+        law["parameters"] = rows
+        template = registry().template(law["template"])
+        xs = np.asarray(law["curve_x"], float)
+        own = [at[n] for n, on, held in zip(law["names"], law["active"], law["held"]) if on and not held]
+        g = _gradient(template, np.asarray(law["w"], float), np.asarray(law["active"], bool), xs)
+        if g is not None and len(own) == g.shape[1]:
+            C = cov[np.ix_(own, own)]
+            law["band"] = np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", g, C, g), 0.0)).tolist()
+
+
+def _gradient(template, w, active, xs):
+    """d curve / d w_k at ``xs`` for the active, non-held parameters (numerically: the curve of
+    any template, explicit or solved)."""
+    base = template.curve(w * active, xs)
+    if not np.all(np.isfinite(base)):
+        return None
+    cols = []
+    for k in np.flatnonzero(active)[1:]:
+        h = 1e-6 * max(abs(w[k]), 1e-3)
+        wp = (w * active).copy()
+        wp[k] += h
+        cols.append((template.curve(wp, xs) - base) / h)
+    return np.column_stack(cols) if cols else None
+
+
+def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dict, laws: list[str],
+              free, outputs, held=()) -> dict:
+    """The laws' parameters ``laws`` refitted together with the nominal parameters ``free``
+    (names, or "auto": those the data determine). Returns what was freed, what the data cannot
+    determine, the values with standard errors, and the training and validation RMS."""
+    from ..fit import FitProblem, LevenbergMarquardt
+    from ..services import simulate
+
+    nominal = [n for n in model.ode.p_names if n not in laws and n not in held and np.isfinite(params[n])]
+    asked = nominal if free == "auto" else list(free)
+    unknown = [n for n in asked if n not in model.ode.p_names]
+    if unknown:
+        from ..errors import ConfigError, did_you_mean
+
+        raise ConfigError(f"free: {unknown[0]} is not a free parameter of the model"
+                          f"{did_you_mean(unknown[0], nominal)}")
+    candidates = [n for n in asked if params[n] != 0.0 and n not in laws]
+    r, J = jacobian(model, train, params, laws + candidates)
+    if r is None:
+        return {"error": "the extended model does not simulate the training data"}
+    determined, undetermined = _determined(r, J, laws, candidates, params, strict=free == "auto")
+    log.info("      calibration: %s refitted with the laws%s", ", ".join(determined) or "nothing",
+             f"; not determined by the data: {', '.join(undetermined)}" if undetermined else "")
+    names = laws + determined
+    fixed = {k: v for k, v in params.items() if k not in names}
+    problem = FitProblem(model, train, names, fixed=fixed, options=FIT_OPTIONS)
+    res = LevenbergMarquardt(max_simulations=60, axis=None, tol=1e-6).fit(problem, [params[n] for n in names])
+    new = {**params, **dict(zip(names, map(float, res.w)))}
+    r2, J2 = jacobian(model, train, new, names)
+    cov = covariance(r2, J2) if r2 is not None else np.full((len(names), len(names)), np.nan)
+    se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    out = {"freed": determined, "not_determined": undetermined,
+           "values": {n: {"before": params[n], "after": new[n], "std_error": float(se[k])} for k, n in enumerate(names)
+                      if n in determined}}
+    sim = simulate(model, train, new)
+    out["train_rms"] = rms(residual(train, model, sim, outputs)) if sim.ok else None
+    if validate is not None:
+        sv = simulate(model, validate, new)
+        out["validation_rms"] = rms(residual(validate, model, sv, outputs)) if sv.ok else None
+    out["params"] = new
+    return out
+
+
+def _determined(r, J, laws, candidates, params, strict: bool) -> tuple[list[str], list[str]]:
+    """Which of ``candidates`` the data determine together with the laws: added in order of how
+    much the outputs depend on them, each kept while every parameter's relative standard error
+    stays below :data:`DETERMINED` (with ``strict``; asked-for ones only need a finite one)."""
+    n_law = len(laws)
+    order = sorted(range(len(candidates)), key=lambda k: -np.linalg.norm(J[:, n_law + k]) * abs(params[candidates[k]]))
+    chosen, left = [], []
+    for k in order:
+        cols = list(range(n_law)) + [n_law + j for j in chosen] + [n_law + k]
+        cov = covariance(r, J[:, cols])
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        rel = se[-1] / max(abs(params[candidates[k]]), 1e-300)
+        # conditioning of the columns scaled to unit norm: a coefficient of 1e11 (a cubic in
+        # millimetres) is not ill-determined for its size alone
+        Jc = J[:, cols] / np.maximum(np.linalg.norm(J[:, cols], axis=0), 1e-300)
+        cond = np.linalg.cond(Jc) if Jc.size else np.inf
+        if np.isfinite(rel) and cond < 1e8 and (rel < DETERMINED or not strict):
+            chosen.append(k)
+        else:
+            left.append(k)
+    return [candidates[k] for k in chosen], [candidates[k] for k in left]

@@ -1,0 +1,418 @@
+"""The learned laws written as Modelica: classes that look native, and the user's model with them.
+
+:func:`learned_class` writes a learned law as a class of the package ``Learned``: it extends the
+nominal class's own two-connector interface (MSL's ``OnePort``, ``PartialCompliant``...; the
+law then reads in that interface's variables, orientation and units), its coefficients are
+parameters with units and descriptions (terms the pruning removed are left out), its icon is the
+nominal class's, and a Documentation annotation gives the law, the range it was learned on, the
+data, the evidence and the confidence. Where no such interface is found, the class declares the
+component's own connectors and its law in v (across a - b) and i (the flow into a).
+
+:func:`write_extended` copies the user's sources and changes, in the copy, each learned
+component's declaration to its learned class (nothing else the user wrote changes: imports,
+initial equations, modifiers, annotations).
+"""
+from __future__ import annotations
+
+import dataclasses
+import html
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+LEARNED_PACKAGE = "Learned"
+
+
+def _library(libraries=(), sources=()):
+    """Class lookup (:class:`mcl.compile.classes.LibraryClasses`) in the libraries on the path and
+    the user's own files."""
+    from ..compile.classes import LibraryClasses
+    from ..compile.library import available, library_path
+    from ..compile.sources import checked, expand, top_level_names
+
+    libs = dict(available(library_path(libraries)))
+    try:
+        files = expand(checked(sources))
+    except Exception:  # noqa: BLE001 - the sources compiled; this is only for naming
+        files = []
+    for f in files:
+        if f.name == "package.mo":
+            libs.setdefault(f.parent.name.split(" ")[0], f.parent)
+        else:
+            for n in top_level_names([f], {f: f.read_text(errors="replace")}):
+                libs.setdefault(n, f)
+    return LibraryClasses(libs)
+
+
+def connector_classes(comp, libraries=(), sources=()) -> dict[str, str]:
+    """The class of each of ``comp``'s connectors, read from its class's declarations (through
+    what it extends), in the libraries on the path and the user's own files."""
+    lib = _library(libraries, sources)
+    info = lib.find(comp.cls) if comp.cls else None
+    out = {}
+    if info is not None:
+        for _prefixes, cls, _type, member, _cond in lib.members(info):
+            if cls is not None and cls.kind == "connector":
+                out[member] = cls.name
+    return out
+
+
+def interface_of(comp, lib) -> str | None:
+    """The partial class the nominal class extends that declares both its connectors and the
+    domain's law variables (MSL's OnePort, PartialCompliant, Element1D; MCL's TwoPin), or None."""
+    from .words import words
+
+    info = lib.find(comp.cls) if comp.cls else None
+    if info is None:
+        return None
+    wd = words(comp)
+    need = {c.name for c in comp.connectors} | {wd.across.split(".", 1)[1], wd.flow.split(".", 1)[1]}
+    todo, seen = list(info.extends), set()
+    scope = info.name.rsplit(".", 1)[0]
+    while todo:
+        name = todo.pop(0)
+        base = lib.resolve(name, scope) or lib.resolve(name, info.name)
+        if base is None or base.name in seen:
+            continue
+        seen.add(base.name)
+        members = {m for *_rest, m, _c in lib.members(base)}
+        if need <= members:
+            return base.name
+        todo += base.extends
+        scope = base.name.rsplit(".", 1)[0]
+    return None
+
+
+def _class_text(qualified: str, lib) -> str | None:
+    """The raw text of class ``qualified`` (annotations included), from its file."""
+    parts = qualified.split(".")
+    where = lib.libraries.get(parts[0])
+    if where is None:
+        return None
+    path, rest = where, parts[1:]
+    if where.is_dir():
+        while rest and (path / rest[0]).is_dir():
+            path, rest = path / rest[0], rest[1:]
+        path = path / f"{rest[0]}.mo" if rest and (path / f"{rest[0]}.mo").is_file() else path / "package.mo"
+    try:
+        text = path.read_text(errors="replace")
+    except OSError:
+        return None
+    short = parts[-1]
+    m = re.search(rf"(?m)^[ \t]*(?:(?:partial|encapsulated|final|replaceable|redeclare)\s+)*(model|block|class)\s+"
+                  rf"{re.escape(short)}\b", text)
+    end = m and re.search(rf"\bend\s+{re.escape(short)}\s*;", text[m.end():])
+    return text[m.start(): m.end() + end.end()] if m and end else None
+
+
+def _balanced(text: str, start: int) -> str:
+    """``text[start:]`` up to the parenthesis that closes the one at ``start``."""
+    depth = 0
+    for k in range(start, len(text)):
+        depth += {"(": 1, ")": -1}.get(text[k], 0)
+        if depth == 0:
+            return text[start:k + 1]
+    return text[start:]
+
+
+def icon_of(qualified: str, lib) -> str | None:
+    """The ``Icon(...)`` of a class's annotation (what OMEdit and Dymola draw), or None."""
+    text = _class_text(qualified, lib)
+    if not text:
+        return None
+    m = re.search(r"\bIcon\s*\(", text)
+    if not m:
+        return None
+    icon = "Icon" + _balanced(text, text.index("(", m.start()))
+    # the nominal class's parameters are not the learned class's: no visibility by them, and a
+    # label that showed one (R=%R) names the law instead
+    icon = re.sub(r"\bvisible\s*=\s*[A-Za-z_]\w*\s*,", "", icon)
+    return re.sub(r'textString\s*=\s*"[^"]*%(?!name\b)\w+[^"]*"', 'textString="learned"', icon)
+
+
+def _unit_power(unit: str, power: int) -> str | None:
+    """``unit`` raised to ``power`` in Modelica's unit syntax, for a plain unit (V, m, K, rad)."""
+    if not unit or not re.fullmatch(r"[A-Za-z]+", unit):
+        return None
+    return unit if power == 1 else f"{unit}{power}"
+
+
+def coefficient_unit(term, units: dict) -> str | None:
+    """The unit of a coefficient of ``term`` in a law y = sum c_k term_k (``units``: y, v, i,
+    dv, di's units; dv's is v's per second): y's unit over the term's; None where a unit is not
+    plain or the term not a monomial (tanh(dv/s) has no unit: its coefficient takes y's)."""
+    y = units.get("y")
+    if not y or not re.fullmatch(r"[A-Za-z]+", y):
+        return None
+    powers = getattr(term, "powers", None)
+    if powers is None or not isinstance(powers, tuple):
+        return y if not getattr(term, "variables", None) or term.degree == 0 else None
+    num, den = [y], []
+    for var, p in powers:
+        base = units.get("v" if var == "dv" else "i" if var == "di" else var)
+        part = _unit_power(base, p)
+        if part is None:
+            return None
+        den.append(part)
+        if var in ("dv", "di"):
+            num.append("s" if p == 1 else f"s{p}")
+    if not den:
+        return y
+    return f"{'.'.join(num)}/{'.'.join(den) if len(den) == 1 else '(' + '.'.join(den) + ')'}"
+
+
+def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | None = None, data: str = "") -> str:
+    """The learned law as a Modelica class that looks native: it extends the nominal class's
+    interface when one is found (else it declares the component's own connectors), its
+    coefficients are parameters with units and descriptions, zero terms are left out, its icon
+    is the nominal class's and its documentation says what was learned, on what, how surely."""
+    from ..services import registry
+
+    template = registry().template(cause["template"])
+    lib = _library(libraries, sources)
+    interface = interface_of(comp, lib) if template.explicit == "i" and hasattr(template, "terms") else None
+    if interface is None:
+        return _template_class(cause, comp, template, libraries, sources)
+    from .words import parity, words
+
+    wd = words(comp)
+    local = lambda q: q.split(".", 1)[1] if not q.startswith("der(") else f"der({q[4:-1].split('.', 1)[1]})"
+    names = {"v": local(wd.across), "dv": local(wd.rate), "i": local(wd.flow)}
+    w = np.asarray(cause["w"], float)
+    if wd.flipped:        # the interface's orientation (b - a): odd terms change sign
+        signs = np.array([parity(t, getattr(template, "scales", None)) for t in template.terms])
+        if (signs == 0).any():
+            return _template_class(cause, comp, template, libraries, sources)
+        w = w.copy()
+        w[:len(signs)] *= signs * signs[0]
+    scales = dict(zip(template.scales, w[len(template.terms):])) if getattr(template, "scales", None) else {}
+    u = {"y": (units or {}).get(wd.flow), "v": (units or {}).get(wd.across), "i": (units or {}).get(wd.flow)}
+    params, rhs = [], []
+    for k, (term, c) in enumerate(zip(template.terms[1:], w[1:len(template.terms)]), start=1):
+        if c == 0:
+            continue
+        text = term.modelica()
+        for s_name, s_val in scales.items():
+            text = re.sub(rf"\b{s_name}\b", f"{s_val:.6g}", text)
+        text = re.sub(r"\b(dv|di|v|i)\b", lambda m: names.get(m.group(1), m.group(1)), text)
+        pname = f"c{len(params) + 1}"
+        unit = coefficient_unit(term, u)
+        unit_mod = f'(unit="{unit}")' if unit else ""
+        params.append(f'  parameter Real {pname}{unit_mod} = {float(c)!r} "coefficient of {html.escape(text)}";')
+        rhs.append(f"{pname}*{text}" if text != "1" else pname)
+    law = f"{names['i']} = {' + '.join(rhs) or '0'};"
+    icon = icon_of(comp.cls, lib)
+    doc = _documentation(cause, data)
+    annotation = f"  annotation({icon + ', ' if icon else ''}Documentation(info=\"{doc}\"));"
+    return (f'model {cause["learned_class"]} "{comp.cls.split(".")[-1]} {comp.name} as learned by mcl: '
+            f'{html.escape(cause["law"]["equation"])}"\n  extends {interface};\n' + "\n".join(params)
+            + f"\nequation\n  {law}\n{annotation}\nend {cause['learned_class']};\n")
+
+
+def _documentation(cause: dict, data: str) -> str:
+    """The Documentation annotation's HTML: the law, where it holds, the data, the evidence, how sure."""
+    law, ev = cause["law"], cause["evidence"]
+    rows = [f"<p>Learned by mcl for <b>{html.escape(cause['component'])}</b> "
+            f"({html.escape(cause.get('class') or '')}):</p>",
+            f"<pre>{html.escape(law['equation'])}</pre><p>where {html.escape(law.get('where', ''))}.</p>",
+            f"<p>{html.escape(law.get('note', ''))}.</p>"]
+    if data:
+        rows.append(f"<p>Data: {html.escape(data)}.</p>")
+    rows.append(f"<p>Evidence: {html.escape(str(ev.get('strength')))} "
+                f"(&Delta;{html.escape(str(ev.get('criterion', '')).upper())} {ev.get('delta_to_next', 0):.3g} "
+                f"to the next explanation).</p>")
+    params = law.get("parameters") or []
+    names, terms = cause.get("parameters") or [], cause.get("terms") or []
+    term_of = dict(zip(names, terms))
+    if params:
+        rows.append("<p>95% intervals of the coefficients: " + "; ".join(
+            f"{html.escape(term_of.get(p['name'].split('.')[-1], p['name']))}: {p['value']:.4g} "
+            f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]" for p in params) + ".</p>")
+    return "".join(rows).replace('"', "'")
+
+
+def _template_class(cause: dict, comp, template, libraries, sources) -> str:
+    """The law as a class declaring the component's own connectors, in v (a - b) and i (into a)."""
+    classes = connector_classes(comp, libraries, sources)
+    conns = [dataclasses.replace(c, cls=classes.get(c.name, c.cls)) for c in comp.connectors]
+    unresolved = [c.name for c in conns if c.cls.startswith("connector(")]
+    if unresolved:
+        raise ValueError(f"the connector classes of {comp.name} ({comp.cls or 'class unknown'}) are not found")
+    note = "; " + cause["law"]["note"]
+    return template.modelica_class(cause["learned_class"], dataclasses.replace(comp, connectors=conns),
+                                   np.asarray(cause["w"]), note)
+
+
+def _statement_end(text: str, start: int) -> int:
+    """Index just past the ';' that ends the statement starting at ``start`` (strings and
+    parentheses skipped)."""
+    depth, k, n = 0, start, len(text)
+    while k < n:
+        ch = text[k]
+        if ch == '"':
+            k += 1
+            while k < n and text[k] != '"':
+                k += 2 if text[k] == "\\" else 1
+        elif ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        elif ch == ";" and depth == 0:
+            return k + 1
+        k += 1
+    return n
+
+
+def _arguments(text: str) -> list[str]:
+    """The top-level comma-separated arguments of a modification."""
+    out, depth, cur = [], 0, ""
+    for ch in text:
+        depth += {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0)
+        if ch == "," and depth == 0:
+            out.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return [a for a in [*out, cur] if a.strip()]
+
+
+def redeclared(text: str, model_short: str, component: str, new_class: str, keep=("v", "i")) -> str | None:
+    """``text`` with the declaration of ``component`` inside class ``model_short`` changed to
+    ``new_class``: of its modification only what modifies the learned class's own variables
+    ``keep`` stays (a start value, fixed = true; the nominal class's parameters go), its
+    comment and annotation stay. None when that declaration is not in the class."""
+    head = re.search(rf"(?m)(?:^|[\s;])(?:(?:partial|encapsulated|final)\s+)*(?:model|block|class)\s+{re.escape(model_short)}\b",
+                     text)
+    if not head:
+        return None
+    end = re.search(rf"\bend\s+{re.escape(model_short)}\s*;", text[head.end():])
+    body_end = head.end() + (end.start() if end else len(text) - head.end())
+    decl = re.compile(rf"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)"
+                      rf"([A-Za-z_][\w.]*)(\s+){re.escape(component)}\b")
+    for m in decl.finditer(text, head.end(), body_end):
+        if m.group(4) in ("connect", "end", "equation", "import", "extends", "parameter", "constant"):
+            continue
+        stop = _statement_end(text, m.end())
+        rest = text[m.end():stop]
+        if rest.lstrip().startswith("("):          # the modification, nested parentheses and all
+            k0, depth = rest.index("("), 0
+            for k in range(k0, len(rest)):
+                depth += {"(": 1, ")": -1}.get(rest[k], 0)
+                if depth == 0:
+                    break
+            kept = [a for a in _arguments(rest[k0 + 1:k]) if re.match(rf"\s*(?:each\s+|final\s+)*({'|'.join(keep)})\b", a)]
+            rest = (f"({', '.join(a.strip() for a in kept)})" if kept else "") + rest[k + 1:]
+        return text[:m.start(4)] + new_class + m.group(5) + component + rest + text[stop:]
+    return None
+
+
+def write_extended(causes: list[dict], base, spec, directory: Path, data: str = "") -> tuple[list[Path], str, Path, list[str]]:
+    """The extended model as Modelica in ``directory``: the package ``Learned`` with the learned
+    classes, and a copy of the user's sources (or of the model's class) in which each learned
+    component is declared with its learned class. Returns (sources, model name, the Learned
+    package file, notes on what could not be written)."""
+    from ..compile.library import uses_annotation
+
+    directory.mkdir(parents=True, exist_ok=True)
+    notes, classes, swaps = [], [], []
+    for cause in causes:
+        comp = base.structure.components[cause["component"]]
+        if "." in comp.name:
+            notes.append(f"{comp.name} is inside a component: its learned class is in the package, "
+                         "the model is not rewritten for it")
+        try:
+            classes.append(learned_class(cause, comp, spec.libraries, spec.sources, base.model.info.get("units", {}),
+                                         data))
+        except ValueError as exc:
+            notes.append(str(exc))
+            continue
+        if "." not in comp.name:
+            swaps.append((comp.name, f"{LEARNED_PACKAGE}.{cause['learned_class']}"))
+    short = spec.model_name.split(".")[-1]
+    sources, model_name, extra = [], spec.model_name, ""
+    if spec.sources:
+        for src in spec.sources:
+            target = directory / src.name
+            if src.is_dir():
+                shutil.copytree(src, target, dirs_exist_ok=True)
+            else:
+                shutil.copyfile(src, target)
+            sources.append(target)
+        files = [f for s in sources for f in ([s] if s.is_file() else sorted(s.rglob("*.mo")))]
+    else:
+        text = _library_class_text(spec.model_name, spec.libraries)
+        if text is None:
+            notes.append(f"the class {spec.model_name} is not found as text: the model is not rewritten")
+        else:
+            extra, model_name = text, f"{LEARNED_PACKAGE}.{short}"
+        files = []
+    for name, cls in swaps:
+        done = False
+        for owner in _class_and_bases(short, [f.read_text(errors="replace") for f in files] + [extra]):
+            for f in files:
+                new = redeclared(f.read_text(errors="replace"), owner, name, cls)
+                if new is not None:
+                    f.write_text(new)
+                    done = True
+                    break
+            if extra and not done:
+                new = redeclared(extra, owner, name, cls)
+                if new is not None:
+                    extra, done = new, True
+            if done:
+                break
+        if not done:
+            notes.append(f"the declaration of {name} is not in {spec.model_name}'s own text: the model is not rewritten for it")
+    body = "\n".join(classes) + (f"\n{extra}" if extra else "")
+    indented = "\n".join(("  " + line) if line.strip() else "" for line in body.splitlines())
+    uses = uses_annotation(body, spec.libraries)
+    package = directory / f"{LEARNED_PACKAGE}.mo"
+    package.write_text(f'package {LEARNED_PACKAGE} "Components learned by mcl"\n{indented}\n'
+                       + (f"  {uses};\n" if uses else "") + f"end {LEARNED_PACKAGE};\n")
+    return [*sources, package], model_name, package, notes
+
+
+def _class_and_bases(short: str, texts: list[str]) -> list[str]:
+    """``short`` and the classes it extends, transitively (short names, as found in ``texts``):
+    where a component may be declared. (The copy of a base class declares the learned class
+    for every model of the copy that extends it.)"""
+    out, todo = [], [short]
+    while todo:
+        name = todo.pop(0)
+        if name in out:
+            continue
+        out.append(name)
+        for text in texts:
+            head = re.search(rf"(?:^|[\s;])(?:model|block|class)\s+{re.escape(name)}\b", text or "")
+            if not head:
+                continue
+            end = re.search(rf"\bend\s+{re.escape(name)}\s*;", text[head.end():])
+            body = text[head.end(): head.end() + (end.start() if end else 0)]
+            todo += [b.split(".")[-1] for b in re.findall(r"\bextends\s+([\w.]+)", body)]
+            break
+    return out
+
+
+def _library_class_text(model: str, libraries=()) -> str | None:
+    """The text of class ``model`` from the library it is in (for a model given by name only)."""
+    from ..compile.library import available, library_path
+
+    parts = model.split(".")
+    where = available(library_path(libraries)).get(parts[0])
+    if where is None:
+        return None
+    path = where
+    rest = parts[1:]
+    if where.is_dir():
+        while rest and (path / rest[0]).is_dir():
+            path, rest = path / rest[0], rest[1:]
+        path = path / f"{rest[0]}.mo" if rest and (path / f"{rest[0]}.mo").is_file() else path / "package.mo"
+    text = path.read_text(errors="replace")
+    short = parts[-1]
+    m = re.search(rf"(?m)^[ \t]*(?:(?:partial|encapsulated)\s+)?(model|block|class)\s+{re.escape(short)}\b", text)
+    end = m and re.search(rf"\bend\s+{re.escape(short)}\s*;", text[m.end():])
+    if not m or not end:
+        return None
+    return text[m.start(): m.end() + end.end()].strip() + "\n"
