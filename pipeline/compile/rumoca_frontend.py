@@ -23,7 +23,7 @@ from .sources import first_line
 from ..errors import ModelicaError, UnsupportedConstruct
 
 def _int(a) -> int:
-    return int(round(float(ca.evalf(a))))
+    return int(round(float(a) if a.is_constant() else float(ca.evalf(a))))
 
 
 _UNARY = {"negate": lambda a: -a, "plus": lambda a: a, "not": ca.logic_not}
@@ -434,6 +434,10 @@ class _Translator:
                             if isinstance(r, dict) and "relation" in r}
         self.relations: list[ca.SX] = []   # lhs - rhs of the event-generating relations met
         self.span = None                   # provenance of what is being translated (for errors)
+        self.fn_asserts: list = []         # (violated, level, message) of asserts in functions called
+        self._compiled: dict = {}          # (function, argument pattern) -> SX Function
+        self._function_tags: dict = {}     # its name -> (number of outputs, [(level, message)])
+        self._unassigned: dict = {}        # its name -> outputs it never assigns
 
     def operands(self, k: int) -> list[int]:
         body = self.nodes[k][next(iter(self.nodes[k]))]
@@ -454,11 +458,20 @@ class _Translator:
             return [body["operand"]]
         if kind == "binary":
             return [body["lhs"], body["rhs"]]
-        if kind in ("conditional", "builtin", "call", "array"):
+        if kind == "call":           # a second output's call names the first as its owner
+            return self.operands(body.get("owner", k))
+        if kind == "builtin" and self.strings_size(k) is not None:
+            return self.operands(k)[1:]
+        if kind in ("conditional", "builtin", "array"):
             return self.operands(k)
-        if kind == "index":
+        if kind in ("index", "array_update"):
             subs = self.subscripts[self.sub_offsets[k]: self.sub_offsets[k] + body["subscript_count"]]
-            return [body["base"]] + [n for s in subs for sk, n in s["kind"].items() if sk == "index"]
+            value = [body["value"]] if kind == "array_update" else []
+            return [body["base"], *value] + [n for s in subs if isinstance(s["kind"], dict)
+                                             for sk, n in s["kind"].items() if sk in ("index", "slice")]
+        if kind == "range":
+            return [n for n in (body["start_expression"], body.get("explicit_step_expression"),
+                                body["stop_expression"]) if n is not None]
         if kind == "field":
             return [body["base"]]
         if kind == "record":
@@ -517,6 +530,8 @@ class _Translator:
                 self.refuse(f"operator '{op}'")
             lhs, rhs = done[body["lhs"]], done[body["rhs"]]
             out = _BINARY[op](lhs, rhs)
+            if out is NotImplemented:
+                self.refuse(f"operator {op!r} on values of shapes {getattr(lhs, 'shape', lhs)} and {getattr(rhs, 'shape', rhs)}")
             if op in _RELATIONS and bound is None and k in self.event_nodes and lhs.numel() == rhs.numel() == 1:
                 self.relations.append(lhs - rhs)
             return out
@@ -527,33 +542,140 @@ class _Translator:
                 out = ca.if_else(ops[j], ops[j + 1], out)
             return out
         if kind == "builtin":
+            n = self.strings_size(k)
+            if n is not None:
+                return ca.SX(n)
             return self.call_builtin(body["builtin"], [done[o] for o in self.operands(k)])
         if kind == "call":
-            return self.call_function(body, [done[o] for o in self.operands(k)])
+            return self.call_function(body, [done[o] for o in self.operands(body.get("owner", k))])
         if kind in ("array", "record"):      # a record: its fields flattened, in order
             return ca.vertcat(*[ca.vec(done[o]) for o in self.operands(k)])
         if kind == "field":
             return self.field(body, done)
         if kind == "index":
             return self.element(k, body, done)
+        if kind == "array_update":
+            return self.updated(k, body, done)
+        if kind == "comprehension":
+            return self.comprehension(body, bound)
+        if kind == "range":
+            return ca.SX(self.range_values(body, done))
         if kind == "function_value":
             try:
-                return bound["values"][body["value"]][body["definition_ordinal"]]
+                return bound["values"][body["definition_ordinal"]]
             except (TypeError, KeyError, IndexError):
                 self.refuse("a function variable read before it is assigned")
         self.refuse(f"expression node '{kind}'")
+
+    def strings_size(self, k: int) -> int | None:
+        """``size(a, 1)`` of an array of strings (a medium's names): its length, which is all
+        that is read of strings in equations."""
+        node = self.nodes[k]
+        if node.get("builtin", {}).get("builtin", "").split(".")[-1] != "size":
+            return None
+        ops = self.operands(k)
+        arr = self.nodes[ops[0]] if ops else None
+        if not (isinstance(arr, dict) and "array" in arr):
+            return None
+        items = [self.nodes[o] for o in self.operands(ops[0])]
+        if not items or not all(isinstance(i, dict) and "string" in i.get("literal", {}) for i in items):
+            return None
+        if len(ops) > 1 and not (isinstance(self.nodes[ops[1]], dict)
+                                 and self.nodes[ops[1]].get("literal", {}).get("integer") == 1):
+            return None
+        return len(items)
+
+    def binders(self, d: int, outer: bool = True) -> list:
+        """(domain, binder id, range of values) of a domain's binders (its parents' first)."""
+        out = []
+        while d is not None:
+            dom = self.st["domains"][d]
+            out = [(d, b["id"], range(b["lower"], b["upper"] + (1 if b["step"] > 0 else -1), b["step"]))
+                   for b in dom["domain"]["binders"]] + out
+            d = dom.get("parent") if outer else None
+        return out
+
+    def comprehension(self, body: dict, bound) -> ca.SX:
+        """``{f(i) for i in 1:n}``: the body at each value of the domain's binders (row-major);
+        binders of an enclosing loop keep the values they have."""
+        bound = bound or {"params": {}, "values": {}, "binders": {}}
+        binders = [b for b in self.binders(body["domain"]) if (b[0], b[1]) not in bound["binders"]]
+        out = []
+        for values in itertools.product(*[r for _, _, r in binders]):
+            inner = {**bound, "binders": {**bound["binders"], **{(d, i): v for (d, i, _), v in zip(binders, values)}}}
+            out.append(ca.vec(self.sx(body["body"], inner)))
+        return ca.vertcat(*out) if out else ca.SX(0, 1)
+
+    def range_values(self, body: dict, done: dict) -> list[float]:
+        """``start:step:stop`` with constant bounds, as its values."""
+        ends = [done[body["start_expression"]], done[body["stop_expression"]]]
+        step = done[body["explicit_step_expression"]] if body.get("explicit_step_expression") is not None else ca.SX(1)
+        if not all(e.is_constant() for e in (*ends, step)):
+            self.refuse("a range whose bounds are not constant")
+        a, b, h = float(ends[0]), float(ends[1]), float(step)
+        if h == 0:
+            self.refuse("a range with step 0")
+        n = int(np.floor((b - a) / h + 1e-9)) + 1
+        return [a + j * h for j in range(max(n, 0))]
+
+    def subscript(self, k: int, body: dict, done: dict):
+        """The one subscript of node ``k``: an index (1-based, an expression), the indices of a
+        slice (a list), or None for the whole array."""
+        subs = self.subscripts[self.sub_offsets[k]: self.sub_offsets[k] + body["subscript_count"]]
+        if len(subs) != 1:
+            self.refuse("an array of more than one dimension subscripted")
+        if subs[0]["kind"] == "whole":
+            return None
+        if not isinstance(subs[0]["kind"], dict):
+            self.refuse(f"a '{subs[0]['kind']}' subscript")
+        kind, node = next(iter(subs[0]["kind"].items()))
+        if kind == "slice":
+            target = self.nodes[node]
+            if isinstance(target, dict) and "range" in target:
+                return [int(round(v)) for v in self.range_values(target["range"], done)]
+            values = done[node]
+            if not values.is_constant():
+                self.refuse("a slice whose indices are not constant")
+            return [int(round(v)) for v in np.array(ca.DM(values)).ravel()]
+        if kind != "index":
+            self.refuse(f"a '{kind}' subscript")
+        return done[node]
+
+    def updated(self, k: int, body: dict, done: dict) -> ca.SX:
+        """``a`` with ``a[i] := v`` (a function's assignment to an element)."""
+        base, value, i = ca.vec(done[body["base"]]), done[body["value"]], self.subscript(k, body, done)
+        out = ca.SX(base)
+        if i is None or isinstance(i, list):        # a[:] := v, a[2:3] := v
+            idx = list(range(1, base.numel() + 1)) if i is None else i
+            value = ca.vec(value)
+            if value.numel() not in (1, len(idx)) or not all(1 <= j <= base.numel() for j in idx):
+                self.refuse("an assignment to a slice of another size")
+            for n, j in enumerate(idx):
+                out[j - 1] = value[n] if value.numel() > 1 else value[0]
+            return out
+        if value.numel() != 1:
+            self.refuse("an assignment of an array to an element")
+        if i.is_constant():
+            j = _int(i) - 1
+            if not 0 <= j < base.numel():
+                self.refuse(f"subscript {j + 1} outside an array of {base.numel()}")
+            out[j] = value
+            return out
+        for j in range(base.numel()):
+            out[j] = ca.if_else(i == j + 1, value, base[j])
+        return out
 
     def element(self, k: int, body: dict, done: dict):
         """``a[i]`` (1-based) of a vector (arrays are held flattened); a subscript that is not a
         constant selects among the elements with a conditional."""
         base = done[body["base"]]
-        subs = self.subscripts[self.sub_offsets[k]: self.sub_offsets[k] + body["subscript_count"]]
-        if len(subs) != 1:
-            self.refuse("an array of more than one dimension subscripted")
-        kind, node = next(iter(subs[0]["kind"].items()))
-        if kind != "index":
-            self.refuse(f"a '{kind}' subscript (slices are not translated)")
-        i = done[node]
+        i = self.subscript(k, body, done)
+        if i is None:
+            return base
+        if isinstance(i, list):
+            if not all(1 <= j <= base.numel() for j in i):
+                self.refuse(f"a slice outside an array of {base.numel()}")
+            return ca.vertcat(*[base[j - 1] for j in i]) if i else ca.SX(0, 1)
         if not i.is_constant():
             out = ca.SX(0)      # the element whose index i is: a chain of conditionals
             for j in range(base.numel() - 1, -1, -1):
@@ -572,16 +694,33 @@ class _Translator:
             n *= sum(self.size_of(f["value_type"]) for f in t.get("record_fields", []))
         return n
 
+    def record_type(self, k: int) -> int:
+        """The value type of node ``k``, a record value: a call's output, a constructor, a
+        function's parameter or variable, a field of one, either branch of a conditional."""
+        node = self.nodes[k]
+        kind = next(iter(node)) if isinstance(node, dict) else node
+        body = node[kind] if isinstance(node, dict) else None
+        if kind == "call":
+            return self.functions[body["function"]]["outputs"][body.get("output", 0)]["value_type"]
+        if kind == "record":
+            return body["value_type"]
+        if kind == "function_value":
+            f = self.functions[body["function"]]
+            held = [*f.get("outputs", []), *f.get("locals", [])]
+            return held[body["value"]]["value_type"]
+        if kind == "coordinate" and isinstance(body, dict) and "function_parameter" in body:
+            ref = body["function_parameter"]
+            return self.functions[ref["function"]]["parameters"][ref["ordinal"]]["value_type"]
+        if kind == "field":
+            fields = self.st["value_types"][self.record_type(body["base"])].get("record_fields", [])
+            return fields[body["field"]]["value_type"]
+        if kind == "conditional":
+            return self.record_type(self.operands(k)[1])
+        self.refuse(f"a record field of a '{kind}' expression")
+
     def field(self, body: dict, done: dict):
         """Field ``body["field"]`` of a record value (a record-valued call or constructor)."""
-        base = self.nodes[body["base"]]
-        kind = next(iter(base)) if isinstance(base, dict) else base
-        if kind == "call":
-            vt = self.functions[base[kind]["function"]]["outputs"][base[kind].get("output", 0)]["value_type"]
-        elif kind == "record":
-            vt = base[kind]["value_type"]
-        else:
-            self.refuse(f"a record field of a '{kind}' expression")
+        vt = self.record_type(body["base"])
         fields = self.st["value_types"][vt].get("record_fields", [])
         start = sum(self.size_of(f["value_type"]) for f in fields[: body["field"]])
         n = self.size_of(fields[body["field"]]["value_type"])
@@ -589,6 +728,16 @@ class _Translator:
         if value.numel() < start + n:
             self.refuse("a record field outside its record")
         return value[start:start + n]
+
+    def function_assert(self, body: dict, bound: dict):
+        """An assert in a function: checked like the model's own (a failed result naming it)."""
+        ok = ca.vec(self.sx(body["condition"], bound))
+        lit = self.nodes[body["message"]] if body.get("message") is not None else None
+        text = lit.get("literal", {}).get("string") if isinstance(lit, dict) else None
+        where = self.located.span(self.span) if self.located is not None else None
+        text = text or "assert"
+        self.fn_asserts.append((ca.logic_not(ok[0]), body.get("level", "error"),
+                                f"{text} ({where})" if where else text))
 
     def call_builtin(self, name: str, args):
         short = name.split(".")[-1]
@@ -610,25 +759,116 @@ class _Translator:
             return self.call_builtin(ext.get("symbol", f["name"]), actual)
         if ext:
             self.refuse(f"external function {f['name']} ({ext.get('language', '?')} code)")
-        return self.interpret(f, bound, body.get("output", 0))
+        compiled, symbolic = self.compiled_function(body["function"], args)
+        outs = compiled.call([args[i] for i in symbolic])
+        n_out, tags = self._function_tags[compiled.name()]
+        for violated, (level, message) in zip(outs[n_out:], tags):
+            self.fn_asserts.append((violated, level, message))
+        output = body.get("output", 0)
+        if output >= n_out or output in self._unassigned[compiled.name()]:
+            self.refuse(f"function {f['name']} assigns no value to its output {output + 1}")
+        return outs[output]
 
-    def interpret(self, f: dict, bound: dict, output: int = 0):
-        """An algorithmic function in its single-assignment form: each assignment defines a new
-        value of its target; an if-statement's assignments are already conditional expressions."""
-        values = bound["values"]
-        for stmt in f.get("statements", []):
+    def compiled_function(self, index: int, args) -> tuple[ca.Function, list[int]]:
+        """Function ``index`` interpreted once per pattern of its arguments (the constant ones
+        by value: they may size arrays or pick branches; the others as symbols of their size),
+        as an SX Function of the non-constant arguments: a function called many times (in a
+        loop, by other functions) is not interpreted again at every call."""
+        key = [index]
+        symbolic = []
+        for i, a in enumerate(args):
+            if a.is_constant():
+                key.append(("c", a.shape, tuple(np.array(ca.DM(a)).ravel(order="F").tolist())))
+            else:
+                key.append(("s", a.shape))
+                symbolic.append(i)
+        key = tuple(key)
+        if key in self._compiled:
+            return self._compiled[key], symbolic
+        f = self.functions[index]
+        syms = {i: ca.SX.sym(f"a{i}", *args[i].shape) for i in symbolic}
+        params = {i: syms.get(i, a) for i, a in enumerate(args)}
+        bound = {"params": params, "values": {}, "binders": {}}
+        before = len(self.fn_asserts)
+        run = _Run(self, f, bound)
+        run.block(f.get("statements", []))
+        found, self.fn_asserts = self.fn_asserts[before:], self.fn_asserts[:before]
+        n_out = len(f.get("outputs", [])) or 1
+        outs = [run.latest.get(j, ca.SX(0, 1)) for j in range(n_out)]
+        name = f"fn{len(self._compiled)}"
+        compiled = ca.Function(name, [syms[i] for i in symbolic], outs + [v for v, _, _ in found])
+        self._function_tags[name] = (n_out, [(level, message) for _, level, message in found])
+        self._unassigned[name] = {j for j in range(n_out) if j not in run.latest}
+        self._compiled[key] = compiled
+        return compiled, symbolic
+
+
+class _Run:
+    """One call of an algorithmic function. Each definition has an ordinal, in the order
+    written: an assignment one; a for-loop (rumoca's lowering of a while-loop included: a
+    bounded loop whose body is guarded by the condition) one per variable it changes on entry
+    (the value carried into an iteration), then its body's, then one per variable on exit (the
+    value after the loop). A read names the definition it sees; an if-statement's assignments
+    are already conditional expressions. Loops are unrolled."""
+
+    def __init__(self, tr: "_Translator", f: dict, bound: dict):
+        self.tr, self.f, self.bound = tr, f, bound
+        self.defs = bound["values"]          # definition ordinal -> value
+        self.latest: dict[int, ca.SX] = {}   # variable -> its last value
+        self.next = 0                        # ordinal of the next definition
+
+    def define(self, target: int, value):
+        self.defs[self.next] = value
+        self.next += 1
+        if value is not None:
+            self.latest[target] = value
+
+    @classmethod
+    def count(cls, stmts: list) -> int:
+        n = 0
+        for stmt in stmts:
             kind = next(iter(stmt))
             if kind == "assignment":
-                assignments = [stmt[kind]]
+                n += 1
             elif kind == "assignment_group":
-                assignments = stmt[kind]["assignments"]
+                n += len(stmt[kind]["assignments"])
+            elif kind == "for":
+                n += 2 * len(stmt[kind]["targets"]) + cls.count(stmt[kind]["statements"])
+        return n
+
+    def block(self, stmts: list):
+        for stmt in stmts:
+            kind = next(iter(stmt))
+            body = stmt[kind]
+            self.tr.span = (body.get("provenance") or body.get("begin_provenance") or {}).get("span") or self.tr.span
+            if kind in ("assignment", "assignment_group"):
+                for a in [body] if kind == "assignment" else body["assignments"]:
+                    self.define(a["target"], self.tr.sx(a["rhs"], self.bound))
+            elif kind == "assertion":
+                self.tr.function_assert(body, self.bound)
+            elif kind == "for":
+                self.loop(body)
             else:
-                self.refuse(f"a '{kind}' statement in function {f['name']} (loops are not translated)")
-            for a in assignments:
-                values.setdefault(a["target"], []).append(self.sx(a["rhs"], bound))
-        if not values.get(output):
-            self.refuse(f"function {f['name']} assigns no value to its output {output + 1}")
-        return values[output][-1]
+                self.tr.refuse(f"a '{kind}' statement in function {self.f['name']}")
+
+    def loop(self, body: dict):
+        targets = body["targets"]
+        carried = self.next
+        for v in targets:                     # carried into the first iteration
+            self.define(v, self.latest.get(v))
+        first, n = self.next, self.count(body["statements"])
+        binders = self.tr.binders(body["domain"], outer=False)
+        outer = self.bound["binders"]
+        for values in itertools.product(*[r for _, _, r in binders]):
+            self.bound["binders"] = {**outer, **{(d, i): v for (d, i, _), v in zip(binders, values)}}
+            self.next = first
+            self.block(body["statements"])
+            for j, v in enumerate(targets):   # carried into the next
+                self.defs[carried + j] = self.latest.get(v)
+        self.bound["binders"] = outer
+        self.next = first + n
+        for v in targets:                     # after the loop
+            self.define(v, self.latest.get(v))
 
 
 def _scalar_names(name: str, dims: list[int]) -> list[str]:
@@ -830,6 +1070,12 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
 
     def bind_event(e):            # pre(), initial() and the ticks stay symbols in the update
         return ca.substitute(e, p_all, resolved)
+
+    # asserts in the functions the model calls, where they read the model's values (not der())
+    fn = [a for a in tr.fn_asserts if not ca.depends_on(a[0], ca.vertcat(dx, d_pre, x_pre, flags))]
+    if fn:
+        asserts = ca.vertcat(asserts, *[a[0] for a in fn])
+        assert_info = [*assert_info, *[(level, message) for _, level, message in fn]]
 
     return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=bind(residual), init_residual=bind(init_residual, 1.0),
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
@@ -1113,13 +1359,7 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
     eq = op[kind]
     if eq["scalar_view"] == "RowMajorProjection":      # an array equation: its elements
         return ca.vertcat(*[ca.vec(tr.sx(b)) for b in eq["bodies"]])
-    binders = []
-    d = eq["domain"]
-    while d is not None:
-        dom = tr.st["domains"][d]
-        binders = [(d, b["id"], range(b["lower"], b["upper"] + (1 if b["step"] > 0 else -1), b["step"]))
-                   for b in dom["domain"]["binders"]] + binders
-        d = dom.get("parent")
+    binders = tr.binders(eq["domain"])
     rows = []
     for values in itertools.product(*[r for _, _, r in binders]):
         bound = {"params": {}, "values": {}, "binders": {(dd, i): v for (dd, i, _), v in zip(binders, values)}}
