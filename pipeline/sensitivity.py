@@ -4,12 +4,18 @@ The sensitivity S = dx/dq of the states to a parameter (or to a signal injected 
 obeys the linear, time-varying equation S' = A(t) S + F(t), with A = df/dx along the run and F
 the parameter's (or signal's) direct effect; the outputs move by C(t) S + G(t), C = dy/dx. Given
 the run on a grid finer than the data's, the trapezoidal rule integrates S for every parameter at
-once: per step one matrix product, whatever the number of parameters, and the run itself is one
-plain simulation. Forward sensitivities carried by the integrator cost several simulations
-each; these cost a fraction of one, and are accurate to the rule's second order (ample for a
-Gauss-Newton step, whose Jacobian need not be exact; the residual comes from the solver).
+once, and the run itself is one plain simulation. Forward sensitivities carried by the integrator
+cost several simulations each; these cost a fraction of one, and are accurate to the rule's
+second order (ample for a Gauss-Newton step, whose Jacobian need not be exact; the residual comes
+from the solver).
+
+The rule's recursion S_k = P_k S_(k-1) + G_k is solved a block of steps at a time
+(:func:`affine_scan`): a Python loop per grid point cost more than the simulation itself on long
+records of small models.
 """
 from __future__ import annotations
+
+from collections import OrderedDict
 
 import casadi as ca
 import numpy as np
@@ -23,13 +29,18 @@ SUBSTEPS = 1
 MAX_STEP = 0.3
 #: numbers held per chunk of the run (the Jacobians are evaluated a chunk at a time)
 CHUNK_NUMBERS = 4_000_000
+#: linearisation functions kept (a fit builds one Linearisation per Gauss-Newton step of the
+#: same model and parameters: the Jacobians' CasADi functions are made once)
+_FUNCTIONS: OrderedDict = OrderedDict()
+_KEEP = 8
 
 
 def fine_grid(t: np.ndarray, substeps: int = SUBSTEPS) -> tuple[np.ndarray, np.ndarray]:
     """The data grid ``t`` with ``substeps`` points in each interval, and where the data points are."""
+    t = np.asarray(t, float)
     substeps = max(1, int(substeps))
-    pieces = [np.linspace(a, b, substeps + 1)[:-1] for a, b in zip(t[:-1], t[1:])]
-    fine = np.concatenate([*pieces, t[-1:]])
+    inner = t[:-1, None] + np.diff(t)[:, None] * (np.arange(substeps) / substeps)
+    fine = np.concatenate([inner.ravel(), t[-1:]])
     return fine, np.arange(0, len(fine), substeps)
 
 
@@ -40,6 +51,78 @@ def _expand(f: ca.Function) -> ca.Function:
         return f
 
 
+class _Mapped:
+    """A CasADi function mapped over n points, evaluated on NumPy arrays through a
+    :class:`casadi.FunctionBuffer` (no conversion to and from DM: on long runs that conversion
+    cost more than the evaluation)."""
+
+    def __init__(self, fun: ca.Function, n: int):
+        self.f = fun.map(n)
+        self.buffer, self.call = self.f.buffer()
+        self.out = [np.zeros(self.f.nnz_out(k)) for k in range(self.f.n_out())]
+        for k, o in enumerate(self.out):
+            self.buffer.set_res(k, memoryview(o))
+
+    def __call__(self, *args) -> list[np.ndarray]:
+        ins = [np.ascontiguousarray(np.asarray(a, float).ravel(order="F")) for a in args]
+        for k, a in enumerate(ins):
+            self.buffer.set_arg(k, memoryview(a))
+        self.call()
+        if self.buffer.ret() != 0:
+            raise RuntimeError(f"evaluating {self.f.name()} failed")
+        return [o.reshape(self.f.size_out(k), order="F").copy() for k, o in enumerate(self.out)]
+
+
+def _functions(ode, idx: list[int]):
+    """(df/dx, df/dq, dy/dx, dy/dq as one dense CasADi function, its maps by size), made once per
+    model and parameter selection."""
+    key = (id(ode.ode), id(ode.out), tuple(idx))
+    entry = _FUNCTIONS.get(key)
+    if entry is None:
+        X, U, P, T = ode.ode.mx_in()
+        f, y = ode.ode(X, U, P, T), ode.out(X, U, P, T)
+        jac = [ca.densify(J) for J in (ca.jacobian(f, X), ca.jacobian(f, P)[:, idx], ca.jacobian(y, X),
+                                       ca.jacobian(y, P)[:, idx])]
+        # the entry holds the ode, so that its id is not reused while the entry lives
+        entry = (ode, _expand(ca.Function("lin", [X, U, P, T], jac)), {})
+        _FUNCTIONS[key] = entry
+        if len(_FUNCTIONS) > _KEEP:
+            _FUNCTIONS.popitem(last=False)
+    _FUNCTIONS.move_to_end(key)
+    return entry[1], entry[2]
+
+
+def affine_scan(P: np.ndarray, G: np.ndarray, S0: np.ndarray) -> np.ndarray:
+    """S_k = P_k S_(k-1) + G_k for k = 0 .. n-1 from S_(-1) = ``S0``; P (n, nx, nx), G (n, nx, ns).
+
+    Solved in blocks of about sqrt(n) steps: within every block at once (a loop over the
+    position in the block, vectorised over the blocks) the maps from the block's start, then the
+    blocks' starts one after another, then every point from its block's start: about 2 sqrt(n)
+    vectorised steps instead of n small ones, O(n nx^2 (nx + ns)) work as before."""
+    n, nx, ns = G.shape
+    if n == 0:
+        return G.copy()
+    m = int(np.ceil(np.sqrt(n)))
+    L = -(-n // m)
+    pad = L * m - n
+    if pad:
+        P = np.concatenate([P, np.broadcast_to(np.eye(nx), (pad, nx, nx))])
+        G = np.concatenate([G, np.zeros((pad, nx, ns))])
+    P, G = P.reshape(L, m, nx, nx), G.reshape(L, m, nx, ns)
+    Pp, Gp = np.empty_like(P), np.empty_like(G)
+    Pp[:, 0], Gp[:, 0] = P[:, 0], G[:, 0]
+    for i in range(1, m):            # within each block: S_(b,i) = Pp_(b,i) S_start(b) + Gp_(b,i)
+        Pp[:, i] = P[:, i] @ Pp[:, i - 1]
+        Gp[:, i] = P[:, i] @ Gp[:, i - 1] + G[:, i]
+    starts = np.empty((L, nx, ns))
+    S = S0
+    for b in range(L):               # the blocks' starts, one after another
+        starts[b] = S
+        S = Pp[b, -1] @ S + Gp[b, -1]
+    out = np.einsum("bmij,bjk->bmik", Pp, starts) + Gp
+    return out.reshape(L * m, nx, ns)[:n]
+
+
 class Linearisation:
     """df/dx, df/dq, dy/dx, dy/dq along a run (``states`` (N, nx) at ``time``, parameter vector
     ``p``) for the free parameters named ``params``, evaluated a chunk of the run at a time."""
@@ -48,25 +131,27 @@ class Linearisation:
         ode = model.ode
         self.time = np.asarray(time, float)
         idx = [ode.p_names.index(n) for n in params]
-        X, U, P, T = ode.ode.mx_in()
-        f, y = ode.ode(X, U, P, T), ode.out(X, U, P, T)
-        self.fun = _expand(ca.Function("lin", [X, U, P, T], [ca.jacobian(f, X), ca.jacobian(f, P)[:, idx],
-                                                           ca.jacobian(y, X), ca.jacobian(y, P)[:, idx]]))
+        self.fun, self._maps = _functions(ode, idx)
         u = prepare_inputs(model, inputs)
         N = len(self.time)
         self.U = np.array([np.interp(self.time, u.time, u.values[:, k]) for k in range(len(u.names))]).reshape(-1, N)
         self.X, self.p = np.asarray(states, float).T, np.asarray(p, float)
         self.nx, self.ny, self.nq = len(ode.x_names), len(ode.y_names), len(idx)
-        self.chunk = int(max(16, CHUNK_NUMBERS // max(1, self.nx * (self.nx + self.nq) + self.ny * (self.nx + self.nq))))
-        self._maps: dict = {}
+        nx, ny, nq = self.nx, self.ny, self.nq
+        # per point: the four Jacobians, and the rule's matrices and partial solutions
+        per_point = nx * (nx + nq) + ny * (nx + nq) + 4 * nx * nx + 3 * nx * nq
+        self.chunk = int(max(16, CHUNK_NUMBERS // max(1, per_point)))
+
+    def _mapped(self, n: int) -> "_Mapped":
+        if n not in self._maps:
+            self._maps[n] = _Mapped(self.fun, n)
+        return self._maps[n]
 
     def jacobians(self, k0: int, k1: int):
         """(A, B, C, E) at points k0 .. k1-1, each (k1 - k0, rows, cols)."""
         n = k1 - k0
-        if n not in self._maps:
-            self._maps[n] = self.fun.map(n)
-        out = [np.array(v) for v in self._maps[n](self.X[:, k0:k1], self.U[:, k0:k1],
-                                                  np.repeat(self.p[:, None], n, 1), self.time[None, k0:k1])]
+        out = self._mapped(n)(self.X[:, k0:k1], self.U[:, k0:k1], np.repeat(self.p[:, None], n, 1),
+                              self.time[None, k0:k1])
         shape = lambda M, r, c: M.reshape(r, n, c).transpose(1, 0, 2) if r * c else np.zeros((n, r, c))
         nx, ny, nq = self.nx, self.ny, self.nq
         return shape(out[0], nx, nx), shape(out[1], nx, nq), shape(out[2], ny, nx), shape(out[3], ny, nq)
@@ -77,41 +162,51 @@ class Linearisation:
             return 0.0
         pick = np.unique(np.linspace(0, len(self.time) - 1, min(50, len(self.time))).astype(int))
         n = len(pick)
-        A = np.array(self.fun.map(n)(self.X[:, pick], self.U[:, pick], np.repeat(self.p[:, None], n, 1),
-                                     self.time[None, pick])[0]).reshape(self.nx, n, self.nx).transpose(1, 0, 2)
+        A = self._mapped(n)(self.X[:, pick], self.U[:, pick], np.repeat(self.p[:, None], n, 1),
+                            self.time[None, pick])[0].reshape(self.nx, n, self.nx).transpose(1, 0, 2)
         return float(np.max(np.abs(np.linalg.eigvals(A))))
 
-    def propagate(self, forcing, at: np.ndarray, ns: int) -> np.ndarray:
+    def propagate(self, forcing, at: np.ndarray, ns: int, batched: bool = False) -> np.ndarray:
         """Output sensitivities (len(at), ny, ns) at grid points ``at`` (increasing), for forcing
         ``forcing(k, B, E) -> (Fx (nx, ns), Fy (ny, ns))``: the direct effect at grid point k
-        on x' and on y, given df/dq and dy/dq there. S(t0) = 0."""
-        t, N, nx = self.time, len(self.time), self.nx
-        Y = np.zeros((len(at), self.ny, ns))
+        on x' and on y, given df/dq and dy/dq there; with ``batched``, ``forcing(k0, k1, B, E)``
+        gives them for the points k0 .. k1-1 at once ((n, nx, ns), (n, ny, ns)). S(t0) = 0."""
+        t, N, nx, ny = self.time, len(self.time), self.nx, self.ny
+        at = np.asarray(at, int)
+        Y = np.zeros((len(at), ny, ns))
         S = np.zeros((nx, ns))
         I = np.eye(nx)
-        F_prev, A_prev, k_out = None, None, 0
+        F_prev, A_prev = None, None
         for k0 in range(0, N, self.chunk):
             k1 = min(N, k0 + self.chunk)
             A, B, C, E = self.jacobians(k0, k1)
+            if batched:
+                Fx, Fy = forcing(k0, k1, B, E)
+            else:
+                pairs = [forcing(k, B[j], E[j]) for j, k in enumerate(range(k0, k1))]
+                Fx = np.array([p[0] for p in pairs], float).reshape(k1 - k0, nx, ns)
+                Fy = np.array([p[1] for p in pairs], float).reshape(k1 - k0, ny, ns)
+            out = (at >= k0) & (at < k1)
+            j_out = at[out] - k0
             if nx:
-                # S_k = P_k S_{k-1} + Q_k (F_{k-1} + F_k): the trapezoidal rule, solved a chunk at a time
-                prev = np.concatenate([A_prev[None] if A_prev is not None else A[:1], A[:-1]])
+                # S_k = P_k S_(k-1) + (I - h A_k / 2)^-1 (h / 2) (F_(k-1) + F_k): the trapezoidal rule
+                prev_A = np.concatenate([A_prev[None] if A_prev is not None else A[:1], A[:-1]])
+                prev_F = np.concatenate([F_prev[None] if F_prev is not None else Fx[:1], Fx[:-1]])
                 h = (t[k0:k1] - t[np.maximum(np.arange(k0, k1) - 1, 0)])[:, None, None]
                 lhs = I - 0.5 * h * A
-                P = np.linalg.solve(lhs, I + 0.5 * h * prev)
-                Q = np.linalg.solve(lhs, np.broadcast_to(0.5 * h * I, lhs.shape))
-                A_prev = A[-1]
-            for j in range(k1 - k0):
-                k = k0 + j
-                Fx, Fy = forcing(k, B[j], E[j])
-                if k > 0 and nx:
-                    S = P[j] @ S + Q[j] @ (F_prev + Fx)
-                F_prev = Fx
-                if k_out < len(at) and at[k_out] == k:
-                    Y[k_out] = (C[j] @ S if nx else 0.0) + Fy
-                    k_out += 1
+                P = np.linalg.solve(lhs, I + 0.5 * h * prev_A)
+                G = np.linalg.solve(lhs, 0.5 * h * (prev_F + Fx))
+                if k0 == 0:                 # S(t0) = 0
+                    G[0] = 0.0
+                    P[0] = 0.0
+                Sk = affine_scan(P, G, S)
+                S = Sk[-1]
+                A_prev, F_prev = A[-1], Fx[-1]
+                Y[out] = np.einsum("kij,kjs->kis", C[j_out], Sk[j_out]) + Fy[j_out]
+            else:
+                Y[out] = Fy[j_out]
         return Y
 
     def parameters(self, at: np.ndarray) -> np.ndarray:
         """d y / d q at grid points ``at`` for every parameter q of the linearisation."""
-        return self.propagate(lambda k, B, E: (B, E), at, self.nq)
+        return self.propagate(lambda k0, k1, B, E: (B, E), at, self.nq, batched=True)
