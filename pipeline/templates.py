@@ -3,7 +3,10 @@
 A template describes a two-connector component whose connectors each carry one potential x and
 one flow f, in any domain and library. With v = x_a - x_b (across) and i = f_a (flow into
 connector a), every template keeps flow balance f_a + f_b = 0 and adds one law in (v, i) and
-optionally their time derivatives (dv = der(v), di = der(i)) for components with memory:
+optionally their time derivatives (dv = der(v), di = der(i)) for components with memory, and
+the connectors' own potentials va = x_a, vb = x_b for laws that depend on more than their
+difference (a tank's free outflow q = c sqrt(h_a), radiation Q = G (T_a^4 - T_b^4)); the
+constant term is ``1`` (an affine law):
 
 - ``polynomial``: linear in w over monomial features, e.g. paper 000's w1 i = w2 v^2 + w3 v^3;
 - ``memory``: the same with derivative features (a damper's law is in dv, not v);
@@ -24,12 +27,14 @@ from scipy.optimize import brentq
 from .errors import ConfigError
 from .graph import Component
 
-VARIABLES = ("v", "i", "dv", "di")
+VARIABLES = ("v", "i", "dv", "di", "va", "vb")
+#: the variables' names in messages
+_VARIABLE_WORDS = "v, i, dv, di, va, vb"
 
 
 @dataclass(frozen=True)
 class Monomial:
-    """A product of powers of the template variables, e.g. v^2*i; the empty product is 1."""
+    """A product of powers of the template variables, e.g. v^2*i or va^4; the empty product is 1."""
 
     powers: tuple[tuple[str, int], ...]
 
@@ -41,7 +46,7 @@ class Monomial:
             return cls(())
         powers: dict[str, int] = {}
         for factor in text.split("*"):
-            m = re.fullmatch(r"(der\((v|i)\)|dv|di|v|i)(?:\^(\d+))?", factor)
+            m = re.fullmatch(r"(der\((v|i)\)|dv|di|va|vb|v|i)(?:\^(\d+))?", factor)
             if not m:
                 return Expression.parse(text, names)
             name = {"der(v)": "dv", "der(i)": "di"}.get(m.group(1), m.group(1))
@@ -90,9 +95,9 @@ def _tree(text: str) -> ast.expr:
 
 @dataclass(frozen=True)
 class Expression:
-    """A term that is not a monomial: an arithmetic expression of v, i, dv, di, numbers and
-    tanh, sinh, cosh, exp, abs, sqrt, atan, log (e.g. ``tanh(v/0.3)``, ``v*abs(v)``,
-    ``v/sqrt(1 + (v/0.5)^2)``); the same text is valid Modelica."""
+    """A term that is not a monomial: an arithmetic expression of v, i, dv, di, va, vb, numbers
+    and tanh, sinh, cosh, exp, abs, sqrt, atan, log (e.g. ``tanh(v/0.3)``, ``v*abs(v)``,
+    ``v/sqrt(1 + (v/0.5)^2)``, ``(va/400)^4``); the same text is valid Modelica."""
 
     text: str
     powers: tuple = ()       # not a monomial: degree 0 for refinement's stage order
@@ -106,14 +111,14 @@ class Expression:
             tree = None
         bad = cls._check(tree.body, set(names)) if tree else "not an expression"
         if bad:
-            raise ConfigError(f"template term '{text}': {bad} (use v, i, dv, di, numbers, + - * / ^ and "
-                              f"{', '.join(_FUNCTIONS)}, e.g. v^3, v*i, tanh(v/0.3))")
+            raise ConfigError(f"template term '{text}': {bad} (use {_VARIABLE_WORDS}, numbers, + - * / ^ and "
+                              f"{', '.join(_FUNCTIONS)}, e.g. v^3, v*i, tanh(v/0.3), va^4, 1)")
         return cls(text)
 
     @classmethod
     def _check(cls, node, names: set) -> str | None:
         if isinstance(node, ast.Name):
-            return None if node.id in VARIABLES or node.id in names else f"'{node.id}' is not v, i, dv or di"
+            return None if node.id in VARIABLES or node.id in names else f"'{node.id}' is not one of {_VARIABLE_WORDS}"
         if isinstance(node, ast.Constant):
             return None if isinstance(node.value, (int, float)) and not isinstance(node.value, bool) else "not a number"
         if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
@@ -180,6 +185,39 @@ class Expression:
         return 0
 
 
+_NUMBER = r"(\d+(?:\.\d*)?(?:e[+-]?\d+)?)"
+_VARIABLE = r"(va|vb|dv|di|v|i)"
+
+
+def scaled_power(term) -> tuple[str, float, int] | None:
+    """(x, s, p) of a term ``(x/s)^p`` or ``x/s``: a variable in units of s, so that the fit's
+    columns stay near 1 (va^4 at 300 K is 1e10, beside v of a few kelvin); its coefficient c is
+    c/s^p on x^p, and laws are written that way. None for any other term."""
+    m = re.fullmatch(rf"\({_VARIABLE}/{_NUMBER}\)\^(\d+)|{_VARIABLE}/{_NUMBER}", str(term))
+    if not m:
+        return None
+    if m.group(1):
+        return m.group(1), float(m.group(2)), int(m.group(3))
+    return m.group(4), float(m.group(5)), 1
+
+
+def unscaled(term) -> tuple[str, float]:
+    """A term as a law is written (:func:`scaled_power`: (va/550)^4 reads va^4) and the factor
+    its coefficient takes there (1/550^4)."""
+    folded = scaled_power(term)
+    if folded is None:
+        return str(term), 1.0
+    x, s, p = folded
+    return (x if p == 1 else f"{x}^{p}"), 1.0 / s**p
+
+
+def scaled(x: str, power: int, s: float) -> str:
+    """The term x^power in units of s (:func:`scaled_power`); plain x^power when s is 1."""
+    if s == 1:
+        return x if power == 1 else f"{x}^{power}"
+    return f"{x}/{s:.3g}" if power == 1 else f"({x}/{s:.3g})^{power}"
+
+
 class Template:
     """Base of templates: the contract discovery relies on. Constructors store options; learned
     values live outside (in w).
@@ -187,19 +225,23 @@ class Template:
     A template must give
     - :meth:`parameter_names` and :meth:`start`; parameter 0 is the **scale** of the law (the
       weight of its left-hand side: G(w) = 0 and G(k w) = 0 are the same law), kept at its start;
-    - :meth:`law`: the law as a Modelica equation in v, i, dv, di and the parameters;
+    - :meth:`law`: the law as a Modelica equation in v, i, dv, di, va, vb and the parameters;
     - :meth:`residual` (G on arrays) and, for laws linear in w, ``features`` with G = features @ w;
     - :meth:`start_from`: w fitted to a law observed along a simulation (the nominal component's),
       so a candidate's first simulation reproduces the nominal model;
     - :meth:`equation`: the fitted law, readable, with the component's own variable names;
     - ``terms`` (optional): the readable terms, one per parameter, for pruning and reports;
-    - :attr:`uses`: which of v, i, dv, di the law needs (dv, di make the class declare them).
+    - :attr:`uses`: which of v, i, dv, di, va, vb the law needs (dv, di make the class declare
+      them and need the states to set the across value or flow; va, vb are the connectors' own
+      potentials).
     """
 
     name = ""
     description = ""
     #: index of a parameter whose sign can be fixed without loss (laws linear in w: G(w) = -G(-w))
     symmetric_axis: int | None = None
+    #: the potentials held where a law of several variables is drawn against one (``{"vb": 300.0}``)
+    at: dict = {}
 
     def parameter_names(self) -> list[str]:
         raise NotImplementedError
@@ -208,16 +250,16 @@ class Template:
         raise NotImplementedError
 
     def law(self) -> str:
-        """The law as a Modelica equation in v, i, dv, di and the parameters."""
+        """The law as a Modelica equation in v, i, dv, di, va, vb and the parameters."""
         raise NotImplementedError
 
     def residual(self, w, env: dict) -> np.ndarray:
-        """G(xi; w) evaluated on arrays of v, i (and dv, di): zero where the law holds."""
+        """G(xi; w) evaluated on arrays of v, i (and dv, di, va, vb): zero where the law holds."""
         raise NotImplementedError
 
     def sx_residual(self, w, env: dict):
         """G(xi; w) as a CasADi expression: ``w`` a list of parameter symbols, ``env`` symbols
-        (or expressions) of v, i, dv, di. This is how a law is put into a compiled model."""
+        (or expressions) of v, i, dv, di, va, vb. This is how a law is put into a compiled model."""
         raise NotImplementedError(f"template {self.name} cannot be put into a compiled model")
 
     @property
@@ -231,7 +273,7 @@ class Template:
         raise NotImplementedError
 
     def start_from(self, env: dict) -> np.ndarray:
-        """w with the scale at 1, fitted to the law observed in ``env`` (arrays v, i, dv, di)."""
+        """w with the scale at 1, fitted to the law observed in ``env`` (arrays v, i, dv, di, va, vb)."""
         phi = self.features(env)
         w_rest, *_ = np.linalg.lstsq(phi[:, 1:], -phi[:, 0], rcond=None)
         return np.concatenate([[1.0], w_rest])
@@ -240,17 +282,19 @@ class Template:
         raise NotImplementedError(f"template {self.name} is not linear in its parameters: "
                                   "it must define start_from")
 
-    def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
+    def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4,
+                 potentials: tuple[str, str] = ("va", "vb")) -> str:
+        """The fitted law, readable: v, i named ``across``, ``flow`` and va, vb ``potentials``."""
         raise NotImplementedError
 
     @property
     def uses(self) -> set[str]:
-        """Which of v, i, dv, di the law uses."""
+        """Which of v, i, dv, di, va, vb the law uses."""
         return {"v", "i"}
 
     def uses_where(self, active) -> set[str]:
-        """Which of v, i, dv, di the law uses with only the ``active`` parameters (a pruned law:
-        a term pruned away needs no rate)."""
+        """Which of v, i, dv, di, va, vb the law uses with only the ``active`` parameters (a
+        pruned law: a term pruned away needs no rate)."""
         return self.uses
 
     def parameter_descriptions(self) -> list[str]:
@@ -272,6 +316,10 @@ class Template:
             memory += "  Real di \"der(i)\";\n"
         mem_eq = ("  dv = der(v);\n" if "dv" in self.uses else "") + \
                  ("  di = der(i);\n" if "di" in self.uses else "")
+        for name, conn, x in (("va", a, xa), ("vb", b, xb)):     # the connectors' own potentials
+            if name in self.uses:
+                memory += f'  Real {name} "potential at {conn.name}";\n'
+                mem_eq += f"  {name} = {conn.name}.{x};\n"
         return (f'model {class_name} "{self.description} (mcl template {self.name}){note}"\n'
                 f"  {a.cls} {a.name};\n  {b.cls} {b.name};\n"
                 f'  Real v "across: {a.name}.{xa} - {b.name}.{xb}";\n'
@@ -283,24 +331,42 @@ class Template:
     @property
     def law_variable(self) -> str:
         """The variable the law is a function of, for its curve: ``v`` (static), ``dv`` (a law
-        in the rate, e.g. a damper in the speed) or ``i`` (a law giving v from the flow)."""
+        in the rate, e.g. a damper in the speed), ``i`` (a law giving v from the flow), or ``va``
+        / ``vb`` (a law in one connector's own potential, e.g. a tank's free outflow)."""
         return "v"
 
-    def curve(self, w, xs: np.ndarray) -> np.ndarray:
+    def curve(self, w, xs: np.ndarray, at: dict | None = None) -> np.ndarray:
         """The law at ``xs`` of :attr:`law_variable` (the other derivatives 0): the flow, or for
-        a law in i the across value."""
+        a law in i the across value. A law that also reads a connector's own potential is drawn
+        with the other potential held at ``at`` (default :attr:`at`, else 0): against v with vb
+        held (va = vb + v), against va with vb held, against vb with va held."""
         xs = np.atleast_1d(np.asarray(xs, dtype=float))
-        if self.law_variable == "dv":
-            return self.flow_of(w, np.zeros_like(xs), dv=xs)
-        if self.law_variable == "i":
-            return _solve(lambda k, v: self.residual(w, {"v": v, "i": xs[k], "dv": 0.0, "di": 0.0}), xs)
-        return self.flow_of(w, xs)
+        held = {**self.at, **(at or {})}
+        var = self.law_variable
+        if var == "i":
+            vb = held.get("vb", 0.0)
+            return _solve(lambda k, v: self.residual(w, {"v": v, "i": xs[k], "dv": 0.0, "di": 0.0,
+                                                         "va": vb + v, "vb": vb}), xs)
+        if var == "va":
+            vb = np.full_like(xs, held.get("vb", 0.0))
+            return self.flow_of(w, xs - vb, va=xs, vb=vb)
+        if var == "vb":
+            va = np.full_like(xs, held.get("va", 0.0))
+            return self.flow_of(w, va - xs, va=va, vb=xs)
+        vb = np.full_like(xs, held.get("vb", 0.0))
+        if var == "dv":
+            return self.flow_of(w, np.zeros_like(xs), dv=xs, va=vb, vb=vb)
+        return self.flow_of(w, xs, va=vb + xs, vb=vb)
 
-    def flow_of(self, w, v: np.ndarray, dv: np.ndarray | None = None) -> np.ndarray:
-        """Solve the law for the flow at each across value (memoryless in i), for plots and curves."""
+    def flow_of(self, w, v: np.ndarray, dv: np.ndarray | None = None, va: np.ndarray | None = None,
+                vb: np.ndarray | None = None) -> np.ndarray:
+        """Solve the law for the flow at each across value (memoryless in i), for plots and
+        curves; ``va``, ``vb`` the potentials there (default: v at a, 0 at b)."""
         v = np.atleast_1d(np.asarray(v, dtype=float))
+        va = v if va is None else np.broadcast_to(np.asarray(va, float), v.shape)
+        vb = np.zeros_like(v) if vb is None else np.broadcast_to(np.asarray(vb, float), v.shape)
         return _solve(lambda k, i: self.residual(w, {"v": v[k], "i": i, "dv": 0.0 if dv is None else dv[k],
-                                                     "di": 0.0}), v)
+                                                     "di": 0.0, "va": va[k], "vb": vb[k]}), v)
 
 
 def _solve(g, xs: np.ndarray) -> np.ndarray:
@@ -354,7 +420,10 @@ class PolynomialTemplate(Template):
     ``start`` gives the initial w (default 0.1 for every parameter, as in Table I).
     ``scales`` names parameters used inside terms with their start values (``rhs: [v,
     tanh(v/s1)]``, ``scales: {s1: 0.3}``): they are fitted with the coefficients (the law is
-    then not linear in them) but never pruned.
+    then not linear in them) but never pruned. Terms may read the connectors' own potentials
+    va, vb and the constant 1 (``rhs: [1, va, va^2]``; ``(va/400)^4``: va^4 in units of 400,
+    written c/400^4*va^4); ``at`` gives the potentials held where such a law is drawn against
+    one variable (:meth:`Template.curve`).
     """
 
     name = "polynomial"
@@ -362,9 +431,12 @@ class PolynomialTemplate(Template):
     symmetric_axis = 0
 
     def __init__(self, lhs=None, rhs=None, degree: int = 3, start=None, prefix: str = "w", family: str = "",
-                 scales: dict | None = None):
+                 scales: dict | None = None, at: dict | None = None):
         self.family = family     # which law family discovery chose it as (static, rate, storage, shape)
         self.scales = {str(k): _scale(k, v) for k, v in (scales or {}).items()}
+        if not isinstance(at or {}, dict) or any(k not in ("va", "vb") for k in (at or {})):
+            raise ConfigError(f"template at = {at!r}: must map va or vb to a potential")
+        self.at = {str(k): float(_finite([v], f"at.{k}")[0]) for k, v in (at or {}).items()}
         if rhs is None and (isinstance(degree, bool) or not isinstance(degree, (int, np.integer))
                             or not 1 <= degree < MAX_PARAMETERS):
             raise ConfigError(f"template degree = {degree!r}: must be a whole number from 1 to {MAX_PARAMETERS - 1}")
@@ -419,6 +491,10 @@ class PolynomialTemplate(Template):
         if [str(m) for m in self.lhs] == ["v"]:
             return "i"
         rhs = set().union(*(m.variables for m in self.rhs)) if self.rhs else set()
+        if rhs and rhs <= {"va"}:
+            return "va"
+        if rhs and rhs <= {"vb"}:
+            return "vb"
         return "dv" if "dv" in rhs and "v" not in rhs else "v"
 
     def start(self) -> np.ndarray:
@@ -464,15 +540,21 @@ class PolynomialTemplate(Template):
         e, k = self._sx_env(w, env), len(self.lhs)
         return sum(wk * m.sx(e) for wk, m in zip(w[k:len(self.terms)], self.rhs)) / w[0]
 
-    def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
-        rename = {"v": across, "i": flow, "dv": f"der({across})", "di": f"der({flow})"}
+    def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4,
+                 potentials: tuple[str, str] = ("va", "vb")) -> str:
+        rename = {"v": across, "i": flow, "dv": f"der({across})", "di": f"der({flow})",
+                  "va": potentials[0], "vb": potentials[1]}
 
         def side(ws, terms):
             parts = []
             for c, m in zip(ws, terms):
                 if c == 0:  # a term removed by pruning
                     continue
-                mono = (re.sub(r"\b(dv|di|v|i)\b", lambda g: rename[g.group(1)], m.modelica())
+                unit = scaled_power(m)
+                if unit is not None:   # (x/s)^p: c/s^p on x^p
+                    x, s_, p = unit
+                    c, m = c / s_**p, Monomial(((x, p),))
+                mono = (re.sub(r"\b(va|vb|dv|di|v|i)\b", lambda g: rename[g.group(1)], m.modelica())
                         if isinstance(m, Expression) else
                         "*".join(rename[n] if p == 1 else f"{rename[n]}^{p}" for n, p in m.powers))
                 coef = f"{c:.{digits}g}"
@@ -501,23 +583,27 @@ class MemoryTemplate(PolynomialTemplate):
 class NeuralTemplate(Template):
     """G(x, i; w) = c*i - sum_j a_j tanh(b_j x + d_j i + e_j): a tanh network read as an equation.
 
-    ``x`` is the across variable ``v`` (default) or its derivative ``dv`` (a damper's law is in
-    the speed). ``coupled`` (default) lets the flow enter the units (d_j i): the law is an
-    equation solved for i; ``coupled: false`` drops d_j and adds a linear term g*x, so the law is
-    explicit in i (cheaper to simulate; discovery uses it to find a law's shape before
-    distilling it). ``hidden`` units; start values break the symmetry between units
-    deterministically (seeded).
+    ``x`` is the across variable ``v`` (default), its derivative ``dv`` (a damper's law is in
+    the speed) or a connector's own potential ``va`` / ``vb`` (a tank's free outflow).
+    ``coupled`` (default) lets the flow enter the units (d_j i): the law is an equation solved
+    for i; ``coupled: false`` drops d_j and adds a linear term g*x, so the law is explicit in i
+    (cheaper to simulate; discovery uses it to find a law's shape before distilling it).
+    ``hidden`` units; start values break the symmetry between units deterministically (seeded).
+    A neural law the user names is a candidate like any other; the one discovery fits to find a
+    law's shape (``family: reference``) is only distilled.
     """
 
     name = "neural"
     description = "neural-network constitutive law"
 
-    def __init__(self, hidden: int = 3, start=None, seed: int = 0, x: str = "v", coupled: bool = True):
-        if x not in ("v", "dv"):
-            raise ConfigError(f"neural template: x must be v or dv, not {x!r}")
+    def __init__(self, hidden: int = 3, start=None, seed: int = 0, x: str = "v", coupled: bool = True,
+                 family: str = ""):
+        if x not in ("v", "dv", "va", "vb"):
+            raise ConfigError(f"neural template: x must be v, dv, va or vb, not {x!r}")
         if isinstance(hidden, bool) or not isinstance(hidden, (int, np.integer)) or not 1 <= hidden <= 64:
             raise ConfigError(f"neural template: hidden = {hidden!r} must be a whole number from 1 to 64")
         self.hidden, self.x, self.coupled = int(hidden), x, bool(coupled)
+        self.family = family     # "reference": discovery's shape stage, distilled, never a cause
         self.per_unit = 4 if self.coupled else 3
         rng = np.random.default_rng(seed)
         n = len(self.parameter_names())
@@ -612,29 +698,46 @@ class NeuralTemplate(Template):
     def fit_curve(self, xs: np.ndarray, fs: np.ndarray, tries: int = 4) -> np.ndarray:
         """w (c = 1) of the uncoupled network closest to the curve i = f(x) given at ``xs``: least
         squares from a few seeded starts with the units spread over the range (the start of a
-        network that must first do what a known law does, then better)."""
+        network that must first do what a known law does, then better; a start needs no more
+        than a few 1e-4 of the curve's span, so each fit stops after 50 Jacobians per unknown)."""
         from scipy.optimize import least_squares
 
         xs, fs = np.asarray(xs, float), np.asarray(fs, float)
         span, scale = float(np.max(np.abs(xs))) or 1.0, float(np.std(fs)) or 1.0
+        # a potential's range lies away from 0 (a level, a temperature): the units about its middle
+        mid = 0.5 * float(np.min(xs) + np.max(xs)) if self.x in ("va", "vb") else 0.0
+        if mid:
+            span = 0.5 * float(np.ptp(xs)) or span
         best = None
         for seed in range(tries):
             rng = np.random.default_rng(seed)
             # widths from a third of the range down to 1/30 of it (a friction law's step at 0)
-            centres = rng.uniform(-0.6, 0.6, self.hidden) * span
-            centres[0] = 0.0
+            centres = mid + rng.uniform(-0.6, 0.6, self.hidden) * span
+            centres[0] = mid
             b = np.exp(rng.uniform(np.log(1.0), np.log(30.0), self.hidden)) / span
             units = np.column_stack([rng.normal(0, scale, self.hidden), b, -b * centres])
-            r0 = np.concatenate([[float(xs @ fs / (xs @ xs)) if np.any(xs) else 0.0], units.ravel()])
+            slope = float(np.polyfit(xs, fs, 1)[0]) if mid else float(xs @ fs / (xs @ xs)) if np.any(xs) else 0.0
+            r0 = np.concatenate([[slope], units.ravel()])
             fun = lambda r: self.residual(np.concatenate([[1.0], r]), {self.x: xs, "i": fs}) / scale
-            sol = least_squares(fun, r0, max_nfev=400 * len(r0))
+            sol = least_squares(fun, r0, jac=lambda r: self._curve_jacobian(r, xs) / scale, max_nfev=50 * len(r0))
             if best is None or sol.cost < best.cost:
                 best = sol
         return np.concatenate([[1.0], best.x])
 
-    def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4) -> str:
+    def _curve_jacobian(self, r, xs: np.ndarray) -> np.ndarray:
+        """d residual / d (g, a_j, b_j, e_j) of the uncoupled network with c = 1 (exact: a curve
+        fit with finite differences spends most of its time on them)."""
+        units = np.asarray(r[1:], float).reshape(self.hidden, 3)
+        t = np.tanh(xs[:, None] * units[:, 1] + units[:, 2])
+        slope = units[:, 0] * (1.0 - t**2)
+        J = np.empty((len(xs), 1 + 3 * self.hidden))
+        J[:, 0], J[:, 1::3], J[:, 2::3], J[:, 3::3] = -xs, -t, -slope * xs[:, None], -slope
+        return J
+
+    def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4,
+                 potentials: tuple[str, str] = ("va", "vb")) -> str:
         c, g, units = self._split(w)
-        x = across if self.x == "v" else f"der({across})"
+        x = {"v": across, "dv": f"der({across})", "va": potentials[0], "vb": potentials[1]}[self.x]
         fmt = lambda z: f"{z:.{digits}g}"
         parts = [f"{fmt(u[0])}*tanh({fmt(u[1])}*{x}" + (f" + {fmt(u[2])}*{flow}" if self.coupled else "")
                  + f" + {fmt(u[-1])})" for u in units]

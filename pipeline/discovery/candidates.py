@@ -20,7 +20,7 @@ from ..data import TimeSeries
 from ..errors import MclError
 from ..stats import rms
 from .fitters import residual
-from .inject import NominalForm, compiled, mode_of, nominal_form, with_law
+from .inject import NominalForm, compiled, mode_of, nominal_of, with_law
 from .screen import law_signals
 
 #: family indices of the shape stage (after any family list)
@@ -149,7 +149,9 @@ class Law:
 
 def start_of(ctx: Context, item: Item):
     """(template, w0, nominal form) of ``item``'s law: started at its fit to the nominal law
-    along the base model's run (or at the spec's own ``start``)."""
+    along the base model's run (or at the spec's own ``start``); the nominal form in the law's
+    variables, affine where the law reads the connectors' own potentials or has a constant term
+    (:func:`.inject.nominal_of`: so that the first simulation is the nominal model)."""
     from ..services import registry
 
     template = registry().template(item.spec)
@@ -158,9 +160,8 @@ def start_of(ctx: Context, item: Item):
     w0 = np.asarray(template.start() if explicit else template.start_from(env), float)
     nominal = None
     if template.explicit is not None:
-        series = mode_of(template) == "series"
-        law_vars = [v for v in (("i", "di") if series else ("v", "dv")) if v in template.uses]
-        nominal = nominal_form(env, law_vars, "v" if series else "i")
+        constant = any(str(m) == "1" for m in getattr(template, "terms", []))
+        nominal = nominal_of(env, template.uses | ({"1"} if constant else set()), mode_of(template) == "series")
     return template, w0, nominal
 
 

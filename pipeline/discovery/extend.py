@@ -19,6 +19,7 @@ import numpy as np
 from ..data import read_csv
 from ..progress import log
 from ..stats import criterion as criterion_of, rms
+from ..templates import unscaled
 from .fitters import residual
 from .modelica import write_extended
 from .words import in_words, words
@@ -42,25 +43,33 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     xs = np.linspace(lo, hi, 41)
     wd = words(comp)
     # the curve in the equation's own words and sign (a mechanical element's s_rel and f are
-    # b - a and the force at b: the template's v and i negated)
+    # b - a and the force at b: the template's v and i negated; a connector's own potential
+    # keeps its sign)
     sign = -1.0 if wd.flipped else 1.0
-    curve = [[sign * float(x), sign * float(f)] for x, f in zip(xs, template.curve(w, xs))]
+    x_sign = 1.0 if var in ("va", "vb") else sign
     env = signals[comp.name].env()
+    names = wd.names
+    # a law that also reads a connector's own potential is drawn with the other one held (at the
+    # template's own value, else its mean along the nominal run)
+    other = "va" if var == "vb" else "vb"
+    held = ({other: float(template.at.get(other, np.mean(env[other])))}
+            if (template.uses & {"va", "vb"}) - {var} else {})
+    curve = [[x_sign * float(x), sign * float(f)] for x, f in zip(xs, template.curve(w, xs, at=held))]
     x_nom, f_nom = (env["i"], env["v"]) if var == "i" else (env[var], env["i"])
     pick = np.linspace(0, len(x_nom) - 1, min(200, len(x_nom))).astype(int)
-    nominal_points = sorted([sign * float(x_nom[k]), sign * float(f_nom[k])] for k in pick)
-    names = {"v": wd.across, "dv": wd.rate, "i": wd.flow}
+    nominal_points = sorted([x_sign * float(x_nom[k]), sign * float(f_nom[k])] for k in pick)
     x_name, y_name = names[var], (wd.across if var == "i" else wd.flow)
     units = base.model.info.get("units", {})
     nominal_terms = set(best.get("nominal_form") or {})
-    new_terms = [t for t, on in zip(best.get("terms", [])[1:], best["active"][1:]) if on and t not in nominal_terms]
+    new_terms = [unscaled(t)[0] for t, on in zip(best.get("terms", [])[1:], best["active"][1:])
+                 if on and t not in nominal_terms]
     effect = f"{comp.name} follows {law}" + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else "")
     if best.get("nominal_exact") is False:
         effect += " (its nominal law is not linear: the learned terms are a deviation from it)"
     equivalents = best.get("equivalents", [])
     if equivalents:
         effect += "; equivalent: " + ", ".join(f"{e['component']} ({e['reason']})" for e in equivalents)
-    name = {"v": "v", "dv": "der(v)", "i": "i"}[var]
+    name = {"v": "v", "dv": "der(v)", "i": "i", "va": _local(wd.potentials[0]), "vb": _local(wd.potentials[1])}[var]
     return {"component": comp.name, "class": comp.cls, "effect": effect, "template": best["template"],
             "w": w.tolist(), "mode": best.get("mode"), "nominal_form": best.get("nominal_form"),
             "evidence": {"criterion": criterion_of(spec.criterion).name, "delta_to_next": best["delta"],
@@ -71,17 +80,48 @@ def describe(best: dict, base, spec, train, signals) -> dict:
                     "template_equation": template.equation(w, across="v", flow="i"),
                     "family": best.get("family"), "across": wd.across, "flow": wd.flow,
                     # the curve: the law against the variable it is in (der(across) for a law in
-                    # the rate; across against flow for a law in the flow), over the visited range
-                    "variable": {"v": "across", "dv": "der(across)", "i": "flow"}[var],
-                    "range": sorted([sign * float(lo), sign * float(hi)]), "curve": curve, "nominal": nominal_points,
+                    # the rate; across against flow for a law in the flow; a connector's own
+                    # potential), over the visited range, the other potential held at "held"
+                    "variable": {"v": "across", "dv": "der(across)", "i": "flow", "va": "potential at a",
+                                 "vb": "potential at b"}[var],
+                    "range": sorted([x_sign * float(lo), x_sign * float(hi)]), "curve": curve,
+                    "nominal": nominal_points,
                     "x": x_name, "y": y_name, "x_unit": unit_of(x_name, units), "y_unit": unit_of(y_name, units),
                     "sign": sign,          # the equation's orientation against the template's (v = a - b, i into a)
+                    "x_sign": x_sign,      # the curve's x against the template's (a potential keeps its sign)
+                    "held": {names[p]: value for p, value in held.items()},
+                    "at": held,            # the same, by the template's names (Template.curve's at)
+                    "along": _along(template, w, env, wd, sign),
                     "nominal_is_function": _nominal_is_function(best, var),
                     "note": f"learned for {name} in [{lo:.4g}, {hi:.4g}] (the range of the training data)"},
             "visited": best.get("visited", []), "parameters": template.parameter_names(),
             "terms": best.get("terms") or template.parameter_names(),
             "learned_class": class_name_for(comp.name, template),
             "train_rms": best.get("train_rms"), "validation_rms": best.get("validation_rms")}
+
+
+def _local(name: str) -> str:
+    """A component's variable without the component's name (Outlet1.a.h: a.h)."""
+    return name.split(".", 1)[-1]
+
+
+def _along(template, w, env: dict, wd, sign: float, points: int = 200) -> dict | None:
+    """A law in more than one of v, va, vb (radiation: G (T_a^4 - T_b^4)) is no curve: the law
+    at points along the nominal run, each [variables..., flow] in the equation's words and sign
+    (v and the flow flipped for a mechanical element, the potentials not); None for a law of
+    one variable."""
+    terms = [m for m, c in zip(getattr(template, "terms", []), w) if c != 0]
+    reads = set().union(*(m.variables for m in terms)) - {"i"} if terms else template.uses - {"i"}
+    used = [x for x in ("v", "va", "vb") if x in reads]
+    if not {"va", "vb"} & reads or len(used) < 2 or reads & {"dv", "di"}:
+        return None
+    n = len(np.asarray(env["v"]))
+    pick = np.linspace(0, n - 1, min(points, n)).astype(int)
+    va, vb = np.asarray(env["va"], float)[pick], np.asarray(env["vb"], float)[pick]
+    f = template.flow_of(w, va - vb, va=va, vb=vb)
+    columns = {"v": sign * (va - vb), "va": va, "vb": vb}
+    return {"variables": [wd.names[x] for x in used],
+            "points": [[*(float(columns[x][k]) for x in used), sign * float(f[k])] for k in range(len(pick))]}
 
 
 def _nominal_is_function(best: dict, var: str) -> bool:

@@ -3,18 +3,28 @@
 The role is read off the nominal component's own law along the nominal simulation (v across,
 i flow into connector a, dv and di their time derivatives):
 
-- ``static``: i follows v (resistor, spring, thermal conductor);
+- ``static``: i follows v (resistor, spring, thermal conductor), or v plus a constant;
 - ``rate``: i follows dv (capacitor, damper, heat capacity between two ports);
-- ``integral``: v follows di (inductor, inerter-like elements).
+- ``integral``: v follows di (inductor, inerter-like elements);
+- ``absolute``: i follows one connector's own potential, affinely (a tank's outlet linearised
+  about its operating level: q = (h_a + h_op)/R, whatever the level h_b downstream).
 
 Families per role (each a template spec; all start from the nominal law, so the first
 simulation of a candidate reproduces the nominal model):
 
-- ``static``: i = f(v) (cubic); a storage law i = f(v) dv + g(v) (a spring with damping);
+- ``static``: i = f(v) (cubic; with a constant when the nominal law has one); a storage law
+  i = f(v) dv + g(v) (a spring with damping);
 - ``rate``: i = h(dv) (a damper cubic in the speed; Coulomb-like friction tanh(dv/s)); the
   storage law (a capacitor whose
   capacitance depends on its voltage, a leaky capacitor: i = C dv + G v);
-- ``integral``: v = f(i) di + g(i).
+- ``integral``: v = f(i) di + g(i);
+- ``absolute``: i = c0 + c1 x + c2 x^2 + c3 x^3 in the potential x (va or vb) the nominal law
+  follows (the model says the flow follows that potential, not the difference: one family).
+
+Laws in both potentials (radiation, Q = G (T_a^4 - T_b^4), where the model has a linear
+conductor) are tried only where the laws in v cannot reach the noise (:func:`potential_families`,
+from the shape stage). Terms in a potential are written in units of its span ((va/400)^4, not
+va^4 ~ 1e10 beside v ~ 10): the screening's and the fit's least squares stay well conditioned.
 
 Non-polynomial shapes (tanh, sinh, |x| x, x/sqrt(1 + x^2), exp) are found afterwards for the
 most promising component only: a neural law fitted to the data is distilled into a sparse
@@ -31,13 +41,18 @@ STORAGE = {"name": "polynomial", "lhs": ["i"], "rhs": ["dv", "v*dv", "v^2*dv", "
 INTEGRAL = {"name": "polynomial", "lhs": ["v"], "rhs": ["di", "i*di", "i^2*di", "i", "i^3"],
             "family": "storage"}
 FAMILIES = {"static": [STATIC, STORAGE], "rate": [RATE, STORAGE], "integral": [INTEGRAL],
-            "unknown": [STATIC, RATE, STORAGE]}
+            "unknown": [STATIC, RATE, STORAGE], "absolute": []}
 #: the variable a role's law is a function of (for the law curve and the shape family)
-LAW_VARIABLE = {"static": "v", "rate": "dv", "integral": "i", "unknown": "v"}
+LAW_VARIABLE = {"static": "v", "rate": "dv", "integral": "i", "unknown": "v", "absolute": "va"}
+#: R^2 a role's line must reach along the nominal run
+ROLE_FIT = 0.99
 
 
 def spec_name(spec) -> str:
-    """The template name of a template spec (a name, or a dict with ``name``)."""
+    """The template name of a template spec (a name, or a dict with ``name``; a pair's two specs
+    joined by +)."""
+    if isinstance(spec, (list, tuple)):
+        return "+".join(spec_name(s) for s in spec)
     return spec if isinstance(spec, str) else spec.get("name", "?")
 
 
@@ -46,19 +61,59 @@ def family_of(spec) -> str:
     return (spec.get("family") if isinstance(spec, dict) else None) or spec_name(spec)
 
 
+def _r2(y, x) -> float:
+    """R^2 of a line through the origin."""
+    y, x = np.asarray(y, float), np.asarray(x, float)
+    if not np.any(x) or not np.any(y):
+        return 0.0
+    a = (x @ y) / (x @ x)
+    return float(1.0 - np.sum((y - a * x) ** 2) / np.sum(y**2))
+
+
+def _affine(y, x) -> tuple[float, float]:
+    """(R^2 of a line with its constant, the constant's share of y's RMS)."""
+    y, x = np.asarray(y, float), np.asarray(x, float)
+    if not np.any(y) or np.ptp(x) <= 1e-12 * (np.max(np.abs(x)) + 1e-300):
+        return 0.0, 0.0
+    slope, c = np.polyfit(x, y, 1)
+    rms = float(np.sqrt(np.mean(y**2)))
+    return float(1.0 - np.sum((y - slope * x - c) ** 2) / np.sum(y**2)), abs(float(c)) / rms
+
+
 def role_of(env: dict) -> str:
     """``static``, ``rate`` or ``integral``: which single variable explains the nominal law
-    (R^2 > 0.99 of a line through the origin); ``unknown`` otherwise."""
-    def r2(y, x):
-        y, x = np.asarray(y, float), np.asarray(x, float)
-        if not np.any(x) or not np.any(y):
-            return 0.0
-        a = (x @ y) / (x @ x)
-        return 1.0 - np.sum((y - a * x) ** 2) / np.sum(y**2)
-
-    fits = {"static": r2(env["i"], env["v"]), "rate": r2(env["i"], env["dv"]), "integral": r2(env["v"], env["di"])}
+    (R^2 > 0.99 of a line through the origin); else ``static`` for a law affine in v, and
+    ``absolute`` for one affine in a connector's own potential (va or vb; one that v explains as
+    well is static); ``unknown`` otherwise."""
+    fits = {"static": _r2(env["i"], env["v"]), "rate": _r2(env["i"], env["dv"]), "integral": _r2(env["v"], env["di"])}
     best = max(fits, key=fits.get)
-    return best if fits[best] > 0.99 else "unknown"
+    if fits[best] > ROLE_FIT:
+        return best
+    if "va" not in env:
+        return "unknown"
+    affine = {"static": _affine(env["i"], env["v"])[0],
+              "absolute": max(_affine(env["i"], env[x])[0] for x in ("va", "vb"))}
+    best = "static" if affine["static"] >= affine["absolute"] - 1e-9 else "absolute"
+    return best if affine[best] > ROLE_FIT else "unknown"
+
+
+def _constant(env: dict) -> bool:
+    """Whether the nominal flow has a constant beside its part in v (an affine law: more than a
+    thousandth of its RMS, and a better fit with it)."""
+    r2, share = _affine(env["i"], env["v"])
+    return share > 1e-3 and r2 > _r2(env["i"], env["v"]) + 1e-6
+
+
+def potential_of(env: dict) -> str:
+    """The connector's potential (va or vb) the nominal flow follows best (affinely)."""
+    return max(("va", "vb"), key=lambda x: _affine(env["i"], env[x])[0])
+
+
+def unit_of(x) -> float:
+    """The unit a potential's terms are written in: its largest value, to two digits (1 where
+    that is between 0.3 and 3: a level in metres stays va^2)."""
+    s = float(f"{float(np.max(np.abs(x))) if np.size(x) and np.any(x) else 1.0:.2g}")
+    return 1.0 if 0.3 <= s <= 3.0 else s
 
 
 def families(role: str, env: dict | None = None) -> list[dict]:
@@ -72,7 +127,35 @@ def families(role: str, env: dict | None = None) -> list[dict]:
     for f in out:
         if f.get("family") == "rate":
             f["rhs"] = [*f["rhs"], f"tanh(dv/{0.05 * span:.3g})", f"tanh(dv/{0.25 * span:.3g})"]
+        if f.get("family") == "static" and env is not None and _constant(env):
+            f["rhs"] = ["1", *f["rhs"]]       # the nominal law has a constant: so may the law
+    if role == "absolute":
+        from ..templates import scaled
+
+        x = potential_of(env) if env is not None else "va"
+        s = unit_of(env[x]) if env is not None else 1.0
+        out.insert(0, {"name": "polynomial", "lhs": ["i"], "rhs": ["1", *(scaled(x, k, s) for k in (1, 2, 3))],
+                       "family": "absolute"})
     return out
+
+
+def potential_families(env: dict) -> list[dict]:
+    """Laws in both connectors' own potentials, for a static component whose law in v cannot
+    reach the noise: radiation, i = c1 v + c2 va^4 + c3 vb^4 (a linear conductor's law, and
+    G (T_a^4 - T_b^4) when c1 = 0), the potentials in units of their span; drawn against v with
+    vb held at its mean. None where a potential does not vary along the run (a conductor to a
+    fixed temperature: its law is in v), or where the potentials are not on an absolute scale
+    (they cross 0: an electrical potential against an arbitrary ground; a temperature in K, a
+    level, an absolute pressure stay above it)."""
+    from ..templates import scaled
+
+    va, vb = np.asarray(env["va"], float), np.asarray(env["vb"], float)
+    span = max(float(np.ptp(va)), float(np.ptp(vb)), 1e-300)
+    if min(np.ptp(va), np.ptp(vb)) < 0.05 * span or min(np.min(va), np.min(vb)) <= 0:
+        return []
+    s = unit_of(np.concatenate([va, vb]))
+    return [{"name": "polynomial", "lhs": ["i"], "rhs": ["v", scaled("va", 4, s), scaled("vb", 4, s)],
+             "at": {"vb": float(f"{np.mean(vb):.4g}")}, "family": "potentials"}]
 
 
 #: the shapes of the laws engineers meet, each with a scale s (fitted): Coulomb friction and
@@ -87,9 +170,12 @@ _SHAPES = ("tanh({x}/{s})", "sinh({x}/{s})", "{x}/sqrt(1 + ({x}/{s})^2)", "exp({
 def basis(x: np.ndarray, name: str) -> list[tuple[str, float | None]]:
     """Candidate terms in the variable ``name`` for a law visited over ``x``, as (pattern, scale):
     polynomials, |x| x, and the shapes of friction, saturation and exponential laws at scales
-    spread over the visited span (the scale of a chosen shape is then fitted)."""
+    spread over the visited span (the scale of a chosen shape is then fitted); in a connector's
+    own potential (va, vb) also a constant (an outflow that starts above the bottom)."""
     span = float(np.max(np.abs(x))) or 1.0
     terms = [(t, None) for t in ("{x}", "{x}^2", "{x}^3", "{x}*abs({x})", "sqrt(abs({x}))*sign({x})")]
+    if name in ("va", "vb"):
+        terms.insert(0, ("1", None))
     return terms + [(shape, k * span) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
 
 
@@ -104,7 +190,7 @@ def _values(term, x, name, scale=None) -> np.ndarray:
     from ..templates import Monomial
 
     with np.errstate(all="ignore"):
-        return Monomial.parse(_text(term, name, scale, digits=17)).value({name: x})
+        return np.broadcast_to(Monomial.parse(_text(term, name, scale, digits=17)).value({name: x}), np.shape(x))
 
 
 def _fit_scales(chosen, x, f, name):
@@ -147,7 +233,8 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
     x, f = x[ok], f[ok]
     terms = basis(x, name)
     Phi = np.column_stack([_values(t, x, name) for t in terms])
-    usable = [k for k in range(len(terms)) if np.all(np.isfinite(Phi[:, k])) and np.ptp(Phi[:, k]) > 0]
+    usable = [k for k in range(len(terms))
+              if np.all(np.isfinite(Phi[:, k])) and (np.ptp(Phi[:, k]) > 0 or terms[k][0] == "1")]
     Phi = Phi / np.where(np.abs(Phi).max(axis=0) > 0, np.abs(Phi).max(axis=0), 1.0)   # conditioning
     scale = float(np.ptp(f)) or 1.0
     span = float(np.max(np.abs(x))) or 1.0

@@ -15,9 +15,11 @@ changes one component's law there, and only there, by a deviation ``D`` at its t
 
 The law's equation fixes D. For a law that gives its variable explicitly (i = f_w(v, dv)), D =
 f_w(...) - f_nom(...), with f_nom the nominal law's own linear form in the law's variables
-(fitted along the nominal run): when the nominal law is linear, what the rest of the model sees
-is exactly f_w, the candidate law, and at the start w0 (the law fitted to the nominal one)
-D = 0: the candidate's first simulation is the nominal model. An implicit law G(v, i, ...) = 0
+(fitted along the nominal run; for a law that reads the connectors' own potentials va, vb, an
+affine form with its constant: a tank's outlet linearised about its operating level, q = (h_a +
+h_op)/R): when the nominal law is linear (or affine), what the rest of the model sees is exactly
+f_w, the candidate law, and at the start w0 (the law fitted to the nominal one) D = 0: the
+candidate's first simulation is the nominal model. An implicit law G(v, i, ...) = 0
 replaces the terminal behaviour outright. The law's derivatives (dv, di) are new states tied to
 the across value or the flow; index reduction differentiates those ties as it does any
 constraint. Everything else the user wrote (initial equations, start values, parameters, other
@@ -42,8 +44,9 @@ ACROSS, FLOW, DEVIATION = "mcl_v", "mcl_i", "mcl_d"
 @dataclass(frozen=True)
 class NominalForm:
     """The nominal law's linear form in the candidate law's variables: f_nom = sum c_k x_k
-    (x_k among v, dv for a parallel law; i, di for a series one) and how well it fits the
-    nominal law along the nominal run (relative RMS error; ~0 for a linear nominal law)."""
+    (x_k among v, dv, va, vb and the constant 1 for a parallel law; i, di for a series one) and
+    how well it fits the nominal law along the nominal run (relative RMS error; ~0 for a linear
+    or affine nominal law)."""
 
     coefficients: dict
     error: float
@@ -55,14 +58,49 @@ class NominalForm:
 
 def nominal_form(env: dict, variables: list[str], target: str) -> NominalForm:
     """f_nom = the least-squares fit of the nominal law's ``target`` (i or v) along the nominal
-    run on ``variables`` (a subset of v, dv or i, di)."""
+    run on ``variables`` (a subset of v, dv, va, vb, 1 or i, di; ``1`` the constant)."""
     y = np.asarray(env[target], float)
     if not variables:
         return NominalForm({}, float(np.sqrt(np.mean(y**2)) / (np.sqrt(np.mean(y**2)) + 1e-300)) if np.any(y) else 0.0)
-    X = np.column_stack([np.asarray(env[v], float) for v in variables])
+    X = np.column_stack([np.ones_like(y) if v == "1" else np.asarray(env[v], float) for v in variables])
     c, *_ = np.linalg.lstsq(X, y, rcond=None)
     scale = float(np.sqrt(np.mean(y**2))) or 1.0
     return NominalForm(dict(zip(variables, map(float, c))), float(np.sqrt(np.mean((y - X @ c) ** 2)) / scale))
+
+
+def nominal_of(env: dict, uses, series: bool = False) -> NominalForm:
+    """The nominal law's form for a candidate law that uses ``uses``: in the difference variables
+    the law reads (v, dv; i, di for a series law), or, where that does not fit the nominal law
+    and the law reads a connector's own potential (or has a constant term, ``"1"`` in
+    ``uses``), affine in those potentials (the nominal law of a tank's outlet follows the level
+    upstream, h_a, not h_a - h_b), or in both; the closest, the plainer on a tie."""
+    if series:
+        return nominal_form(env, [v for v in ("i", "di") if v in uses], "v")
+    plain = [v for v in ("v", "dv") if v in uses]
+    best = nominal_form(env, plain, "i")
+    absolute = [v for v in ("va", "vb") if v in uses and v in env]
+    if best.exact or not (absolute or "1" in uses):
+        return best
+    for variables in (["1", *absolute], [*plain, "1", *absolute]):
+        form = nominal_form(env, _independent(env, variables), "i")
+        if form.error < best.error - 1e-9:
+            best = form
+    return best
+
+
+def _independent(env: dict, variables: list[str]) -> list[str]:
+    """``variables`` without those the others already span along the run (v = va - vb; a
+    potential held constant is the constant term), in order: a nominal form's coefficients stay
+    unique and of the nominal law's size."""
+    out, cols = [], []
+    for v in variables:
+        col = np.ones(len(np.asarray(env["i"]))) if v == "1" else np.asarray(env[v], float)
+        trial = np.column_stack([*cols, col])
+        sv = np.linalg.svd(trial / np.maximum(np.abs(trial).max(axis=0), 1e-300), compute_uv=False)
+        if sv[-1] > 1e-6 * sv[0]:
+            out.append(v)
+            cols.append(col)
+    return out
 
 
 def mode_of(template) -> str:
@@ -92,14 +130,14 @@ def with_law(dae: Dae, comp: Component, template, w0, nominal: NominalForm | Non
     dae, D, env = _deviation(dae, comp, mode_of(template))
     explicit = template.explicit is not None
     uses = template.uses if active is None else template.uses_where(active)
-    needs = set(uses) | (set(nominal.coefficients) if explicit else set())
+    needs = set(uses) | (set(nominal.coefficients) - {"1"} if explicit else set())
     env = _derivatives(dae, comp, env, needs, rates)
     env.update({v: ca.SX(0) for v in template.uses - set(env)})
     names = qualified(comp.name, template.parameter_names(), set(dae.p_names))
     w = ca.SX.sym("w", len(names))
     ws = ca.vertsplit(w)
     if explicit:
-        f_nom = sum((c * env[v] for v, c in nominal.coefficients.items()), ca.SX(0))
+        f_nom = sum((c * (1.0 if v == "1" else env[v]) for v, c in nominal.coefficients.items()), ca.SX(0))
         law = D - (template.sx_explicit(ws, env) - f_nom)
     else:
         law = template.sx_residual(ws, env)
@@ -108,7 +146,8 @@ def with_law(dae: Dae, comp: Component, template, w0, nominal: NominalForm | Non
 
 def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
     """The new unknown D put at ``comp``'s terminals, and the law's variables as expressions:
-    v (the across value the rest of the model sees), i (the flow into connector a)."""
+    v (the across value the rest of the model sees), i (the flow into connector a), va and vb
+    (the potentials of connectors a and b)."""
     xa, xb = (dae.exprs[n] for n in comp.across())
     fa, fb = (dae.exprs[n] for n in comp.flow())
     for s, n in zip((xa, xb, fa, fb), (*comp.across(), *comp.flow())):
@@ -129,7 +168,7 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
         if ca.depends_on(rows[k], old):
             rows[k] = ca.substitute(rows[k], old, new)
     i = fa + D if mode == "parallel" else fa
-    env = {"v": xa - xb, "i": i}
+    env = {"v": xa - xb, "i": i, "va": xa, "vb": xb}
     exprs[f"{comp.name}.{ACROSS}"], exprs[f"{comp.name}.{FLOW}"], exprs[f"{comp.name}.{DEVIATION}"] = xa - xb, i, D
     dae = dataclasses.replace(dae, residual=ca.vertcat(*rows) if rows else ca.SX(0, 1), exprs=exprs,
                               z=ca.vertcat(dae.z, D), z_names=[*dae.z_names, f"{comp.name}.{DEVIATION}"],

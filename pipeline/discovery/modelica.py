@@ -2,7 +2,8 @@
 
 :func:`learned_class` writes a learned law as a class of the package ``Learned``: it extends the
 nominal class's own two-connector interface (MSL's ``OnePort``, ``PartialCompliant``...; the
-law then reads in that interface's variables, orientation and units), its coefficients are
+law then reads in that interface's variables, orientation and units; a law in the connectors'
+own potentials reads them by name, ``port_a.T``), its coefficients are
 parameters with units and descriptions (terms the pruning removed are left out), its icon is the
 nominal class's, and a Documentation annotation gives the law, the range it was learned on, the
 data, the evidence and the confidence. Where no such interface is found, the class declares the
@@ -46,16 +47,19 @@ def _library(libraries=(), sources=()):
     return LibraryClasses(libs)
 
 
-def connector_classes(comp, libraries=(), sources=()) -> dict[str, str]:
+def connector_classes(comp, libraries=(), sources=(), scope: str = "") -> dict[str, str]:
     """The class of each of ``comp``'s connectors, read from its class's declarations (through
-    what it extends), in the libraries on the path and the user's own files."""
+    what it extends), in the libraries on the path and the user's own files; named as seen from
+    ``scope`` (the model's class: a connector of the user's own package, ``Port``, is
+    ``Tanks.Port`` from the package ``Learned``)."""
     lib = _library(libraries, sources)
     info = lib.find(comp.cls) if comp.cls else None
     out = {}
     if info is not None:
         for _prefixes, cls, _type, member, _cond in lib.members(info):
             if cls is not None and cls.kind == "connector":
-                out[member] = cls.name
+                seen = lib.resolve(cls.name, scope) if scope else None
+                out[member] = seen.name if seen is not None and seen.kind == "connector" else cls.name
     return out
 
 
@@ -83,6 +87,12 @@ def interface_of(comp, lib) -> str | None:
         todo += base.extends
         scope = base.name.rsplit(".", 1)[0]
     return None
+
+
+def _declared(qualified: str, lib) -> set[str]:
+    """The names class ``qualified`` declares, itself and through what it extends."""
+    info = lib.find(qualified)
+    return {m for *_rest, m, _c in lib.members(info)} if info is not None else set()
 
 
 def _class_text(qualified: str, lib) -> str | None:
@@ -141,7 +151,7 @@ def _unit_power(unit: str, power: int) -> str | None:
 
 def coefficient_unit(term, units: dict) -> str | None:
     """The unit of a coefficient of ``term`` in a law y = sum c_k term_k (``units``: y, v, i,
-    dv, di's units; dv's is v's per second): y's unit over the term's; None where a unit is not
+    va, vb's units; dv's is v's per second): y's unit over the term's; None where a unit is not
     plain or the term not a monomial (tanh(dv/s) has no unit: its coefficient takes y's)."""
     y = units.get("y")
     if not y or not re.fullmatch(r"[A-Za-z]+", y):
@@ -163,40 +173,52 @@ def coefficient_unit(term, units: dict) -> str | None:
     return f"{'.'.join(num)}/{'.'.join(den) if len(den) == 1 else '(' + '.'.join(den) + ')'}"
 
 
-def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | None = None, data: str = "") -> str:
+def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | None = None, data: str = "",
+                  scope: str = "") -> str:
     """The learned law as a Modelica class that looks native: it extends the nominal class's
     interface when one is found (else it declares the component's own connectors), its
     coefficients are parameters with units and descriptions, zero terms are left out, its icon
-    is the nominal class's and its documentation says what was learned, on what, how surely."""
+    is the nominal class's and its documentation says what was learned, on what, how surely.
+    ``scope``: the model's class, where the component's classes are named from."""
     from ..services import registry
 
     template = registry().template(cause["template"])
     lib = _library(libraries, sources)
     interface = interface_of(comp, lib) if template.explicit == "i" and hasattr(template, "terms") else None
     if interface is None:
-        return _template_class(cause, comp, template, libraries, sources)
+        return _template_class(cause, comp, template, libraries, sources, scope)
     from .words import parity, words
+
+    from ..templates import Monomial, scaled_power
 
     wd = words(comp)
     local = lambda q: q.split(".", 1)[1] if not q.startswith("der(") else f"der({q[4:-1].split('.', 1)[1]})"
-    names = {"v": local(wd.across), "dv": local(wd.rate), "i": local(wd.flow)}
+    names = {"v": local(wd.across), "dv": local(wd.rate), "i": local(wd.flow),
+             "va": local(wd.potentials[0]), "vb": local(wd.potentials[1])}
+    if names["dv"] not in _declared(interface, lib):      # MCL's TwoFlange has s_rel, no v_rel
+        names["dv"] = f"der({names['v']})"
     w = np.asarray(cause["w"], float)
     if wd.flipped:        # the interface's orientation (b - a): odd terms change sign
         signs = np.array([parity(t, getattr(template, "scales", None)) for t in template.terms])
         if (signs == 0).any():
-            return _template_class(cause, comp, template, libraries, sources)
+            return _template_class(cause, comp, template, libraries, sources, scope)
         w = w.copy()
         w[:len(signs)] *= signs * signs[0]
     scales = dict(zip(template.scales, w[len(template.terms):])) if getattr(template, "scales", None) else {}
     u = {"y": (units or {}).get(wd.flow), "v": (units or {}).get(wd.across), "i": (units or {}).get(wd.flow)}
+    u["va"] = u["vb"] = (units or {}).get(wd.potentials[0]) or u["v"]
     params, rhs = [], []
     for k, (term, c) in enumerate(zip(template.terms[1:], w[1:len(template.terms)]), start=1):
         if c == 0:
             continue
+        folded = scaled_power(term)
+        if folded is not None:     # (x/s)^p, fitted in units of s: c/s^p on x^p
+            x, s_, p = folded
+            term, c = Monomial(((x, p),)), c / s_**p
         text = term.modelica()
         for s_name, s_val in scales.items():
             text = re.sub(rf"\b{s_name}\b", f"{s_val:.6g}", text)
-        text = re.sub(r"\b(dv|di|v|i)\b", lambda m: names.get(m.group(1), m.group(1)), text)
+        text = re.sub(r"\b(va|vb|dv|di|v|i)\b", lambda m: names.get(m.group(1), m.group(1)), text)
         pname = f"c{len(params) + 1}"
         unit = coefficient_unit(term, u)
         unit_mod = f'(unit="{unit}")' if unit else ""
@@ -225,17 +247,23 @@ def _documentation(cause: dict, data: str) -> str:
                 f"to the next explanation).</p>")
     params = law.get("parameters") or []
     names, terms = cause.get("parameters") or [], cause.get("terms") or []
-    term_of = dict(zip(names, terms))
+    from ..templates import unscaled
+
+    term_of = {n: unscaled(t) for n, t in zip(names, terms)}    # (va/550)^4 reads va^4
+
+    def interval(p):
+        term, k = term_of.get(p["name"].split(".")[-1], (p["name"], 1.0))
+        return f"{html.escape(term)}: {k * p['value']:.4g} [{k * p['ci95'][0]:.4g}, {k * p['ci95'][1]:.4g}]"
+
     if params:
-        rows.append("<p>95% intervals of the coefficients: " + "; ".join(
-            f"{html.escape(term_of.get(p['name'].split('.')[-1], p['name']))}: {p['value']:.4g} "
-            f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]" for p in params) + ".</p>")
+        rows.append("<p>95% intervals of the coefficients: " + "; ".join(interval(p) for p in params) + ".</p>")
     return "".join(rows).replace('"', "'")
 
 
-def _template_class(cause: dict, comp, template, libraries, sources) -> str:
-    """The law as a class declaring the component's own connectors, in v (a - b) and i (into a)."""
-    classes = connector_classes(comp, libraries, sources)
+def _template_class(cause: dict, comp, template, libraries, sources, scope: str = "") -> str:
+    """The law as a class declaring the component's own connectors, in v (a - b), i (into a) and
+    the connectors' potentials va, vb where it reads them."""
+    classes = connector_classes(comp, libraries, sources, scope)
     conns = [dataclasses.replace(c, cls=classes.get(c.name, c.cls)) for c in comp.connectors]
     unresolved = [c.name for c in conns if c.cls.startswith("connector(")]
     if unresolved:
@@ -324,7 +352,7 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
                          "the model is not rewritten for it")
         try:
             classes.append(learned_class(cause, comp, spec.libraries, spec.sources, base.model.info.get("units", {}),
-                                         data))
+                                         data, scope=spec.model_name))
         except ValueError as exc:
             notes.append(str(exc))
             continue

@@ -27,39 +27,43 @@ from .inject import ACROSS, FLOW
 
 @dataclass
 class Signals:
-    """A component's law variables along a run: v, i and their time derivatives."""
+    """A component's law variables along a run: v, i and their time derivatives, and the
+    potentials va, vb of its connectors a and b (v = va - vb)."""
 
     v: np.ndarray
     i: np.ndarray
     dv: np.ndarray
     di: np.ndarray
+    va: np.ndarray
+    vb: np.ndarray
 
     def env(self) -> dict:
-        return {"v": self.v, "i": self.i, "dv": self.dv, "di": self.di}
+        return {"v": self.v, "i": self.i, "dv": self.dv, "di": self.di, "va": self.va, "vb": self.vb}
 
 
 def law_signals(model, states: np.ndarray, time: np.ndarray, inputs, components) -> dict[str, Signals]:
-    """v, i, dv/dt, di/dt of each component along a run (``states`` (N, nx) at ``time``), exact:
-    d/dt of a variable is its gradient in the states times the right-hand side, plus its partial
-    derivatives in time and in the inputs (these times the inputs' slopes)."""
+    """v, i, dv/dt, di/dt, va, vb of each component along a run (``states`` (N, nx) at ``time``),
+    exact: d/dt of a variable is its gradient in the states times the right-hand side, plus its
+    partial derivatives in time and in the inputs (these times the inputs' slopes)."""
     ode = model.ode
     names = []
     for c in components:
         xa, xb = c.across()
         fa, _ = c.flow()
         v_name, i_name = f"{c.name}.{ACROSS}", f"{c.name}.{FLOW}"
-        names.append((v_name, None, i_name) if v_name in ode.probe_names else (xa, xb, fa))
+        names.append(((v_name, None, i_name) if v_name in ode.probe_names else (xa, xb, fa), (xa, xb)))
     X, U, P, T = ode.probe.mx_in()
     Ud = ca.MX.sym("ud", U.numel())
     probe = ode.probe(X, U, P, T)
     idx = {n: k for k, n in enumerate(ode.probe_names)}
-    vals = []
-    for a, b, f in names:
+    vals, pots = [], []
+    for (a, b, f), (xa, xb) in names:
         vals += [probe[idx[a]] - (probe[idx[b]] if b else 0), probe[idx[f]]]
+        pots += [probe[idx[xa]], probe[idx[xb]]]
     q = ca.vertcat(*vals) if vals else ca.MX(0, 1)
     xdot = ode.ode(X, U, P, T)
     dq = ca.jtimes(q, X, xdot) + ca.jacobian(q, T) + (ca.jtimes(q, U, Ud) if U.numel() else 0)
-    fun = ca.Function("signals", [X, U, P, T, Ud], [q, dq])
+    fun = ca.Function("signals", [X, U, P, T, Ud], [q, dq, ca.vertcat(*pots) if pots else ca.MX(0, 1)])
     try:
         fun = fun.expand()
     except RuntimeError:
@@ -69,10 +73,10 @@ def law_signals(model, states: np.ndarray, time: np.ndarray, inputs, components)
     Uo = np.array([np.interp(time, u.time, u.values[:, j]) for j in range(len(u.names))]).reshape(-1, N)
     Ud_ = np.array([np.interp(time, u.time, np.gradient(u.values[:, j], u.time)) for j in range(len(u.names))]).reshape(-1, N)
     p = model.parameter_vector()
-    Q, dQ = (np.array(v) for v in fun.map(N)(states.T, Uo, np.repeat(p[:, None], N, 1), time[None], Ud_))
+    Q, dQ, V = (np.array(v) for v in fun.map(N)(states.T, Uo, np.repeat(p[:, None], N, 1), time[None], Ud_))
     out = {}
     for k, c in enumerate(components):
-        out[c.name] = Signals(Q[2 * k], Q[2 * k + 1], dQ[2 * k], dQ[2 * k + 1])
+        out[c.name] = Signals(Q[2 * k], Q[2 * k + 1], dQ[2 * k], dQ[2 * k + 1], V[2 * k], V[2 * k + 1])
     return out
 
 

@@ -22,7 +22,7 @@ from ..executor import TaskFailed
 from ..progress import log
 from ..sensitivity import fine_grid
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, publish
-from .families import distillations, families, role_of
+from .families import distillations, families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
 from .screen import law_signals, linear_response, predicted_rss
 
@@ -33,6 +33,8 @@ PAIR_WHEN, PAIR_GAIN = 2.0, 0.5
 #: a candidate's simulation may take this many times the nominal model's solver steps: a law
 #: that makes the model crawl (stiff, near singular) fails fast and is recorded as such
 WORK = 50
+#: family indices of the laws in both potentials (:func:`potential_items`)
+POTENTIALS_INDEX = 90
 
 
 def balanced(base: Base, train: TimeSeries, comp) -> bool:
@@ -203,28 +205,60 @@ def _done(path: Path) -> bool:
         return False
 
 
+def _ranked(cands: list[dict]) -> list[dict]:
+    return sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
+
+
+def _at_noise(c: dict, sigma: float) -> bool:
+    return c.get("train_rms") is not None and c["train_rms"] < 1.2 * sigma
+
+
+def potential_items(ctx: Context, ranked: list[dict], top: int = 2) -> list[Item]:
+    """Laws in both connectors' own potentials (:func:`families.potential_families`: radiation
+    where the model has a linear conductor) at the static components among the ``top`` best
+    components, where both potentials vary."""
+    comps = list(dict.fromkeys(c["component"] for c in ranked if "parts" not in c))[:top]
+    items = []
+    for comp in comps:
+        env = ctx.signals[comp].env() if comp in ctx.signals else None
+        if env is None or role_of(env) != "static":
+            continue
+        items += [Item(comp, POTENTIALS_INDEX + k, f) for k, f in enumerate(potential_families(env))]
+    return items
+
+
 def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
-    """Non-polynomial shapes for the most promising component: a neural law in the variable of
-    its best polynomial law, fitted to the data, then distilled into a sparse readable law over
-    tanh, sinh, |x| x, x/sqrt(1 + x^2), exp and polynomial terms (:func:`families.distillations`)
-    and fitted and pruned like any candidate. Skipped when the polynomial law already fits to
-    the noise, or when it is not a law of one variable."""
+    """What the polynomial laws in one difference variable could not reach, when the best of them
+    leaves misfit above the noise: first laws in both connectors' own potentials at the best
+    static components (radiation between two bodies whose temperatures both vary, where the
+    model has a linear conductor); then, unless such a law wins, non-polynomial shapes for the
+    most promising component: a neural law in the variable of its best polynomial law (v, dv,
+    or a connector's own potential), fitted to the data, then distilled into a sparse readable
+    law over tanh, sinh, |x| x, sqrt(|x|), x/sqrt(1 + x^2), exp and polynomial terms
+    (:func:`families.distillations`) and fitted and pruned like any candidate. Skipped when the
+    polynomial law already fits to the noise, or when it is not a law of one variable."""
     from ..services import registry
 
-    done = sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
-    if not done or (done[0].get("train_rms") is not None and done[0]["train_rms"] < 1.2 * sigma):
+    done = _ranked(cands)
+    if not done or _at_noise(done[0], sigma):
         return []
-    one = [c for c in done if c.get("family") in ("static", "rate") and c.get("law_variable") in ("v", "dv")]
+    items = potential_items(fit.ctx, done)
+    out = fit(items) if items else []
+    done = _ranked(cands + out)
+    if _at_noise(done[0], sigma) or done[0].get("family") == "potentials":
+        return out
+    one = [c for c in done if c.get("family") in ("static", "rate", "absolute")
+           and c.get("law_variable") in ("v", "dv", "va", "vb")]
     if not one:
-        return []
+        return out
     best, var = one[0], one[0]["law_variable"]
     log.info("      shape of %s's law in %s: neural fit, then a sparse law distilled from it", best["component"], var)
     poly = registry().template(best["template"])
     xs = np.linspace(*(best.get("law_range") or [-1.0, 1.0]), 201)
-    spec = {"name": "neural", "hidden": 4, "x": var, "coupled": False}
+    spec = {"name": "neural", "hidden": 4, "x": var, "coupled": False, "family": "reference"}
     start = registry().template(spec).fit_curve(xs, poly.curve(np.asarray(best["w"]) * np.asarray(best["active"]), xs))
     neural = fit([Item(best["component"], NEURAL_INDEX, {**spec, "start": start.tolist()})])
-    out = list(neural)
+    out += neural
     n = neural[0]
     if n.get("score") is None or not n.get("law_range"):
         return out

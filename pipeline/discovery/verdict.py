@@ -84,13 +84,14 @@ def equivalents(best: dict, ranked: list[dict], structure) -> list[dict]:
 def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: float, signals: dict | None = None):
     """(causes, why not, score of the model without them): the winning law, or both laws of a
     winning pair, each with its lead over the best candidate that shares none of its components
-    (or the model without it), its equivalents, its role and the kind of its effect. A neural
-    law is never a cause (it is the reference the readable laws are distilled from)."""
+    (or the model without it), its equivalents, its role and the kind of its effect. The neural
+    law of the shape stage is never a cause (it is the reference the readable laws are
+    distilled from); one the user pinned may be."""
     n_obs = int(np.isfinite(resid).sum())
     nominal_score = criterion_of(spec.criterion).score(rss0, n_obs, 0)
     env = {k: v.env() for k, v in (signals or {}).items()}
     kind = lambda c: effect_kind(c, env.get(c["component"]))
-    scored = sorted((c for c in cands if c.get("score") is not None and spec_name(c.get("template") or "") != "neural"),
+    scored = sorted((c for c in cands if c.get("score") is not None and c.get("family") != "reference"),
                     key=lambda c: c["score"])
     ranked = [c for c in scored if c["score"] < nominal_score]
     if not ranked:

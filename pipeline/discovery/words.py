@@ -4,7 +4,9 @@ Templates are written in v (across, connector a minus b) and i (flow into connec
 report names them as the domain does, with the Modelica Standard Library's orientation: an
 electrical or thermal element's v = p.v - n.v / dT = port_a.T - port_b.T with the flow into the
 first connector; a mechanical element's s_rel = flange_b.s - flange_a.s with f = flange_b.f (the
-opposite orientation, so the law's odd and even terms are rewritten accordingly).
+opposite orientation, so the law's odd and even terms are rewritten accordingly). The connectors'
+own potentials va, vb are named as the model names them (Outlet1.a.h, Rad.port_a.T,
+D.flange_a.s): they keep their sign whatever the orientation.
 """
 from __future__ import annotations
 
@@ -31,10 +33,12 @@ class Words:
     flow: str
     flipped: bool           # across and flow are b - a and the flow into b
     definitions: str
+    potentials: tuple[str, str] = ("va", "vb")   # the potentials of connectors a and b
 
     @property
     def names(self) -> dict:
-        return {"v": self.across, "dv": self.rate, "i": self.flow}
+        return {"v": self.across, "dv": self.rate, "i": self.flow, "va": self.potentials[0],
+                "vb": self.potentials[1]}
 
 
 def words(comp) -> Words:
@@ -47,16 +51,18 @@ def words(comp) -> Words:
     defs = (f"{q(across)} = {q(first.name)}.{x} - {q(second.name)}.{x}, {q(flow)} = {q(first.name)}.{f}"
             + (f", {q(rate)} = {rate_def}" if rate_def else ""))
     rate_name = f"der({q(across)})" if rate.startswith("der(") else q(rate)
-    return Words(q(across), rate_name, q(flow), flipped, defs)
+    return Words(q(across), rate_name, q(flow), flipped, defs, (q(f"{a.name}.{x}"), q(f"{b.name}.{x}")))
 
 
 def parity(term, constants: dict | None = None) -> int:
     """+1 for an even term, -1 for an odd one, 0 for neither (checked numerically on v, i, dv, di
-    changing sign together: the orientation flip; ``constants``: the values of scale names)."""
+    changing sign together: the orientation flip; the potentials va, vb keep theirs, a constant
+    is even; ``constants``: the values of scale names)."""
     rng = np.random.default_rng(1)
     env = {k: rng.uniform(0.1, 2.0, 16) for k in ("v", "i", "dv", "di")}
-    neg = {**(constants or {}), **{k: -x for k, x in env.items()}}
-    env = {**(constants or {}), **env}
+    pots = {k: rng.uniform(0.1, 2.0, 16) for k in ("va", "vb")}
+    neg = {**(constants or {}), **pots, **{k: -x for k, x in env.items()}}
+    env = {**(constants or {}), **pots, **env}
     with np.errstate(all="ignore"):
         a, b = np.asarray(term.value(env), float), np.asarray(term.value(neg), float)
     if np.allclose(a, b, rtol=1e-9, atol=1e-12):
@@ -71,16 +77,25 @@ def in_words(template, w, comp, digits: int = 4) -> str:
     wd = words(comp)
     if not wd.flipped or not hasattr(template, "terms"):
         if wd.flipped:   # no terms to rewrite: name the variables by their definitions
-            return template.equation(w, across=f"(-{wd.across})", flow=f"(-{wd.flow})", digits=digits)
-        return _renamed(template.equation(w, across=wd.across, flow=wd.flow, digits=digits), wd)
-    # v = -across', i = -flow': an even term keeps its value, an odd one changes sign; with a
-    # term that is neither, the law is written in the negated variables
+            return _equation(template, w, f"(-{wd.across})", f"(-{wd.flow})", digits, wd)
+        return _renamed(_equation(template, w, wd.across, wd.flow, digits, wd), wd)
+    # v = -across', i = -flow' (va, vb keep their names and signs): an even term keeps its
+    # value, an odd one changes sign; with a term that is neither, the law is written in the
+    # negated variables
     signs = np.array([parity(t, getattr(template, "scales", None)) for t in template.terms])
     if (signs == 0).any():
-        return _renamed(template.equation(w, across=f"(-{wd.across})", flow=f"(-{wd.flow})", digits=digits), wd)
+        return _renamed(_equation(template, w, f"(-{wd.across})", f"(-{wd.flow})", digits, wd), wd)
     w = np.asarray(w, float).copy()
     w[:len(signs)] *= signs * signs[0]
-    return _renamed(template.equation(w, across=wd.across, flow=wd.flow, digits=digits), wd)
+    return _renamed(_equation(template, w, wd.across, wd.flow, digits, wd), wd)
+
+
+def _equation(template, w, across: str, flow: str, digits: int, wd: Words) -> str:
+    """``template``'s equation in these names; the potentials named only for a law that reads
+    them (a third party's template need not know of them)."""
+    if {"va", "vb"} & set(template.uses):
+        return template.equation(w, across=across, flow=flow, digits=digits, potentials=wd.potentials)
+    return template.equation(w, across=across, flow=flow, digits=digits)
 
 
 def _renamed(text: str, wd: Words) -> str:
