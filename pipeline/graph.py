@@ -15,25 +15,11 @@ import networkx as nx
 
 from . import modelica_text as mt
 from .errors import ModelicaError
+from .compile.components import Connector
 from .compile.pymoca_frontend import collect_sources, find_class, parse
 from .compile.sources import checked, expand
 
 BUILTIN = {"Real", "Integer", "Boolean", "String"}
-
-
-@dataclass
-class Connector:
-    """A connector of a component: its class and its potential and flow variables."""
-
-    name: str
-    cls: str
-    potential: list[str]
-    flow: list[str]
-
-    @property
-    def simple(self) -> bool:
-        """One potential and one flow variable (paper 000's component template, Fig. 1)."""
-        return len(self.potential) == 1 and len(self.flow) == 1
 
 
 @dataclass

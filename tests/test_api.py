@@ -82,7 +82,7 @@ def test_api_on_a_data_frame_equals_the_run_file(tmp_path, capsys):
     # integrator (~1e-6), far below what the criterion can tell apart (~2)
     assert [c["score"] for c in d.candidates_] == pytest.approx([c["score"] for c in yaml_report["candidates"]], abs=0.05)
     assert d.report_["inputs"]["train"] != yaml_report["inputs"]["train"]   # array hash vs file hash
-    assert "cause: Rx follows" in str(d) and "<li>" in d._repr_html_()
+    assert "cause: Rx follows" in str(d) and "<th style='text-align:left'>cause</th>" in d._repr_html_()
     assert d.run_dir_.name == "run" and (d.run_dir_ / "report.json").is_file()
 
     lib = d.export(tmp_path / "lib", name="Parts")

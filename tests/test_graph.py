@@ -82,7 +82,7 @@ def test_graph_command_prints_and_draws(tmp_path, capsys):
     png = tmp_path / "g.png"
     assert main(["graph", str(LIB), "-m", "MCL.Examples.TwoInertiaDrive", "--draw", str(png)]) == 0
     out = capsys.readouterr().out
-    assert "shaft" in out and "[two-connector]" in out and "nets:" in out
+    assert "shaft" in out and "[candidate]" in out and "nets:" in out
     assert png.stat().st_size > 10_000
 
 

@@ -179,6 +179,35 @@ def test_prioritisers_are_plugins():
     assert reg.prioritisers["linear-first"]().stages(NAMES, DEGREES * 2) == [[1, 2, 7, 8]]
 
 
+
+def test_criteria_are_plugins():
+    """A third party's criterion is found by name and scores like the built-in ones."""
+    from mcl import hookimpl
+    from mcl.errors import ConfigError
+    from mcl.registry import Registry
+    from mcl.stats import Criterion
+
+    class HannanQuinn(Criterion):
+        name = "hqc"
+
+        def penalty(self, n):
+            return 2.0 * np.log(np.log(max(n, 3)))
+
+    class Plugin:
+        @hookimpl
+        def mcl_criteria(self):
+            return [HannanQuinn]
+
+    reg = Registry(external=False, extra=[Plugin()])
+    assert {"bic", "aic", "aicc", "hqc"} <= set(reg.criteria)
+    hqc, bic = reg.criterion("hqc"), reg.criterion("bic")
+    n, rss = 1000, 2.5
+    assert hqc.score(rss, n, 3) - hqc.score(rss, n, 2) == pytest.approx(2 * np.log(np.log(n)))
+    assert bic.score(rss, n, 3) - bic.score(rss, n, 2) == pytest.approx(np.log(n))
+    assert reg.criterion(hqc) is hqc
+    with pytest.raises(ConfigError, match="no criterion named 'hq'.*did you mean 'hqc'"):
+        reg.criterion("hq")
+
 def test_blockwise_gradient_equals_sparse_jacobian_product():
     from mcl.lm import jacobian_matrix
 

@@ -101,7 +101,7 @@ def test_a_user_model_of_msl_parts_takes_its_connectors_as_data_columns(msl_path
 
 def test_discovery_on_a_user_model_of_msl_parts(msl_path, tmp_path, capsys):
     """RealInput source, sensor output, a hidden cubic in one MSL resistor: named, learned, put
-    back as a class with the MSL's own connectors, exported with uses(Modelica(...))."""
+    back as a class extending the MSL's own interface, exported with uses(Modelica(...))."""
     import json
 
     (tmp_path / "UserRC.mo").write_text(USER_RC)
@@ -121,7 +121,8 @@ def test_discovery_on_a_user_model_of_msl_parts(msl_path, tmp_path, capsys):
     g = report["gain"]
     assert g["validation_rms_after"] <= 0.2 * g["validation_rms_before"]
     extended = (tmp_path / "out" / cause["modelica"]).read_text()
-    assert "Modelica.Electrical.Analog.Interfaces.PositivePin p;" in extended
+    # native: the MSL's own interface (its connectors, v and i), the law in its variables
+    assert "extends Modelica.Electrical.Analog.Interfaces.OnePort;" in extended and "i = c1*v + c2*v^3;" in extended
     assert 'annotation(uses(Modelica(version="4.0.0")))' in extended
     assert main(["export", str(tmp_path / "out"), "-o", str(tmp_path / "lib"), "--name", "Parts"]) == 0
     assert 'uses(Modelica(version="4.0.0"))' in (tmp_path / "lib" / "Parts" / "package.mo").read_text()

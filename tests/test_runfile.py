@@ -24,7 +24,7 @@ def write(tmp_path, text):
     ("executor: {kind: dsak}\n", 4, "executor.kind: 'dsak' is not one of local, serial, dask (did you mean 'dask'?)"),
     ("executor: {kind: local, address: x}\n", 4, "executor.address: unknown key"),
     ("executor: {kind: local, workers: -3}\n", 4, "executor.workers: -3 is less than 1"),
-    ("refinement: {criterion: bci}\n", 4, "refinement.criterion: 'bci' is not one of bic, aic (did you mean 'bic'?)"),
+    ("refinement: {criterion: bci}\n", 4, "refinement.criterion: 'bci' is not one of bic, aic, aicc (did you mean 'bic'?)"),
     ("fitting: {max_simulatons: 10}\n", 4, "fitting.max_simulatons: unknown key (did you mean 'max_simulations'?)"),
     ("templates:\n  - {name: polynomial, rhs: [v, 'v^q']}\n", 5, "templates.0: template term 'v^q'"),
     ("templates:\n  - {name: polynomial, rsh: [v]}\n", 5, "templates.0.rsh: unknown key (did you mean 'rhs'?)"),

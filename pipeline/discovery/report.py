@@ -189,12 +189,15 @@ def _search_figure(plt, cause):
         return None
     W, ok = visited[:, :-1], visited[:, -1] > 0.5
     spread = np.argsort(-np.std(W[:, 1:], axis=0))[:2] + 1
-    terms = cause.get("terms") or [f"w{k + 1}" for k in range(W.shape[1])]
+    terms, names = cause.get("terms") or [], cause.get("parameters") or []
+    # a coefficient is named by its term; a shape's scale (after the terms) by its own name
+    label = lambda k: (f"coefficient of {terms[k]}" if k < len(terms) else
+                       f"scale {names[k]}" if k < len(names) else f"parameter {k + 1}")
     fig, ax = plt.subplots(figsize=(6, 4.5))
     ax.scatter(W[ok, spread[0]], W[ok, spread[-1]], c="tab:green", s=14, label="simulated")
     ax.scatter(W[~ok, spread[0]], W[~ok, spread[-1]], c="tab:red", marker="x", s=20, label="failed to simulate")
-    ax.set_xlabel(f"coefficient of {terms[spread[0]]}")
-    ax.set_ylabel(f"coefficient of {terms[spread[-1]]}")
+    ax.set_xlabel(label(spread[0]))
+    ax.set_ylabel(label(spread[-1]))
     ax.legend(fontsize=8)
     return fig
 
