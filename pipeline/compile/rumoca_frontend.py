@@ -137,7 +137,21 @@ def in_rumoca_thread(fn, *args):
         finally:
             threading.stack_size(old)
         _RUMOCA_POOL = pool
-    return _RUMOCA_POOL.submit(fn, *args).result()
+    return _RUMOCA_POOL.submit(_without_modelicapath, fn, *args).result()
+
+
+def _without_modelicapath(fn, *args):
+    """``fn(*args)`` with MODELICAPATH out of the environment: rumoca reads it itself, and the
+    libraries on it are already in the session's root (first entry winning); read twice, a
+    library such as the MSL's Complex.mo is a duplicate class to rumoca."""
+    import os
+
+    saved = os.environ.pop("MODELICAPATH", None)
+    try:
+        return fn(*args)
+    finally:
+        if saved is not None:
+            os.environ["MODELICAPATH"] = saved
 
 
 def virtual_name(path: Path, digest: str) -> str:
