@@ -67,6 +67,10 @@ def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
                                        nominal, rates, active=best["active"])
     model = compiled(dae, base.model.name, outputs=train.names, info=base.model.info, structure=base.structure)
     result = simulate(model, train)
+    if not result.ok:     # a stiff learned law: the tolerance its fit simulated it at
+        from .fitters import FIT_OPTIONS
+
+        result = simulate(model, train, options=FIT_OPTIONS)
     if not result.ok:
         raise ConfigError(f"the model with the learned laws of {', '.join(b['component'] for b in bests)} does not "
                           f"simulate the training data: {result.reason}")
@@ -134,9 +138,16 @@ class Causes:
             bests = self.round(base, val)
             if not bests:
                 break
+            try:
+                base = with_causes(nominal, found + bests, self.train)
+            except ConfigError as exc:
+                if not found:
+                    raise
+                # a further cause whose law does not simulate with the others' is not one
+                log.warning("      round %d: %s; the causes found before stand", len(self.rounds), exc)
+                break
             found += bests
             self.n_params += sum(int(np.sum(b["active"])) - 1 for b in bests)
-            base = with_causes(nominal, found, self.train)
             after = self.after(base)
             for b in bests:
                 b["_after"] = after
