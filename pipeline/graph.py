@@ -131,41 +131,6 @@ class SystemGraph:
         body = "\n".join(f"  {d}" for d in decl) + "\nequation\n" + "\n".join(f"  {e}" for e in eqs)
         return f"{extra_classes}model {short}\n{body}\nend {short};\n"
 
-    def draw(self, path) -> Path:
-        """Draw the graph (PNG or SVG by extension): two-connector components highlighted."""
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        g = nx.Graph(self.graph)
-        pos = nx.kamada_kawai_layout(g) if len(g) > 2 else nx.spring_layout(g, seed=0)
-        comps = self.components
-        colors = ["tab:orange" if comps[n].two_connector else "tab:gray" for n in g]
-        fig, ax = plt.subplots(figsize=(8, 6))
-        nx.draw_networkx(g, pos, ax=ax, node_color=colors, node_size=900, font_size=9)
-        labels = {(a, b): "/".join(sorted({d["ports"].get(a, ""), d["ports"].get(b, "")} - {""}))
-                  for a, b, d in self.graph.edges(data=True) if a != b}
-        nx.draw_networkx_edge_labels(g, pos, edge_labels=labels, font_size=7, ax=ax)
-        ax.set_title(f"{self.name}: orange = two-connector components")
-        ax.axis("off")
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, bbox_inches="tight", dpi=110)
-        plt.close(fig)
-        return path
-
-    def describe(self) -> str:
-        """A text listing: components with class and connectors, then the nets."""
-        lines = [f"{self.name}: {len(self.graph)} components, {self.graph.number_of_edges()} connections"]
-        for c in self.components.values():
-            ports = ", ".join(f"{p.name}:{p.cls.split('.')[-1]}" for p in c.connectors)
-            mark = " [two-connector]" if c.two_connector else ""
-            lines.append(f"  {c.name:16s} {c.cls:36s} {ports}{mark}")
-        lines.append("nets:")
-        lines += [f"  {{{', '.join(sorted(n))}}}" for n in self.nets()]
-        return "\n".join(lines)
-
 
 # -- building the graph from sources -----------------------------------------------------------
 def _resolve(scope, type_ref):

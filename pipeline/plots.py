@@ -13,6 +13,17 @@ def axis_label(name: str, units: dict | None) -> str:
     return f"{name} [{unit}]" if unit else name
 
 
+def save_figure(fig, path, **options) -> Path:
+    """``fig`` written to ``path`` (its folder made; PNG, SVG or PDF by extension), then closed."""
+    import matplotlib.pyplot as plt
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, **{"dpi": 110, "bbox_inches": "tight", **options})
+    plt.close(fig)
+    return path
+
+
 def plot_simulation(result: SimulationResult, inputs: TimeSeries, path, title: str = "",
                     units: dict | None = None) -> Path:
     """Inputs on top, every output below, on one time axis; written atomically as PNG."""
@@ -34,9 +45,5 @@ def plot_simulation(result: SimulationResult, inputs: TimeSeries, path, title: s
     fig.suptitle((title or "simulation") + f" ({result.engine} engine){status}")
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(path)
+    save_figure(fig, path.with_name(f".{path.name}.tmp.png"), bbox_inches=None).replace(path)
     return path

@@ -229,13 +229,11 @@ def plot_feasibility(result: PretrainResult, path, axes=(0, 1, 2), title: str = 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .plots import save_figure
+
     fig = plt.figure(figsize=(7.5, 6))
     ax = fig.add_subplot(111, projection="3d" if len(result.parameter_names) >= 3 else None)
     draw_feasibility(ax, result.samples, result.labels, result.parameter_names, axes,
                      getattr(result.model, "coef_", None), getattr(result.model, "intercept_", 0.0))
     ax.set_title(title or f"feasibility of w: held-out accuracy {result.accuracy:.1%}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -102,24 +102,28 @@ class LibraryClasses:
     def __init__(self, libraries: dict[str, Path]):
         self.libraries = libraries
 
-    @functools.lru_cache(maxsize=4096)
-    def find(self, qualified: str) -> ClassInfo | None:
+    def file_of(self, qualified: str) -> tuple[Path, list[str]] | None:
+        """The file that holds class ``qualified`` (a package directory walked down as far as
+        its structure goes), and the class names from that file's top to the class."""
         parts = qualified.split(".")
         where = self.libraries.get(parts[0])
         if where is None:
             return None
-        text, rest = None, parts[1:]
-        if where.is_dir():
-            path = where
-            while rest and (path / rest[0]).is_dir() and (path / rest[0] / "package.mo").is_file():
-                path, rest = path / rest[0], rest[1:]
-            if rest and (path / f"{rest[0]}.mo").is_file():
-                text, rest = _file_text(str(path / f"{rest[0]}.mo")), rest
-            else:
-                text, rest = _file_text(str(path / "package.mo")), [path.name.split(" ")[0], *rest]
-        else:
-            text, rest = _file_text(str(where)), parts
-        kind, body = "package", text
+        if not where.is_dir():
+            return where, parts
+        path, rest = where, parts[1:]
+        while rest and (path / rest[0]).is_dir() and (path / rest[0] / "package.mo").is_file():
+            path, rest = path / rest[0], rest[1:]
+        if rest and (path / f"{rest[0]}.mo").is_file():
+            return path / f"{rest[0]}.mo", rest
+        return path / "package.mo", [path.name.split(" ")[0], *rest]
+
+    @functools.lru_cache(maxsize=4096)
+    def find(self, qualified: str) -> ClassInfo | None:
+        located = self.file_of(qualified)
+        if located is None:
+            return None
+        kind, body, rest = "package", _file_text(str(located[0])), located[1]
         for name in rest:
             found = _block(body, name)
             if found is None:

@@ -125,6 +125,8 @@ class Structure:
         import matplotlib.pyplot as plt
         import networkx as nx
 
+        from ..plots import save_figure
+
         g = nx.Graph()
         for c in self.components.values():
             g.add_node(c.name, kind="candidate" if c.two_connector and not c.inputs else "component")
@@ -145,11 +147,7 @@ class Structure:
                          font_size=8)
         ax.set_title(f"{self.model}: orange = components whose law discovery may question")
         ax.axis("off")
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, bbox_inches="tight", dpi=110)
-        plt.close(fig)
-        return path
+        return save_figure(fig, path)
 
     def describe(self) -> str:
         """A text listing: components with class and connectors, then the nets."""

@@ -97,20 +97,14 @@ def _declared(qualified: str, lib) -> set[str]:
 
 def _class_text(qualified: str, lib) -> str | None:
     """The raw text of class ``qualified`` (annotations included), from its file."""
-    parts = qualified.split(".")
-    where = lib.libraries.get(parts[0])
-    if where is None:
+    located = lib.file_of(qualified)
+    if located is None:
         return None
-    path, rest = where, parts[1:]
-    if where.is_dir():
-        while rest and (path / rest[0]).is_dir():
-            path, rest = path / rest[0], rest[1:]
-        path = path / f"{rest[0]}.mo" if rest and (path / f"{rest[0]}.mo").is_file() else path / "package.mo"
     try:
-        text = path.read_text(errors="replace")
+        text = located[0].read_text(errors="replace")
     except OSError:
         return None
-    short = parts[-1]
+    short = qualified.split(".")[-1]
     m = re.search(rf"(?m)^[ \t]*(?:(?:partial|encapsulated|final|replaceable|redeclare)\s+)*(model|block|class)\s+"
                   rf"{re.escape(short)}\b", text)
     end = m and re.search(rf"\bend\s+{re.escape(short)}\s*;", text[m.end():])
