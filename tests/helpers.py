@@ -26,6 +26,14 @@ def msl_path() -> Path | None:
     return None
 
 
+def needs_msl():
+    """The skip mark of a test that needs the MSL, saying where it was looked for."""
+    import pytest
+
+    return pytest.mark.skipif(msl_path() is None, reason="the Modelica Standard Library is not on "
+                              "MODELICAPATH nor at ../shared/msl")
+
+
 def compiled(name: str, sources=None):
     """Compile once per test session (compiling is deterministic and the models are immutable)."""
     key = (name, tuple(map(str, sources or [LIB])))

@@ -12,15 +12,14 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import ROOT, msl_path
+from helpers import ROOT, msl_path, needs_msl
 from mcl.cli import main
 
 sys.path.insert(0, str(ROOT / "examples" / "ladder"))
 from ladder import values, write_data, write_model  # noqa: E402
 
 MSL = msl_path()
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(MSL is None, reason="the Modelica Standard Library is not on "
-                                                   "MODELICAPATH nor at ../shared/msl")]
+pytestmark = [pytest.mark.slow, needs_msl()]
 
 
 def run(tmp_path, source: str, model: str, extra: str = "") -> dict:

@@ -11,12 +11,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import msl_path
+from helpers import msl_path, needs_msl
 from mcl.cli import main
 
 MSL = msl_path()
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(MSL is None, reason="the Modelica Standard Library is not on "
-                                                   "MODELICAPATH nor at ../shared/msl")]
+pytestmark = [pytest.mark.slow, needs_msl()]
 
 SUSPENSION = """
 model Suspension "a mass on a spring and a damper in parallel, pushed by a force"
