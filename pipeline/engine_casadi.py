@@ -25,6 +25,7 @@ import numpy as np
 
 from .data import TimeSeries
 from .errors import DataError
+from .compile.structure import differentiable
 from .model import CompiledModel
 from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
                          quiet_native_output)
@@ -170,7 +171,7 @@ class _Plan:
         else:
             Ut = ca.MX(0, 1)
             self.u_out = np.zeros((0, len(t_out)))
-        f = ode.ode(X, Ut, P, T)
+        f = differentiable(ode)(X, Ut, P, T)
         xa, fa = X, f
         if ns:
             S = ca.MX.sym("S", nx, ns)
@@ -223,7 +224,7 @@ class _Plan:
         self.checks = ode.checks.map(N)   # outputs and checks with one solve of the loops per point
         if ns:
             Ss = ca.MX.sym("S", nx, ns)
-            y = ode.out(Xs, Us, Ps, Ts)
+            y = differentiable(ode, "out")(Xs, Us, Ps, Ts)
             dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel]
             self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts], [dy]).map(N)
             x0 = ode.init(Us, Ps, Ts)

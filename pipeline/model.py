@@ -18,7 +18,8 @@ from .errors import DataError, MclError
 from .compile.structure import Ode, expanded
 
 _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks", "zero", "start", "init_start",
-              "update", "init_discrete", "asserts")   # the last three: a hybrid model's
+              "update", "init_discrete", "asserts",   # these three: a hybrid model's
+              "loops", "given")                        # a model with algebraic loops
 
 
 @dataclass

@@ -75,16 +75,26 @@ class _Mapped:
 
 def _functions(ode, idx: list[int]):
     """(df/dx, df/dq, dy/dx, dy/dq as one dense CasADi function, its maps by size), made once per
-    model and parameter selection."""
+    model and parameter selection. A model with algebraic loops is differentiated through their
+    Newton form (:func:`mcl.compile.structure.causalise`): the function then takes the loops'
+    solutions as a fifth argument."""
     key = (id(ode.ode), id(ode.out), tuple(idx))
     entry = _FUNCTIONS.get(key)
     if entry is None:
         X, U, P, T = ode.ode.mx_in()
-        f, y = ode.ode(X, U, P, T), ode.out(X, U, P, T)
+        args = [X, U, P, T]
+        where = {n: k for k, n in enumerate(ode.probe_names)}
+        if getattr(ode, "given", None) is not None and all(n in where for n in ode.y_names):
+            ZL = ca.MX.sym("zl", ode.given.size1_in(4))
+            f, probe = ode.given(X, U, P, T, ZL)
+            y = probe[[where[n] for n in ode.y_names]] if ode.y_names else ca.MX(0, 1)
+            args.append(ZL)
+        else:
+            f, y = ode.ode(X, U, P, T), ode.out(X, U, P, T)
         jac = [ca.densify(J) for J in (ca.jacobian(f, X), ca.jacobian(f, P)[:, idx], ca.jacobian(y, X),
                                        ca.jacobian(y, P)[:, idx])]
         # the entry holds the ode, so that its id is not reused while the entry lives
-        entry = (ode, _expand(ca.Function("lin", [X, U, P, T], jac)), {})
+        entry = (ode, _expand(ca.Function("lin", args, jac)), {})
         _FUNCTIONS[key] = entry
         if len(_FUNCTIONS) > _KEEP:
             _FUNCTIONS.popitem(last=False)
@@ -131,6 +141,7 @@ class Linearisation:
         ode = model.ode
         self.time = np.asarray(time, float)
         idx = [ode.p_names.index(n) for n in params]
+        self.ode = ode
         self.fun, self._maps = _functions(ode, idx)
         u = prepare_inputs(model, inputs)
         N = len(self.time)
@@ -142,16 +153,27 @@ class Linearisation:
         per_point = nx * (nx + nq) + ny * (nx + nq) + 4 * nx * nx + 3 * nx * nq
         self.chunk = int(max(16, CHUNK_NUMBERS // max(1, per_point)))
 
-    def _mapped(self, n: int) -> "_Mapped":
-        if n not in self._maps:
-            self._maps[n] = _Mapped(self.fun, n)
-        return self._maps[n]
+    def _mapped(self, fun: ca.Function, n: int) -> "_Mapped":
+        key = (fun.name(), n)
+        if key not in self._maps:
+            self._maps[key] = _Mapped(fun, n)
+        return self._maps[key]
+
+    def _at(self, pick) -> list[np.ndarray]:
+        """The four Jacobians (flat, as the mapped function gives them) at the points ``pick``
+        (a slice or indices): first the algebraic loops' solutions there, where the function
+        takes them."""
+        X, U, t = self.X[:, pick], self.U[:, pick], self.time[None, pick]
+        n = X.shape[1]
+        args = [X, U, np.repeat(self.p[:, None], n, 1), t]
+        if self.fun.n_in() == 5:
+            args.append(self._mapped(self.ode.loops, n)(*args)[0])
+        return self._mapped(self.fun, n)(*args)
 
     def jacobians(self, k0: int, k1: int):
         """(A, B, C, E) at points k0 .. k1-1, each (k1 - k0, rows, cols)."""
         n = k1 - k0
-        out = self._mapped(n)(self.X[:, k0:k1], self.U[:, k0:k1], np.repeat(self.p[:, None], n, 1),
-                              self.time[None, k0:k1])
+        out = self._at(slice(k0, k1))
         shape = lambda M, r, c: M.reshape(r, n, c).transpose(1, 0, 2) if r * c else np.zeros((n, r, c))
         nx, ny, nq = self.nx, self.ny, self.nq
         return shape(out[0], nx, nx), shape(out[1], nx, nq), shape(out[2], ny, nx), shape(out[3], ny, nq)
@@ -162,8 +184,7 @@ class Linearisation:
             return 0.0
         pick = np.unique(np.linspace(0, len(self.time) - 1, min(50, len(self.time))).astype(int))
         n = len(pick)
-        A = self._mapped(n)(self.X[:, pick], self.U[:, pick], np.repeat(self.p[:, None], n, 1),
-                            self.time[None, pick])[0].reshape(self.nx, n, self.nx).transpose(1, 0, 2)
+        A = self._at(pick)[0].reshape(self.nx, n, self.nx).transpose(1, 0, 2)
         return float(np.max(np.abs(np.linalg.eigvals(A))))
 
     def propagate(self, forcing, at: np.ndarray, ns: int, batched: bool = False) -> np.ndarray:
