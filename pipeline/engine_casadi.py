@@ -191,7 +191,8 @@ class _Plan:
         self.hop_oracle = ca.Function("hop", [tau, xa, empty[0], PH, empty[1]],
                                       [ca.substitute(fa, T, t0 + tau * h) * h, ca.MX(0, 1), ca.MX(0, 1), ca.MX(0, 1)],
                                       ca.dyn_in(), ca.dyn_out())
-        self.hybrid = _Hybrid(ode, t_out) if (ode.zero is not None or getattr(ode, "discrete", 0)) else None
+        self.hybrid = (_Hybrid(ode, t_out) if (ode.zero is not None or getattr(ode, "discrete", 0)
+                                               or getattr(ode, "asserts", None) is not None) else None)
         # the integration grid: output times, time events and clock ticks (a restart at each),
         # and where relations are watched, enough points to see their sign changes
         events = [te for te in ode.time_events if t_out[0] < te < t_out[-1]]

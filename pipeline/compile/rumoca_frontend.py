@@ -1008,7 +1008,11 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     events = _Events(st, tr, conditions, memory, d, d_pre, flags, located, model)
     d_update = events.discrete_update(index["d"], slot, pre_slot, size, variables)
     x_reinit = events.reinit(x, index["x"], slot, variables)
+    # an assert's condition is checked, not located: its relations are not state events (as in
+    # other tools; the MSL's resistors assert on their temperature, a sign change never seen)
+    met = len(tr.relations)
     asserts, assert_info = events.asserts()
+    del tr.relations[met:]
 
     def value_of(i, key_order=("binding", "start")):
         node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)

@@ -169,16 +169,24 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     path = []
     score = score_for(rss, active)
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
+    last = {}      # the previous estimates, by parameter: for a point whose sensitivities fail
     while prune and (active & prunable).sum() > 1 and not res.message.startswith("stopped"):
         sim = problem.simulate(w[active & ~held], gradient=True)
         sims += 1
-        if not sim.ok:
-            break
         free = np.flatnonzero(active & ~held)
-        S = sim.sensitivities[:, problem.idx, :].reshape(-1, len(free))
-        H_inv = np.linalg.pinv(S.T @ S)
-        est = w[free] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
+        if sim.ok:
+            S = sim.sensitivities[:, problem.idx, :].reshape(-1, len(free))
+            H_inv = np.linalg.pinv(S.T @ S)
+            est = w[free] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
+        elif last:
+            # a law near the edge of what simulates (a capacitance term crossing zero at the
+            # end of the range) may fail on the finer grid of the sensitivities: the removals
+            # are tried in the previous order (removing the culprit is what makes it robust)
+            est = np.array([last.get(k, np.inf) for k in free])
+        else:
+            break
         est = np.where(prunable[free], est, np.inf)                  # a scale is not a term
+        last = dict(zip(free, est))
         refit = None
         # the cheapest removal first; one the model cannot do without (a capacitor's own
         # capacitance: its state would vanish) does not simulate, and the next is tried

@@ -112,19 +112,31 @@ class Causes:
         rss = float(np.nansum(resid**2))
         found = search(self.spec, base, self.train, self.validate, rpart, self.rundir, self.reg, self.sigma, resid)
         cands = found.candidates
-        bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss,
+
+        def verdict() -> list[dict]:
+            bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss,
                                                found.signals)
+            self.rounds[-1].update(nominal_score=nominal_score, no_cause=why)
+            if not bests:
+                log.info("      round %d: %s", len(self.rounds), why)
+            return [{**b, "_signals": found.signals, "_base": base, "_round": label} for b in bests]
+
+        self.rounds.append({"label": label, "round": len(self.rounds) + 1, "screening": found.screening,
+                            "pairs": found.pairs, "candidates": cands, "roles": found.roles})
+        bests = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss, found.signals)[0]
         items = role_items(bests[0], found.roles, base.structure, cands, found.signals) if bests else []
         if items:
             cands += [c for c in found.fit.patient()(items) if not c.get("not_applicable")]
-            bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss,
-                                               found.signals)
-        self.rounds.append({"label": label, "round": len(self.rounds) + 1, "screening": found.screening,
-                            "pairs": found.pairs, "candidates": cands, "roles": found.roles,
-                            "nominal_score": nominal_score, "no_cause": why})
-        if not bests:
-            log.info("      round %d: %s", len(self.rounds), why)
-        return [{**b, "_signals": found.signals, "_base": base, "_round": label} for b in bests]
+        self._verdict = verdict
+        return verdict()
+
+    def without(self, bests: list[dict], why: str) -> list[dict]:
+        """The round's verdict again with the laws of ``bests`` (which do not simulate once put
+        in the model) marked failed: the next best law, or none."""
+        for cand in self.rounds[-1]["candidates"]:
+            if any(cand.get("component") == b["component"] and cand.get("template") == b["template"] for b in bests):
+                cand.update(failed=why, score=None)
+        return self._verdict()
 
     def after(self, base: Base) -> dict:
         resid, val = self.misfit(base)
@@ -136,16 +148,18 @@ class Causes:
         found, base, val = [], nominal, val0
         while len(found) < MAX_CAUSES:
             bests = self.round(base, val)
+            extended = None
+            while bests and extended is None:
+                try:
+                    extended = with_causes(nominal, found + bests, self.train)
+                except ConfigError as exc:
+                    # a law that simulated while it was fitted but not once put in the model (near
+                    # a singular point) is not a cause: the next best law of the round is weighed
+                    log.warning("      round %d: %s", len(self.rounds), exc)
+                    bests = self.without(bests, f"does not simulate once put in the model: {exc}")
             if not bests:
                 break
-            try:
-                base = with_causes(nominal, found + bests, self.train)
-            except ConfigError as exc:
-                if not found:
-                    raise
-                # a further cause whose law does not simulate with the others' is not one
-                log.warning("      round %d: %s; the causes found before stand", len(self.rounds), exc)
-                break
+            base = extended
             found += bests
             self.n_params += sum(int(np.sum(b["active"])) - 1 for b in bests)
             after = self.after(base)
