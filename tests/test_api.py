@@ -8,6 +8,7 @@ import pytest
 import mcl
 from mcl import Discovery, compile_model, discover, simulate
 from mcl.data import as_timeseries, read_csv
+from mcl.discovery.candidates import stopped
 from mcl.errors import ConfigError, DataError, NotFittedError
 
 from test_discover import setup_run
@@ -79,8 +80,15 @@ def test_api_on_a_data_frame_equals_the_run_file(tmp_path, capsys):
     assert d.misfit_["train_rms"] == pytest.approx(yaml_report["misfit"]["train_rms"])
     assert d.misfit_["noise_estimate"] == pytest.approx(yaml_report["misfit"]["noise_estimate"])
     # the same fits; a freshly compiled and a cached model may round differently in the
-    # integrator (~1e-6), far below what the criterion can tell apart (~2)
-    assert [c["score"] for c in d.candidates_] == pytest.approx([c["score"] for c in yaml_report["candidates"]], abs=0.05)
+    # integrator (~1e-6), far below what the criterion can tell apart (~2); a losing fit stopped
+    # early stops where the other workers' progress found it, which timing decides
+    def finished(cands):
+        return {(c["component"], c["family"]): c["score"] for c in cands if not stopped(c)}
+
+    api, yaml_ = finished(d.candidates_), finished(yaml_report["candidates"])
+    both = sorted(set(api) & set(yaml_))
+    assert d.candidates_[0]["score"] == pytest.approx(yaml_report["candidates"][0]["score"], abs=0.05)
+    assert [api[k] for k in both] == pytest.approx([yaml_[k] for k in both], abs=0.05)
     assert d.report_["inputs"]["train"] != yaml_report["inputs"]["train"]   # array hash vs file hash
     assert "cause: Rx follows" in str(d) and "<th style='text-align:left'>cause</th>" in d._repr_html_()
     assert d.run_dir_.name == "run" and (d.run_dir_ / "report.json").is_file()

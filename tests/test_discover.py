@@ -182,3 +182,22 @@ def test_named_unknown_component(tmp_path):
     run.write_text(run.read_text().replace("unknown: C", "unknown: Nope"))
     with pytest.raises(ConfigError, match="unknown: no component 'Nope'"):
         load_runfile(run)
+
+
+def test_early_stop_weighs_parameters_not_only_rss(tmp_path):
+    """A fit stops when another cannot be beaten: a smaller law is not stopped by a larger law's
+    lower RSS (the criterion may prefer it), a larger law at the same component is stopped by a
+    smaller one it cannot improve on, and a law far behind is stopped whatever its size."""
+    from mcl.discovery.candidates import Context, Item, publish
+
+    ctx = Context(None, {}, {}, None, None, 10, "bic", "simulation", str(tmp_path), n_obs=400)
+    static, storage, other = Item("Rx", 0, {}), Item("Rx", 1, {}), Item("C", 1, {})
+    publish(tmp_path, storage, 0.02252, k=6, dictionary=6)       # a 6-term law, lower RSS
+    publish(tmp_path, other, 0.02253, k=6, dictionary=6)
+    # 400 ln(0.02265/0.02252) = 2.3 behind in RSS, 3 parameters (18 in BIC) ahead: runs on
+    assert not ctx.give_up(0.02265, 0.02270, static, k=3, dictionary=3)
+    publish(tmp_path, static, 0.02279, k=2, dictionary=3)
+    assert ctx.give_up(0.02275, 0.02276, storage, k=4, dictionary=6)       # can only prune back
+    assert not ctx.give_up(0.02200, 0.02276, storage, k=4, dictionary=6)   # can improve on it
+    assert ctx.give_up(0.0300, 0.0301, Item("R1", 0, {}), k=2, dictionary=3)   # 400 ln(1.3) behind
+    assert not ctx.give_up(0.0300, 0.0600, Item("R1", 0, {}), k=2, dictionary=3)  # far from its optimum

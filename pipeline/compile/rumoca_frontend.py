@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ import numpy as np
 
 from .dae import Dae, check_balance, resolve_parameters
 from .sources import first_line
-from ..errors import ModelicaError, UnsupportedConstruct
+from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
 def _int(a) -> int:
     return int(round(float(a) if a.is_constant() else float(ca.evalf(a))))
@@ -213,7 +214,6 @@ def library_roots(libraries=(), shadowed=(), used=None) -> list[str]:
     import hashlib
     import tempfile
 
-    from .cache import base_dir
     from .library import available, library_path
 
     libs = {n: p.resolve() for n, p in available(library_path(libraries)).items() if n not in shadowed}
@@ -221,10 +221,9 @@ def library_roots(libraries=(), shadowed=(), used=None) -> list[str]:
         keep = {Path(u).resolve() for u in used}
         libs = {n: p for n, p in libs.items() if p in keep}
     key = hashlib.sha256(repr(sorted((n, str(p)) for n, p in libs.items())).encode()).hexdigest()[:16]
-    base = base_dir() / "roots"
+    base = roots_dir()
     root = base / key
     if not root.is_dir():
-        base.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(dir=base, prefix=".new-"))
         for n, p in libs.items():
             (tmp / (n if p.is_dir() else f"{n}.mo")).symlink_to(p)
@@ -235,6 +234,24 @@ def library_roots(libraries=(), shadowed=(), used=None) -> list[str]:
 
             shutil.rmtree(tmp, ignore_errors=True)
     return [str(root)]
+
+
+def roots_dir() -> Path:
+    """Where the library roots are made: rumoca keeps what it learnt of a library (parsed files,
+    semantic summaries) in its own cache, keyed by the root's path, so the roots stay in one
+    place per user (not in ``MCL_CACHE_DIR``: a new compile cache would make rumoca analyse the
+    MSL again, ~10 s); mcl's cache directory when that place cannot be written."""
+    from .cache import base_dir
+
+    home = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "mcl" / "roots"
+    for place in (home, base_dir() / "roots"):
+        try:
+            place.mkdir(parents=True, exist_ok=True)
+            if os.access(place, os.W_OK):
+                return place
+        except OSError:
+            continue
+    raise ConfigError(f"no writable cache directory for the library roots ({home}; set MCL_CACHE_DIR)")
 
 
 @dataclass

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..errors import MclError
-from ..stats import rms
+from ..stats import criterion as criterion_of, rms
 from .fitters import residual
 from .inject import NominalForm, compiled, mode_of, nominal_of, with_law
 from .screen import law_signals
@@ -113,27 +113,42 @@ class Context:
     algorithm: str = "levenberg-marquardt"   # the optimiser (mcl.fit.FITTERS)
     max_work: int | None = None  # solver steps a candidate's simulation may take (50x the nominal's)
 
-    def give_up(self, reachable: float, current: float, item) -> bool:
-        """A fit stops when it cannot win or tie. Given the RSS the other fits have reached and
-        what its trusted Gauss-Newton model can still reach: it stops when that is 10x the best
-        (n ln 10 behind in any criterion); or, near its own optimum (its RSS within 1.5x of what it
-        can reach), when it cannot come within the decisive margin of the best (n ln(RSS ratio) >
-        10), or cannot improve on another law at its own component by what one more parameter
-        costs (ln n / n of the RSS: it could only prune back to a law already fitted there).
-        Laws at other components that can tie run to their end: the verdict compares them."""
+    def give_up(self, reachable: float, current: float, item, k: int | None = None,
+                dictionary: int | None = None) -> bool:
+        """A fit stops when it cannot win or tie. Given the RSS the other fits have reached (with
+        their free parameters and the number of terms they choose from) and what its trusted
+        Gauss-Newton model can still reach with its ``k`` free parameters of ``dictionary``
+        terms: it stops when that is 10x the best (n ln 10 behind in any criterion); or, near its
+        own optimum (its RSS within 1.5x of what it can reach), when it cannot come within the
+        decisive margin of another fit, counting no more parameters than that fit has now (which
+        pruning only lowers: a larger law's lower RSS does not stop a smaller one the criterion
+        may prefer); or when it cannot improve by what one more parameter costs (ln n / n of the
+        RSS) on a law at its own component with no more parameters chosen from no more terms:
+        it could only prune back to that law, which the criterion then prefers. Laws at other
+        components that can tie run to their end: the verdict compares them."""
         if not self.progress_dir:
             return False
         others = reached(Path(self.progress_dir), exclude=item)
         if not others:
             return False
         n = max(self.n_obs, 2)
-        best = min(rss for _, rss in others)
+        complexity = criterion_of(self.criterion).complexity
         mine = set(item.component.split("+"))
-        same = [rss for comp, rss in others if set(comp.split("+")) == mine]
-        near = current <= 1.5 * reachable
-        return (reachable > 10.0 * best
-                or (near and n * np.log(max(reachable, 1e-300) / max(best, 1e-300)) > 10.0)
-                or (near and bool(same) and reachable > min(same) * (1.0 - np.log(n) / n)))
+        if reachable > 10.0 * min(o.rss for o in others):
+            return True
+        if current > 1.5 * reachable:
+            return False
+        for o in others:
+            k_me = k if k is not None else o.k
+            fewer = None in (k_me, o.k) or o.k <= k_me
+            lead = n * np.log(max(reachable, 1e-300) / max(o.rss, 1e-300))
+            if not fewer:
+                lead -= complexity(n, o.k) - complexity(n, k_me)
+            smaller = fewer and None not in (dictionary, o.dictionary) and o.dictionary <= dictionary
+            if lead > 10.0 or (smaller and set(o.component.split("+")) == mine
+                               and reachable > o.rss * (1.0 - np.log(n) / n)):
+                return True
+        return False
 
 
 @dataclass
@@ -190,8 +205,8 @@ def fit_task(ctx: Context, item) -> dict:
     names = [n for law in laws for n in law.names]
     w0 = np.concatenate([law.w0 for law in laws])
     shape = isinstance(item, Item) and item.index >= NEURAL_INDEX
-    progress = None if not ctx.progress_dir else (lambda rss: publish(Path(ctx.progress_dir), item, rss))
-    give_up = None if shape or not ctx.progress_dir else (lambda reach, now: ctx.give_up(reach, now, item))
+    progress = None if not ctx.progress_dir else (lambda rss, *size: publish(Path(ctx.progress_dir), item, rss, *size))
+    give_up = None if shape or not ctx.progress_dir else (lambda reach, now, *size: ctx.give_up(reach, now, item, *size))
     if isinstance(item, Pair):        # two laws: each keeps its scale, every term may be pruned
         held, prunable = [], []
         for law in laws:
@@ -248,19 +263,45 @@ def _law_result(ctx: Context, law: Law, model, res, w, active) -> dict:
     return out
 
 
-def publish(directory: Path, item, rss: float) -> None:
-    """A running or finished fit's RSS, where the other fits (in any worker) read it."""
+def stopped(result: dict) -> bool:
+    """Whether a fit was stopped early (another fit could not be beaten)."""
+    return any(str(step.get("message", "")).startswith("stopped") for step in result.get("pruning") or [])
+
+
+def free_parameters(result: dict) -> tuple[int | None, int | None]:
+    """A finished fit's free parameters (its laws' active terms but each law's scale) and the
+    number of terms they were chosen from."""
+    laws = result.get("parts") or [result]
+    if not all("active" in law for law in laws):
+        return None, None
+    return (int(sum(max(int(np.sum(law["active"])) - 1, 0) for law in laws)),
+            int(sum(len(law["active"]) - 1 for law in laws)))
+
+
+class Reached(NamedTuple):
+    """What a fit of the round has reached: its least RSS, with its free parameters chosen among
+    ``dictionary`` terms (None: not told)."""
+
+    component: str
+    rss: float
+    k: int | None = None
+    dictionary: int | None = None
+
+
+def publish(directory: Path, item, rss: float, k: int | None = None, dictionary: int | None = None) -> None:
+    """A running or finished fit's RSS (with its free parameters, chosen among ``dictionary``
+    terms), where the other fits (in any worker) read it."""
     if rss is None or not np.isfinite(rss):
         return
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{item.component}_{item.index}.json"
     tmp = path.with_suffix(f".{id(path)}.tmp")
-    tmp.write_text(json.dumps({"rss": float(rss), "component": item.component}))
+    tmp.write_text(json.dumps(Reached(item.component, float(rss), k, dictionary)._asdict()))
     tmp.replace(path)
 
 
-def reached(directory: Path, exclude=None) -> list[tuple[str, float]]:
-    """(component, least RSS) of every fit of this round (but ``exclude``) that has published."""
+def reached(directory: Path, exclude=None) -> list[Reached]:
+    """What every fit of this round (but ``exclude``) that has published has reached."""
     out = []
     own = f"{exclude.component}_{exclude.index}.json" if exclude is not None else None
     for f in directory.glob("*.json") if directory.is_dir() else []:
@@ -268,7 +309,8 @@ def reached(directory: Path, exclude=None) -> list[tuple[str, float]]:
             continue
         try:
             d = json.loads(f.read_text())
-            out.append((str(d.get("component", "")), float(d["rss"])))
+            k, dictionary = (None if d.get(key) is None else int(d[key]) for key in ("k", "dictionary"))
+            out.append(Reached(str(d.get("component", "")), float(d["rss"]), k, dictionary))
         except (OSError, ValueError, KeyError, TypeError):
             continue
     return out

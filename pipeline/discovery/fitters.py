@@ -65,8 +65,9 @@ class CandidateFitter:
     def fit(self, model, data: TimeSeries, names: list[str], w0, template, criterion, budget: int,
             give_up=None, prune: bool = True, progress=None, algorithm: str = "levenberg-marquardt",
             max_work: int | None = None) -> FitOutcome:
-        """``give_up(reachable_rss, current_rss)`` stops a fit that cannot win; ``progress(rss)``
-        is told the RSS of each better point reached (so that other fits can compare);
+        """``give_up(reachable_rss, current_rss, k, dictionary)`` stops a fit that cannot win;
+        ``progress(rss, k, dictionary)`` is told the RSS of each better point reached (so that
+        other fits can compare), ``k`` being the parameters the fit has free among ``dictionary``;
         ``algorithm`` names the optimiser (:data:`mcl.fit.FITTERS`), ``max_work`` bounds each
         simulation's solver steps (a law that makes the model crawl fails instead)."""
         raise NotImplementedError
@@ -128,9 +129,12 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         fixed = {nm: (float(w0[k]) if held[k] else 0.0) for k, nm in enumerate(names) if not free[k]}
         problem = FitProblem(model, window, params, fixed=fixed, options={**FIT_OPTIONS, "max_work": max_work})
         whole = window is data      # only a fit to all the data compares with other candidates
-        report = None if progress is None or not whole else (lambda cost: progress(cost * len(data.time)))
-        algo = fitter(algorithm, limit, tol=FIT_TOL, give_up=give_up if whole else None, progress=report,
-                      restore=restore)
+        # the other fits compare with this one counting its free parameters (a larger law's
+        # lower RSS does not stop a smaller one that the criterion may prefer)
+        k = len(params)
+        report = None if progress is None or not whole else (lambda cost: progress(cost * len(data.time), k, dictionary))
+        stop = None if give_up is None or not whole else (lambda reach, now: give_up(reach, now, k, dictionary))
+        algo = fitter(algorithm, limit, tol=FIT_TOL, give_up=stop, progress=report, restore=restore)
         res = algo.fit(problem, np.asarray(start)[free])
         w = np.where(held, w0, 0.0)
         w[free] = res.w

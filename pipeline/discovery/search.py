@@ -21,7 +21,7 @@ from ..errors import ConfigError
 from ..executor import TaskFailed
 from ..progress import log
 from ..sensitivity import fine_grid
-from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, publish
+from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
 from .families import distillations, families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
 from .screen import law_signals, linear_response, predicted_rss
@@ -183,16 +183,32 @@ class Batch:
                 r = {"component": it.component, "template": it.spec, "failed": r.reason, "score": None}
             self.rundir.write_json(str((part / it.file).relative_to(self.rundir.partial)), r)
             if self.ctx.progress_dir and r.get("rss") is not None and not r.get("failed"):
-                publish(Path(self.ctx.progress_dir), it, r["rss"])
+                publish(Path(self.ctx.progress_dir), it, r["rss"], *free_parameters(r))
 
         if todo:
             with self.reg.executor(self.executor) as ex:
                 ex.map(fit_task, todo, context=self.ctx, timeout=3600, label="candidates", on_result=checkpoint)
-        return [json.loads((part / it.file).read_text()) for it in items]
+        out = [json.loads((part / it.file).read_text()) for it in items]
+        leading = [it for it, r in zip(items, out) if stopped(r) and _leads(r, out)]
+        if leading and self.ctx.progress_dir:
+            # a fit stopped where it stood (before pruning) by another's progress, which still
+            # leads the batch: fitted to its end, so the answer does not depend on which worker
+            # got ahead
+            for it in leading:
+                (part / it.file).unlink()
+            self.patient()(leading)
+            out = [json.loads((part / it.file).read_text()) for it in items]
+        return out
 
     def patient(self) -> "Batch":
         """The same batch with no early stop (every fit to its end)."""
         return Batch(dataclasses.replace(self.ctx, progress_dir=""), self.part, self.rundir, self.reg, self.executor)
+
+
+def _leads(result: dict, results: list[dict], margin: float = 2.0) -> bool:
+    """Whether ``result`` scores within ``margin`` (a weak lead) of the best of ``results``."""
+    scores = [r["score"] for r in results if r.get("score") is not None and not r.get("failed")]
+    return result.get("score") is not None and bool(scores) and result["score"] <= min(scores) + margin
 
 
 def _done(path: Path) -> bool:

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import MclError
 from ..stats import criterion as criterion_of
-from .candidates import Item
+from .candidates import Item, stopped
 from .families import families, spec_name
 
 #: a lead below this (in the criterion) does not separate two laws: they explain the data alike
@@ -135,8 +135,7 @@ def role_items(best: dict, roles: dict, structure, cands: list[dict], signals) -
     kind = effect_kind(best, signals[best["component"]].env() if best["component"] in signals else None)
     if best.get("pair") or kind is None or roles.get(best["component"]) == kind or structure is None:
         return []
-    tried = {(c["component"], c.get("family")) for c in cands
-             if not any(str(step.get("message", "")).startswith("stopped") for step in c.get("pruning", []))}
+    tried = {(c["component"], c.get("family")) for c in cands if not stopped(c)}
     items = []
     for other in structure.parallel(best["component"]):
         if roles.get(other) != kind or other not in signals:

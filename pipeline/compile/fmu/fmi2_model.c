@@ -95,6 +95,7 @@ static const double RM[NS] = {1.221224509226641, 6.019134481288629, 12.537083329
 static const double RALPHA[NS] = {0.0, 0.386, 0.21, 0.63, 1.0, 1.0};
 static const double RGAMMA[NS] = {0.25, -0.1043, 0.1035, -0.0362, 0.0, 0.0};
 #define MAX_STEPS 500000
+#define MAX_CRAWL 5000
 
 /* what fmi2GetFMUstate saves: everything that changes after instantiation */
 typedef struct {
@@ -962,6 +963,12 @@ static int integrate(Model* m, double t_end) {
     State* s = &m->st;
     double t = s->t, h = s->h;
     int rejected = 0, cut = 0, steps = 0;
+    /* a solver that crawls (MAX_CRAWL attempts advancing less than a millionth of the interval
+     * each, on average) would need millions of steps: it is at a singularity (a loop turning
+     * singular, a derivative without bound) and fails there at once rather than after
+     * MAX_STEPS, as the in-process engine's work budget does */
+    const double tiny = 1e-6 * (t_end - t);
+    double t_mark = t;
     /* the discrete values are constant over the integration */
     memcpy(m->ys + NC, s->x + NC, ND * sizeof(double));
     memcpy(m->ynew + NC, s->x + NC, ND * sizeof(double));
@@ -984,7 +991,15 @@ static int integrate(Model* m, double t_end) {
             s->t = t;
             return fmi2Error;
         }
-        if (++steps > MAX_STEPS) {
+        if (++steps % MAX_CRAWL == 0) {
+            if (t - t_mark < MAX_CRAWL * tiny) {
+                diagnose(m, t, s->x, "the solver crawls (steps of a millionth of the interval)");
+                s->t = t;
+                return fmi2Error;
+            }
+            t_mark = t;
+        }
+        if (steps > MAX_STEPS) {
             diagnose(m, t, s->x, "too many solver steps in one communication step");
             s->t = t;
             return fmi2Error;
