@@ -21,6 +21,7 @@ from ..errors import ConfigError
 from ..executor import TaskFailed
 from ..progress import log
 from ..sensitivity import fine_grid
+from ..stats import criterion as criterion_of
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
 from .families import distillations, families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
@@ -65,17 +66,22 @@ def blocked(template, rates: dict, component: str) -> str | None:
 
 
 # -- screening -----------------------------------------------------------------------------------
-def promising(screening: list[dict], limit: int, ratio: float = 10.0) -> list[int]:
+def promising(screening: list[dict], limit: int, ratio: float = 10.0, score=None) -> list[int]:
     """Indices of the candidates worth a full fit: at most ``limit``, best predicted first, and
     only those whose predicted RSS after one Gauss-Newton step is within ``ratio`` of the best
     prediction (a candidate predicted 10x worse loses by n ln 10 in any criterion unless the
-    linearisation is badly wrong). Laws that could not be screened are always fitted."""
-    ok = sorted((s["predicted_rss"], k) for k, s in enumerate(screening) if s.get("predicted_rss") is not None)
+    linearisation is badly wrong). ``score(rss, k)``, the criterion of a law with ``k`` free
+    terms, orders them: a small law predicted a little behind a large one in RSS may well be
+    ahead in the criterion (default: by RSS alone). Laws that could not be screened are always
+    fitted."""
+    rank = score or (lambda rss, k: rss)
+    ok = sorted((rank(s["predicted_rss"], s.get("n_params", 1) - 1), s["predicted_rss"], k)
+                for k, s in enumerate(screening) if s.get("predicted_rss") is not None)
     unscreened = [k for k, s in enumerate(screening) if s.get("unscreened")]
     if not ok:
         return unscreened
-    floor = max(ok[0][0], 1e-300)
-    return [k for pred, k in ok[:limit] if pred <= ratio * floor] + unscreened
+    floor = max(min(pred for _, pred, _ in ok), 1e-300)
+    return [k for _, pred, k in ok[:limit] if pred <= ratio * floor] + unscreened
 
 
 class Screening:
@@ -327,7 +333,9 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
     why_not = {it.key: blocked(templates[it.key], rates[it.component], it.component) for it in items}
     n_obs = int(np.isfinite(resid).sum())
     screening, pairs = _screened(part, rundir, items, why_not, base, train, resid, spec, n_obs * sigma**2)
-    keep = promising(screening, spec.screen, ratio=10.0 if spec.early_stop else np.inf)
+    criterion = criterion_of(spec.criterion)
+    keep = promising(screening, spec.screen, ratio=10.0 if spec.early_stop else np.inf,
+                     score=lambda rss, k: criterion.score(rss, n_obs, k))
     for k, s_ in enumerate(screening):
         if k not in keep and s_.get("predicted_rss") is not None:
             s_["not_fitted"] = "screening predicts it cannot compete"
