@@ -123,12 +123,13 @@ class Causes:
 
         self.rounds.append({"label": label, "round": len(self.rounds) + 1, "screening": found.screening,
                             "pairs": found.pairs, "candidates": cands, "roles": found.roles})
-        bests = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss, found.signals)[0]
+        self._verdict = verdict
+        bests = verdict()
         items = role_items(bests[0], found.roles, base.structure, cands, found.signals) if bests else []
         if items:
             cands += [c for c in found.fit.patient()(items) if not c.get("not_applicable")]
-        self._verdict = verdict
-        return verdict()
+            bests = verdict()
+        return bests
 
     def without(self, bests: list[dict], why: str) -> list[dict]:
         """The round's verdict again with the laws of ``bests`` (which do not simulate once put

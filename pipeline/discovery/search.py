@@ -26,6 +26,7 @@ from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fi
 from .families import distillations, families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
 from .screen import law_signals, linear_response, predicted_rss
+from .verdict import EQUAL
 
 #: pairs of laws are screened when the best single law is predicted to leave more than this
 #: times the noise's share of the RSS; a pair is fitted when it promises at most half the best
@@ -211,8 +212,9 @@ class Batch:
         return Batch(dataclasses.replace(self.ctx, progress_dir=""), self.part, self.rundir, self.reg, self.executor)
 
 
-def _leads(result: dict, results: list[dict], margin: float = 2.0) -> bool:
-    """Whether ``result`` scores within ``margin`` (a weak lead) of the best of ``results``."""
+def _leads(result: dict, results: list[dict], margin: float = EQUAL) -> bool:
+    """Whether ``result`` scores within ``margin`` (what does not separate two laws) of the best
+    of ``results``."""
     scores = [r["score"] for r in results if r.get("score") is not None and not r.get("failed")]
     return result.get("score") is not None and bool(scores) and result["score"] <= min(scores) + margin
 
