@@ -584,8 +584,7 @@ class _Hybrid:
         level warning are logged once each."""
         if self.assert_fun is None or not self.assert_info:
             return None
-        n = X.shape[1]
-        V = np.array(self.assert_fun.map(n)(X, U, P, t[None, :]))
+        V = self.assert_values(X, U, P, t)
         for i, (level, message) in enumerate(self.assert_info):
             bad = np.flatnonzero(V[i] > 0.5)
             if not bad.size:
@@ -595,6 +594,37 @@ class _Hybrid:
                 continue
             return f"assertion failed at t = {t[bad[0]]:g}: {message}"
         return None
+
+    def assert_values(self, X, U, P, t) -> np.ndarray:
+        """(asserts, points): 1 where an assert is violated; ``P`` one column or one per point."""
+        n, fun = X.shape[1], self.assert_fun
+        P = np.asarray(P, float)
+        P = P[:, None] if P.ndim == 1 else P
+        if _varies(fun):
+            return np.array(_mapped(fun, n)(X, U, P if P.shape[1] == n else np.repeat(P[:, :1], n, 1), t[None, :]))
+        # on parameters only (the MSL's range checks): one point tells, no loop solved n times
+        return np.repeat(np.array(fun(X[:, :1], U[:, :1], P[:, :1], t[:1])), n, axis=1)
+
+
+_ASSERTS: dict = {}
+
+
+def _varies(fun) -> bool:
+    """Whether an assert function depends on the states, inputs or time (structurally)."""
+    key = ("varies", id(fun))
+    if key not in _ASSERTS:
+        _ASSERTS[key] = (fun, any(fun.sparsity_jac(i, 0).nnz() for i in (0, 1, 3)))
+    return _ASSERTS[key][1]
+
+
+def _mapped(fun, n: int):
+    """``fun`` mapped over ``n`` points, built once per function and length."""
+    key = ("map", id(fun), n)
+    if key not in _ASSERTS:
+        if len(_ASSERTS) > 256:
+            _ASSERTS.clear()
+        _ASSERTS[key] = (fun, fun.map(n))
+    return _ASSERTS[key][1]
 
 
 def _check(y, res, drift, t, scale, opts) -> str | None:

@@ -183,7 +183,7 @@ class FitProblem:
     def _linearised(self, w):
         import dataclasses
 
-        from .sensitivity import Linearisation, MAX_STEP, fine_grid
+        from .sensitivity import Linearisation, fine_grid, substeps_for
 
         params = self.params(w)
         while True:
@@ -196,7 +196,7 @@ class FitProblem:
             if not self._grid_checked:       # dynamics fast against the data's sampling: a finer grid
                 self._grid_checked = True
                 h = float(np.max(np.diff(self.time)))
-                need = int(np.clip(np.ceil(lin.rate() * h / MAX_STEP), self.substeps, 24))
+                need = max(self.substeps, substeps_for(lin.rate(), h))
                 if need > self.substeps:
                     self.substeps = need
                     continue

@@ -22,11 +22,16 @@ import numpy as np
 
 from .simulation import prepare_inputs
 
-#: points per data interval on the grid the rule integrates on (at least)
-SUBSTEPS = 1
-#: the rule's step is shortened until the fastest mode moves by at most this in one step
-#: (h |lambda|: for oscillations the turn in radians, for decays the fraction lost)
+#: points per data interval on the grid the rule integrates on (at least, and at most)
+SUBSTEPS, MAX_SUBSTEPS = 1, 24
+#: the rule's step is shortened until every mode the data can show (up to their Nyquist rate)
+#: moves by at most this in one step (h |lambda|: for oscillations the turn in radians, for
+#: decays the fraction lost) ...
 MAX_STEP = 0.3
+#: ... and a faster mode by at most this: the rule then damps it by (1 - x/2)/(1 + x/2) = -0.2
+#: or more a step, and gives its quasi-static response exactly (the rule's fixed point for a
+#: constant forcing is -A^-1 F); finer steps for modes the samples cannot see only cost time
+MAX_STIFF_STEP = 3.0
 #: numbers held per chunk of the run (the Jacobians are evaluated a chunk at a time)
 CHUNK_NUMBERS = 4_000_000
 #: linearisation functions kept (a fit builds one Linearisation per Gauss-Newton step of the
@@ -42,6 +47,13 @@ def fine_grid(t: np.ndarray, substeps: int = SUBSTEPS) -> tuple[np.ndarray, np.n
     inner = t[:-1, None] + np.diff(t)[:, None] * (np.arange(substeps) / substeps)
     fine = np.concatenate([inner.ravel(), t[-1:]])
     return fine, np.arange(0, len(fine), substeps)
+
+
+def substeps_for(rate: float, h: float) -> int:
+    """Points per data interval of spacing ``h`` for a model whose fastest mode is ``rate``."""
+    seen = min(rate, np.pi / h) if h > 0 else rate
+    need = max(rate * h / MAX_STIFF_STEP, seen * h / MAX_STEP)
+    return int(np.clip(np.ceil(need), SUBSTEPS, MAX_SUBSTEPS))
 
 
 def _expand(f: ca.Function) -> ca.Function:
@@ -133,6 +145,45 @@ def affine_scan(P: np.ndarray, G: np.ndarray, S0: np.ndarray) -> np.ndarray:
     return out.reshape(L * m, nx, ns)[:n]
 
 
+#: from this many states on, the rule's steps are taken one after another with the factors of a
+#: fixed matrix (:func:`_low_rank_steps`): the blocked scan costs ~5 nx^3 a point
+LOW_RANK_MIN_STATES = 12
+
+
+def _low_rank_steps(A, prev_A, G, h, S0, first: bool) -> np.ndarray | None:
+    """The rule's steps S_k = (I - h A_k / 2)^-1 ((I + h A_(k-1) / 2) S_(k-1) + G_k) one after
+    another, for a model whose Jacobian A varies along the run in few rows (a law in a model of
+    fixed parts): I - h A_k / 2 = M - (h/2) E D_k with M fixed and D_k the rows that vary, so
+    by Woodbury its inverse is M^-1 + W (I - D_k W)^-1 D_k M^-1, W = (h/2) M^-1 E: O(nx^2 ns) a
+    step instead of O(nx^3). None when the step varies or too many rows vary (the caller then
+    takes the blocked scan). ``first``: the chunk starts the run (S there is 0)."""
+    n, nx, ns = G.shape
+    steps = h[1:] if first else h
+    if not len(steps) or np.ptp(steps) > 1e-9 * steps[0]:
+        return None
+    hk = float(steps[0])
+    A0 = A[-1]
+    scale = 1e-12 * (1.0 + np.max(np.abs(A0)))
+    rows = np.flatnonzero(np.max(np.abs(A - A0), axis=(0, 2)) > scale)
+    if 3 * len(rows) > nx:
+        return None
+    Minv = np.linalg.inv(np.eye(nx) - 0.5 * hk * A0)
+    D = (A - A0)[:, rows, :]                                  # (n, r, nx)
+    W = 0.5 * hk * Minv[:, rows]                              # (nx, r)
+    Cinv = np.linalg.inv(np.eye(len(rows)) - D @ W) if len(rows) else None
+    R = 0.5 * h[:, None, None] * prev_A                       # (I + R_k) S: the rule's explicit half
+    out = np.empty((n, nx, ns))
+    S = np.asarray(S0, float)
+    for k in range(n):
+        if k == 0 and first:
+            S = np.zeros((nx, ns))
+        else:
+            z = Minv @ (S + R[k] @ S + G[k])
+            S = z + W @ (Cinv[k] @ (D[k] @ z)) if Cinv is not None else z
+        out[k] = S
+    return out
+
+
 class Linearisation:
     """df/dx, df/dq, dy/dx, dy/dq along a run (``states`` (N, nx) at ``time``, parameter vector
     ``p``) for the free parameters named ``params``, evaluated a chunk of the run at a time."""
@@ -214,13 +265,16 @@ class Linearisation:
                 prev_A = np.concatenate([A_prev[None] if A_prev is not None else A[:1], A[:-1]])
                 prev_F = np.concatenate([F_prev[None] if F_prev is not None else Fx[:1], Fx[:-1]])
                 h = (t[k0:k1] - t[np.maximum(np.arange(k0, k1) - 1, 0)])[:, None, None]
-                lhs = I - 0.5 * h * A
-                P = np.linalg.solve(lhs, I + 0.5 * h * prev_A)
-                G = np.linalg.solve(lhs, 0.5 * h * (prev_F + Fx))
-                if k0 == 0:                 # S(t0) = 0
-                    G[0] = 0.0
-                    P[0] = 0.0
-                Sk = affine_scan(P, G, S)
+                Sk = (_low_rank_steps(A, prev_A, 0.5 * h * (prev_F + Fx), h[:, 0, 0], S, k0 == 0)
+                      if nx >= LOW_RANK_MIN_STATES else None)
+                if Sk is None:
+                    lhs = I - 0.5 * h * A
+                    P = np.linalg.solve(lhs, I + 0.5 * h * prev_A)
+                    G = np.linalg.solve(lhs, 0.5 * h * (prev_F + Fx))
+                    if k0 == 0:                 # S(t0) = 0
+                        G[0] = 0.0
+                        P[0] = 0.0
+                    Sk = affine_scan(P, G, S)
                 S = Sk[-1]
                 A_prev, F_prev = A[-1], Fx[-1]
                 Y[out] = np.einsum("kij,kjs->kis", C[j_out], Sk[j_out]) + Fy[j_out]

@@ -31,7 +31,7 @@ class CasadiCompiler(Compiler):
         libraries = (options or {}).get("libraries", ())
         prep = rumoca_frontend.prepare(sources, libraries, model)
         key = compile_cache.key_of(model=model, docs=sorted(h for h, _ in prep.docs.values()),
-                                   libraries=compile_cache.library_fingerprint(prep.roots), compiler=self.name)
+                                   libraries=compile_cache.library_fingerprint(prep.whole), compiler=self.name)
         cached = compile_cache.load(key)
         if cached is not None:
             return cached
@@ -44,7 +44,7 @@ class CasadiCompiler(Compiler):
         seconds = time.perf_counter() - start
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
-                "files_read": len(files), "units": dae.units, "descriptions": dae.descriptions,
+                "files_read": len(files), "library_subset": ir.get("library_subset"), "units": dae.units, "descriptions": dae.descriptions,
                 "compile_seconds": seconds}
         compiled = CompiledModel(model, ode, info, dae=raw, structure=components)
         compile_cache.store(key, compiled, seconds)

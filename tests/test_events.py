@@ -173,6 +173,28 @@ def test_an_assert_that_fires_fails_the_run_with_its_message(tmp_path):
     assert "x left its range" in res.reason and "t = 0.5" in res.reason and "A.mo:5" in res.reason
 
 
+def test_an_assert_on_parameters_only_is_checked_once_and_still_fires(tmp_path):
+    """An assert that reads no state, input or time (the MSL's range checks) is evaluated at one
+    point, not at every output point: the same verdict, without the model's loops solved n times."""
+    from mcl.engine_casadi import _varies
+
+    (tmp_path / "B.mo").write_text("model B\n  parameter Real k = 2;\n  Real x(start = 1, fixed = true);\n"
+                                   "equation\n  der(x) = -k*x;\n  assert(k > 0, \"k must be positive\");\nend B;\n")
+    model = compile_model([tmp_path / "B.mo"], "B")
+    assert not _varies(model.ode.asserts)
+    t = np.linspace(0, 1, 11)
+    inputs = TimeSeries(t, np.zeros((len(t), 0)), [])
+    assert CasadiEngine().simulate(model, inputs, options=None).ok
+    res = CasadiEngine().simulate(model, inputs, {"k": -1.0}, options=None)
+    assert not res.ok and "k must be positive" in res.reason and "t = 0" in res.reason
+    from mcl.engine_casadi import _Hybrid
+
+    n = 500
+    X, P = np.ones((1, n)), np.repeat(model.parameter_vector({"k": -1.0})[:, None], n, 1)
+    V = _Hybrid(model.ode, np.linspace(0, 1, n)).assert_values(X, np.zeros((0, n)), P, np.linspace(0, 1, n))
+    assert V.shape == (1, n) and np.all(V > 0.5)
+
+
 @pytest.mark.slow
 def test_a_5000_term_sum_compiles(tmp_path):
     """rumoca recurses as deep as the sum nests (it runs with a large stack); the translation

@@ -58,3 +58,30 @@ def test_newton_form_gives_the_solvers_derivatives(cauer):
     assert newton.fun.n_in() == 5 and solver.fun.n_in() == 4
     for a, b in zip(newton.jacobians(0, len(t)), solver.jacobians(0, len(t))):
         assert np.max(np.abs(a - b)) <= 1e-9 * (np.max(np.abs(b)) + 1e-12)
+
+
+def test_the_low_rank_steps_equal_the_blocked_scan(monkeypatch):
+    """The rule taken one step after another with a fixed matrix's factors and Woodbury's
+    correction for the rows that vary (larger models) gives the blocked scan's sensitivities."""
+    from mcl import sensitivity
+
+    rng = np.random.default_rng(3)
+    nx, ny, nq, N = 20, 2, 3, 700
+    A0 = -np.diag(rng.uniform(1, 40, nx)) + 0.3 * rng.normal(size=(nx, nx))
+    B, C, E = rng.normal(size=(N, nx, nq)), rng.normal(size=(N, ny, nx)), rng.normal(size=(N, ny, nq))
+    wobble = np.sin(np.linspace(0, 9, N))                     # a law varying along the run, in rows 3 and 7
+    A = np.repeat(A0[None], N, 0)
+    A[:, [3, 7], :] += 2.0 * wobble[:, None, None] * rng.normal(size=(2, nx))[None]
+
+    class Along(sensitivity.Linearisation):
+        def __init__(self):
+            self.time, self.nx, self.ny, self.nq, self.chunk = np.linspace(0, 7, N), nx, ny, nq, 97
+
+        def jacobians(self, k0, k1):
+            return A[k0:k1], B[k0:k1], C[k0:k1], E[k0:k1]
+
+    at = np.arange(0, N, 7)
+    fast = Along().parameters(at)
+    monkeypatch.setattr(sensitivity, "LOW_RANK_MIN_STATES", 10**9)
+    blocked = Along().parameters(at)
+    assert np.max(np.abs(fast - blocked)) < 1e-9 * np.max(np.abs(blocked))

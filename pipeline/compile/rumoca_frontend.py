@@ -52,6 +52,7 @@ _FUNCTIONS = {
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
     "identity": lambda n: ca.vec(ca.SX.eye(_int(n))),      # held flattened like every array
+    "cross": lambda a, b: ca.cross(ca.vec(a), ca.vec(b)),
 }
 
 
@@ -155,6 +156,11 @@ def _without_modelicapath(fn, *args):
             os.environ["MODELICAPATH"] = saved
 
 
+def _real(path: str) -> str:
+    """A library file by its real path, not through the links of a library root."""
+    return os.path.realpath(path) if path.startswith(str(roots_dir())) else path
+
+
 def virtual_name(path: Path, digest: str) -> str:
     return f"{VIRTUAL}/{digest[:16]}/{path.name}"
 
@@ -206,27 +212,34 @@ def documents(paths) -> tuple[dict[Path, tuple[str, set]], list[Path]]:
     return docs, files
 
 
-def library_roots(libraries=(), shadowed=(), used=None) -> list[str]:
+def library_roots(libraries=(), shadowed=(), used=None, texts=None) -> list[str]:
     """One rumoca root: a directory of links to the libraries on the path, first entry winning,
     less those the sources define themselves (``shadowed``: the user's copy is the one used);
     with ``used`` (library paths), only those: rumoca parses every library of its root, so a
-    model that uses none of the MSL must not have it there (89 s and 1.75 GB otherwise)."""
+    model that uses none of the MSL must not have it there (89 s and 1.75 GB otherwise); with
+    ``texts`` (the sources), only the packages of them the texts reach (:mod:`.subset`)."""
     import hashlib
     import tempfile
 
     from .library import available, library_path
+    from .subset import mirror, units_needed
 
     libs = {n: p.resolve() for n, p in available(library_path(libraries)).items() if n not in shadowed}
     if used is not None:
         keep = {Path(u).resolve() for u in used}
         libs = {n: p for n, p in libs.items() if p in keep}
-    key = hashlib.sha256(repr(sorted((n, str(p)) for n, p in libs.items())).encode()).hexdigest()[:16]
+    units = units_needed(texts, libs) if texts is not None else {}
+    parts = {n: sorted(units[n]) if units.get(n) is not None else None for n in libs}
+    key = hashlib.sha256(repr(sorted((n, str(p), parts[n]) for n, p in libs.items())).encode()).hexdigest()[:16]
     base = roots_dir()
     root = base / key
     if not root.is_dir():
         tmp = Path(tempfile.mkdtemp(dir=base, prefix=".new-"))
         for n, p in libs.items():
-            (tmp / (n if p.is_dir() else f"{n}.mo")).symlink_to(p)
+            if parts[n] is None:
+                (tmp / (n if p.is_dir() else f"{n}.mo")).symlink_to(p)
+            else:
+                mirror(tmp / n, p, set(parts[n]))
         try:
             tmp.rename(root)
         except OSError:        # another process made it first
@@ -262,6 +275,7 @@ class Prepared:
     docs: dict[Path, tuple[str, set]]
     files: list[Path]
     roots: list[str]
+    whole: list[str]        # the root with the whole libraries: a compile failing in ``roots`` is retried there
 
     @property
     def virtual(self) -> dict[str, str]:
@@ -277,11 +291,13 @@ def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
 
     docs, files = documents(paths)
     defined = {n for _, names in docs.values() for n in names}
-    used = None
+    used, texts = None, None
     if files or model:
         texts = [f.read_text(encoding="utf-8", errors="replace") for f in files]
         used = needed(texts, defined, model, library_path(libraries))
-    return Prepared(docs, files, library_roots(libraries, shadowed=defined, used=used))
+        texts.append(model or "")
+    whole = library_roots(libraries, shadowed=defined, used=used)
+    return Prepared(docs, files, library_roots(libraries, shadowed=defined, used=used, texts=texts), whole)
 
 
 def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -> tuple[dict, Located]:
@@ -299,8 +315,15 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
     real = prep.virtual
 
     def work():
-        compiled = _front(prep.roots).compile(prep.docs, model)
+        subset = prep.whole != prep.roots
+        try:
+            compiled = _front(prep.roots).compile(prep.docs, model)
+        except rumoca.RumocaError:
+            if not subset:
+                raise
+            compiled, subset = _front(prep.whole).compile(prep.docs, model), False   # a file the subset missed
         ir = compiled.to_dict("dae")
+        ir["library_subset"] = subset
         # the flat stage names each equation's origin (a component's own equation, a flow
         # sum, a connection) and each variable's flow prefix: the model's component structure
         ir["flat"] = compiled.to_dict("flat")
@@ -310,7 +333,7 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
         ir = in_rumoca_thread(work)
     except rumoca.RumocaError as exc:
         raise _located_error(exc, model, prep.files, real) from None
-    located = Located({f[0]: (real.get(f[1], f[1]), f[2]) for f in ir.get("source_map", {}).get("files", [])})
+    located = Located({f[0]: (real.get(f[1]) or _real(f[1]), f[2]) for f in ir.get("source_map", {}).get("files", [])})
     return ir, located
 
 

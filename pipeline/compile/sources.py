@@ -6,6 +6,13 @@ from pathlib import Path
 
 from ..errors import ModelicaError
 
+#: Modelica's reserved words (Modelica 3.6, section 2.3.3): never a class name
+KEYWORDS = frozenset("""algorithm and annotation block break class connect connector constant
+constrainedby der discrete each else elseif elsewhen encapsulated end enumeration equation expandable
+extends external false final flow for function if import impure in initial inner input loop model not
+operator or outer output package parameter partial protected public pure record redeclare replaceable
+return stream then true type when while within""".split())
+
 
 def checked(paths) -> list[Path]:
     """``paths`` as Paths; a missing one or a file that is not ``.mo`` is a one-line error."""

@@ -7,15 +7,10 @@ import shutil
 import textwrap
 from pathlib import Path
 
+from ..compile.sources import KEYWORDS
 from ..errors import ConfigError
 
 IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-#: Modelica's reserved words (Modelica 3.6, section 2.3.3): never a class name
-KEYWORDS = frozenset("""algorithm and annotation block break class connect connector constant
-constrainedby der discrete each else elseif elsewhen encapsulated end enumeration equation expandable
-extends external false final flow for function if import impure in initial inner input loop model not
-operator or outer output package parameter partial protected public pure record redeclare replaceable
-return stream then true type when while within""".split())
 #: top-level names of libraries a learned library is used beside (shadowing one breaks the model)
 LIBRARIES = frozenset({"Modelica", "ModelicaServices", "ModelicaReference", "ModelicaTest", "Complex",
                        "ObsoleteModelica4", "MCL"})

@@ -159,16 +159,16 @@ class Screening:
 
 def substeps(model, train: TimeSeries) -> int:
     """Points per data interval for the linearised response (:mod:`mcl.sensitivity`): enough
-    that the model's fastest mode moves little in one step."""
+    that the modes the data can show move little in one step, and faster ones are damped."""
     from ..services import simulate
-    from ..sensitivity import MAX_STEP, SUBSTEPS, Linearisation
+    from ..sensitivity import SUBSTEPS, Linearisation, substeps_for
 
     res = simulate(model, train)
     if not res.ok:
         return SUBSTEPS
     lin = Linearisation(model, res.states, res.time, train, model.parameter_vector(), [])
     h = float(np.max(np.diff(train.time)))
-    return int(np.clip(np.ceil(lin.rate() * h / MAX_STEP), SUBSTEPS, 24))
+    return substeps_for(lin.rate(), h)
 
 
 # -- fitting batches -----------------------------------------------------------------------------
