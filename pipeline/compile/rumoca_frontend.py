@@ -217,7 +217,7 @@ def library_roots(libraries=(), shadowed=(), used=None, texts=None) -> list[str]
     less those the sources define themselves (``shadowed``: the user's copy is the one used);
     with ``used`` (library paths), only those: rumoca parses every library of its root, so a
     model that uses none of the MSL must not have it there (89 s and 1.75 GB otherwise); with
-    ``texts`` (the sources), only the packages of them the texts reach (:mod:`.subset`)."""
+    ``texts`` (the sources), only the files of them the texts reach (:mod:`.subset`)."""
     import hashlib
     import tempfile
 
