@@ -151,3 +151,12 @@ def test_a_fifo_named_as_a_source_is_refused_at_once(tmp_path):
     os.mkfifo(tmp_path / "P" / "Q.mo")              # inside a package directory: left out
     (tmp_path / "P" / "package.mo").write_text("package P\nend P;\n")
     assert expand([tmp_path / "P"]) == [(tmp_path / "P" / "package.mo").resolve()]
+
+
+def test_an_initial_system_singular_at_the_start_values_names_the_state(tmp_path):
+    """sqrt(x) = 0.5 from x = 0: no finite derivative to start Newton's method from; said in
+    the model's words, not as an internal error of the structural analysis."""
+    f = tmp_path / "S.mo"
+    f.write_text("model S\n  Real x(start = 0);\ninitial equation\n  sqrt(x) = 0.5;\nequation\n  der(x) = -x;\nend S;\n")
+    with pytest.raises(ModelicaError, match=r"no finite derivative at the start values of x: start it away"):
+        compile_model([f], "S")

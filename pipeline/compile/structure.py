@@ -502,7 +502,7 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     # numeric Jacobian at the nominal start point, to choose a square nonsingular system
     xs0 = np.array(ca.Function("s0", [P], [semi_start])(dae.p_values)).ravel()
     jac = ca.Function("J", [Xs, Us, Ps, Ts], [ca.jacobian(hard_s, Xs)])
-    J = np.array(jac(xs0, dae.u_start, dae.p_values, 0.0))
+    J = _finite_jacobian(lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0)), xs0, x_names)
     rows = _independent_rows(J)
     J = J[rows]
     fixed = set(n for n, f in zip(dae.x_names, dae.x_fixed) if f)
@@ -572,6 +572,19 @@ def _column_basis(J: np.ndarray, order: list[int]) -> list[int]:
             if len(kept) == m:
                 break
     return kept
+
+
+def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
+    """The initial system's Jacobian at the start values ``x0`` (it chooses which equations and
+    states to solve); at a singularity there (sqrt(x) at x = 0), a clear error naming the states,
+    not a solve started where Newton's method cannot move."""
+    J = jac(x0)
+    if np.all(np.isfinite(J)):
+        return J
+    bad = sorted({names[j] for j in np.flatnonzero(~np.all(np.isfinite(J), axis=0)) if j < len(names)})
+    raise ModelicaError("the initial equations have no finite derivative at the start values of "
+                        f"{', '.join(bad[:5]) or 'the states'}: start {'them' if len(bad) > 1 else 'it'} "
+                        "away from the singularity")
 
 
 def _independent_rows(J: np.ndarray) -> list[int]:
