@@ -16,6 +16,7 @@ until the discrete values stop changing (Modelica's event iteration), then the s
 """
 from __future__ import annotations
 
+import functools
 import logging
 import math
 from collections import OrderedDict
@@ -606,25 +607,17 @@ class _Hybrid:
         return np.repeat(np.array(fun(X[:, :1], U[:, :1], P[:, :1], t[:1])), n, axis=1)
 
 
-_ASSERTS: dict = {}
-
-
+@functools.lru_cache(maxsize=64)
 def _varies(fun) -> bool:
     """Whether an assert function depends on the states, inputs or time (structurally)."""
-    key = ("varies", id(fun))
-    if key not in _ASSERTS:
-        _ASSERTS[key] = (fun, any(fun.sparsity_jac(i, 0).nnz() for i in (0, 1, 3)))
-    return _ASSERTS[key][1]
+    return any(fun.sparsity_jac(i, 0).nnz() for i in (0, 1, 3))
 
 
+@functools.lru_cache(maxsize=64)
 def _mapped(fun, n: int):
-    """``fun`` mapped over ``n`` points, built once per function and length."""
-    key = ("map", id(fun), n)
-    if key not in _ASSERTS:
-        if len(_ASSERTS) > 256:
-            _ASSERTS.clear()
-        _ASSERTS[key] = (fun, fun.map(n))
-    return _ASSERTS[key][1]
+    """``fun`` mapped over ``n`` points, built once per function and length (the cache holds
+    ``fun``, so its identity, which CasADi hashes, is not reused while the entry lives)."""
+    return fun.map(n)
 
 
 def _check(y, res, drift, t, scale, opts) -> str | None:

@@ -13,7 +13,7 @@ import functools
 import itertools
 import os
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import casadi as ca
@@ -156,9 +156,9 @@ def _without_modelicapath(fn, *args):
             os.environ["MODELICAPATH"] = saved
 
 
-def _real(path: str) -> str:
-    """A library file by its real path, not through the links of a library root."""
-    return os.path.realpath(path) if path.startswith(str(roots_dir())) else path
+def _real(path: str, roots: str) -> str:
+    """A library file by its real path, not through the links of a library root under ``roots``."""
+    return os.path.realpath(path) if path.startswith(roots) else path
 
 
 def virtual_name(path: Path, digest: str) -> str:
@@ -270,17 +270,28 @@ def roots_dir() -> Path:
 @dataclass
 class Prepared:
     """What a compile reads: the user's documents (hash, class names), every user file, and the
-    rumoca root of the libraries; computed once for the cache key and the compile."""
+    rumoca root of the libraries (``whole``); computed once for the cache key and the compile.
+    ``roots``, the root of only the library files the sources reach, is made when a compile
+    needs it: reading the closure costs ~2 s for an MSL model, a cache hit nothing."""
 
     docs: dict[Path, tuple[str, set]]
     files: list[Path]
-    roots: list[str]
-    whole: list[str]        # the root with the whole libraries: a compile failing in ``roots`` is retried there
+    whole: list[str]        # the whole libraries: a compile failing in ``roots`` is retried there
+    texts: list[str] | None = None       # the sources and the model's name (None: no subset)
+    libraries: tuple = ()
+    shadowed: set = field(default_factory=set)
+    used: list | None = None
 
     @property
     def virtual(self) -> dict[str, str]:
         """The names single files are registered under -> their real paths."""
         return {virtual_name(p, h): str(p) for p, (h, _) in self.docs.items()}
+
+    @functools.cached_property
+    def roots(self) -> list[str]:
+        if self.texts is None:
+            return self.whole
+        return library_roots(self.libraries, shadowed=self.shadowed, used=self.used, texts=self.texts)
 
 
 def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
@@ -296,8 +307,8 @@ def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
         texts = [f.read_text(encoding="utf-8", errors="replace") for f in files]
         used = needed(texts, defined, model, library_path(libraries))
         texts.append(model or "")
-    whole = library_roots(libraries, shadowed=defined, used=used)
-    return Prepared(docs, files, library_roots(libraries, shadowed=defined, used=used, texts=texts), whole)
+    return Prepared(docs, files, library_roots(libraries, shadowed=defined, used=used), texts,
+                    tuple(libraries), defined, used)
 
 
 def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -> tuple[dict, Located]:
@@ -333,7 +344,8 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
         ir = in_rumoca_thread(work)
     except rumoca.RumocaError as exc:
         raise _located_error(exc, model, prep.files, real) from None
-    located = Located({f[0]: (real.get(f[1]) or _real(f[1]), f[2]) for f in ir.get("source_map", {}).get("files", [])})
+    roots = str(roots_dir())
+    located = Located({f[0]: (real.get(f[1]) or _real(f[1], roots), f[2]) for f in ir.get("source_map", {}).get("files", [])})
     return ir, located
 
 
