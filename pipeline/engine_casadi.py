@@ -178,6 +178,7 @@ class _Plan:
             S = ca.MX.sym("S", nx, ns)
             dS = ca.mtimes(ca.jacobian(f, X), S) + ca.jacobian(f, P)[:, sel]
             xa, fa = ca.vertcat(X, ca.vec(S)), ca.vertcat(f, ca.vec(dS))
+        fa = ca.densify(fa)       # CVODES takes dense right-hand sides (a state held constant is a structural 0)
         self.na = xa.numel()
         empty = ca.MX.sym("z", 0, 1), ca.MX.sym("u", 0, 1)
         # one oracle for every integrator: its derivatives are built once, so an integrator
@@ -327,7 +328,8 @@ class _Plan:
         except RuntimeError as exc:
             return fail(f"initialisation failed: {_last_line(exc)}")
         if not np.all(np.isfinite(xa)):
-            return fail("initialisation gave non-finite values")
+            return fail("initialisation failed: no start satisfying the initial equations was found "
+                        "from the start values (give the states start values nearer the solution)")
         budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
         t_int = self.t_int
         traj = np.full((len(xa), len(t_int)), np.nan)

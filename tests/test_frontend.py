@@ -160,3 +160,23 @@ def test_an_initial_system_singular_at_the_start_values_names_the_state(tmp_path
     f.write_text("model S\n  Real x(start = 0);\ninitial equation\n  sqrt(x) = 0.5;\nequation\n  der(x) = -x;\nend S;\n")
     with pytest.raises(ModelicaError, match=r"no finite derivative at the start values of x: start it away"):
         compile_model([f], "S")
+
+
+@pytest.mark.parametrize("start,equation,x0", [
+    ("1", "sqrt(x) = 0.5", 0.25),   # Newton's first step lands on sqrt's singularity at x = 0
+    ("1", "x * x = -1", None)])     # no real solution
+def test_initial_equations_are_solved_or_the_start_fails(tmp_path, start, equation, x0):
+    """A full Newton step can overshoot onto a point where it stops (a zero step): the damped
+    fallback must find the solution, and a system without one fails the simulation rather
+    than starting from a state that does not satisfy the initial equations."""
+    f = tmp_path / "S.mo"
+    f.write_text(f"model S\n  Real x(start = {start});\n  output Real y = x;\ninitial equation\n"
+                 f"  {equation};\nequation\n  der(x) = -x;\nend S;\n")
+    t = np.linspace(0.0, 1.0, 11)
+    res = simulate(compile_model([f], "S"), series(t), t_out=t)
+    if x0 is None:
+        assert not res.ok and "initial equations" in res.reason
+    else:
+        assert res.ok
+        assert abs(res.output("y")[0] - x0) < 1e-9
+        np.testing.assert_allclose(res.output("y"), x0 * np.exp(-t), rtol=1e-4)

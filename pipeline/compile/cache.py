@@ -1,8 +1,8 @@
 """Compile once: compiled models kept on disk, keyed by everything that decides the result.
 
 The key is the model name, the content of the user's documents, a fingerprint of every library
-file the front end may read (path, size, modification time), the options and the versions of
-mcl, rumoca and CasADi. A hit loads the saved CasADi functions instead of parsing, flattening
+file the front end may read (path, size, modification time), the options, the versions of
+mcl, rumoca and CasADi and the compiler's own source. A hit loads the saved CasADi functions instead of parsing, flattening
 and analysing again (an MSL model: seconds -> a fraction of a second). Only compiles that took
 long enough to be worth it are kept, and the oldest entries are dropped beyond ``MAX_ENTRIES``.
 ``MCL_NO_COMPILE_CACHE=1`` turns it off; ``MCL_CACHE_DIR`` moves it.
@@ -14,6 +14,7 @@ C sources, with the model description, the C compiler and its flags (see
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -58,12 +59,21 @@ def library_fingerprint(paths) -> str:
     return h.hexdigest()
 
 
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """The compiler's own source (an editable install changes without a new version)."""
+    h = hashlib.sha256()
+    for f in sorted(Path(__file__).parent.rglob("*.py")):
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
 def key_of(**parts) -> str:
     from .library import distribution_versions
 
     versions = distribution_versions("mcl", "rumoca", "casadi")
-    return hashlib.sha256(json.dumps({**parts, "versions": versions, "format": FORMAT}, sort_keys=True, default=str)
-                          .encode()).hexdigest()[:32]
+    return hashlib.sha256(json.dumps({**parts, "versions": versions, "format": FORMAT, "code": code_fingerprint()},
+                                     sort_keys=True, default=str).encode()).hexdigest()[:32]
 
 
 def load(key: str):

@@ -285,7 +285,9 @@ class _Aliases:
         for k, v in zip(nz, var):
             if rows[k] not in outside:
                 self.waiting.setdefault(v, set()).add(rows[k])
-        nonlinear = {rows[k] for k in nz}
+        # a row reading an unknown only in a condition (a derivative that is a structural 0:
+        # if x < 1 then a else b) is no alias: the rest would hold that unknown
+        nonlinear = {rows[k] for k in nz} | {rows[k] for k, c in enumerate(coefs) if _is_zero(c)}
         terms: dict[int, list] = {}
         for k, (r, c) in enumerate(zip(rows, cols)):
             terms.setdefault(r, []).append((c, coefs[k]))
@@ -346,8 +348,8 @@ class _Aliases:
             return
         v = ca.vertcat(*syms)
         jac = ca.jacobian(row, v)
-        if ca.depends_on(jac, v):
-            return
+        if ca.depends_on(jac, v) or any(_is_zero(_num(jac[0, k])) for k in range(v.numel())):
+            return                   # nonlinear, or an unknown read only in a condition
         rest = ca.substitute(row, v, ca.SX.zeros(v.numel()))
         self._candidate(r, [(self.index[s.element_hash()], _num(jac[0, k])) for k, s in enumerate(syms)], _num(rest))
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from . import tables
 from .dae import Dae, check_balance, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
@@ -501,6 +502,8 @@ class _Translator:
         self.relations: list[ca.SX] = []   # lhs - rhs of the event-generating relations met
         self.span = None                   # provenance of what is being translated (for errors)
         self.fn_asserts: list = []         # (violated, level, message) of asserts in functions called
+        self.table_records: dict = {}      # the MSL's interpolation tables by their id (rumoca's data)
+        self.tables: dict[int, tables.Table] = {}   # ... translated when first looked up
         self._compiled: dict = {}          # (function, argument pattern) -> SX Function
         self._function_tags: dict = {}     # its name -> (number of outputs, [(level, message)])
         self._unassigned: dict = {}        # its name -> outputs it never assigns
@@ -823,6 +826,9 @@ class _Translator:
         if ext and ext.get("language") == "builtin":
             actual = [self.sx(a["input"], bound) for a in ext.get("arguments", []) if "input" in a]
             return self.call_builtin(ext.get("symbol", f["name"]), actual)
+        if ext and ext.get("symbol", "").startswith("ModelicaStandardTables_"):
+            actual = [self.sx(a["input"], bound) for a in ext.get("arguments", []) if "input" in a]
+            return self.call_table(ext["symbol"], actual)
         if ext:
             self.refuse(f"external function {f['name']} ({ext.get('language', '?')} code)")
         compiled, symbolic = self.compiled_function(body["function"], args)
@@ -834,6 +840,23 @@ class _Translator:
         if output >= n_out or output in self._unassigned[compiled.name()]:
             self.refuse(f"function {f['name']} assigns no value to its output {output + 1}")
         return outs[output]
+
+    def call_table(self, symbol: str, args):
+        """A lookup in one of the MSL's tables (the C library's function, as an expression)."""
+        ident = args[0] if args else None
+        key = _int(ident) if ident is not None and ident.is_constant() else None
+        if key not in self.table_records:
+            self.refuse(f"table function {symbol} on a table that is not a constant of the model")
+        try:
+            if key not in self.tables:
+                self.tables[key] = tables.Table.of(*self.table_records[key])
+            value, outside = tables.call(symbol, self.tables[key], args)
+        except UnsupportedConstruct as exc:
+            self.refuse(str(exc))
+        if outside is not None:
+            self.fn_asserts.append((outside, "error", "the table's abscissa is outside the table "
+                                    "(extrapolation = NoExtrapolation)"))
+        return value
 
     def compiled_function(self, index: int, args) -> tuple[ca.Function, list[int]]:
         """Function ``index`` interpreted once per pattern of its arguments (the constant ones
@@ -965,6 +988,11 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     tr = _Translator(st, model, located)
     role = [v["role"] for v in variables]
     attrs = [v["attributes"] for v in variables]
+    # an external object (a table's id: rumoca evaluated its constructor) and a String (a
+    # table's name) are constants, not parameters to fit
+    objects = _external_objects(ir)
+    role = ["constant" if v["name"] in objects or st["value_types"][v["value_type"]].get("scalar") == "string"
+            else r for v, r in zip(variables, role)]
     # parameters computed during initialisation (fixed = false, no binding) become constant states
     init_params = {i for i, v in enumerate(variables) if role[i] == "parameter" and attrs[i]["binding"] is None
                    and attrs[i].get("fixed") in ([False], False)}
@@ -1048,6 +1076,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         tr.refuse(f"variable {variables[i]['name']} ({kind})")
 
     tr.coord = coord
+    tr.table_records = _table_records(ir, variables, objects, attrs, tr)
     eqs = [_residual(op, tr, model) for op in st["continuous_equation_operations"]]
     eqs += [der[i] for i in sorted(init_params)]       # d/dt of an initialisation parameter is 0
     residual = ca.vertcat(*[ca.vec(e) for e in eqs]) if eqs else ca.SX(0, 1)
@@ -1105,6 +1134,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     for j, n in enumerate(names["p"]):
         exprs[n] = resolved[j]
     for i in index["c"]:
+        if st["value_types"][variables[i]["value_type"]].get("scalar") == "string":
+            continue        # no number to name (a table's name)
         for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(ca.vec(coord("constant", i)))):
             exprs[n] = e
     for i, node in always.items():
@@ -1114,8 +1145,9 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     units = {v["name"]: v["attributes"]["unit"] for v in variables if v["attributes"].get("unit")}
     descriptions = {v["name"]: v["attributes"]["description"] for v in variables
                     if v["attributes"].get("description")}
-    # relations on the unknowns are state events; on time alone they are time events (above)
-    unknowns = ca.vertcat(x, dx, z)
+    # relations on the unknowns are state events; on time alone they are time events (above);
+    # time against a discrete value (time >= pre(nextEvent): the MSL's tables) a state event too
+    unknowns = ca.vertcat(x, dx, z, d, d_pre)
     on = set(ca.jacobian_sparsity(ca.vertcat(*tr.relations), unknowns).get_triplet()[0]) if tr.relations else ()
     rel = [r for k, r in enumerate(tr.relations) if k in on]
     relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
@@ -1158,6 +1190,36 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                x_reinit=bind_event(x_reinit) if x.numel() else ca.SX(0, 1),
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
                assert_info=assert_info)
+
+
+def _external_objects(ir: dict) -> set[str]:
+    """Names of the variables holding an MSL table (an ExternalObject: ``tableID``)."""
+    types = ir.get("flat", {}).get("variable_type_names", {}) or {}
+    return {name for name, t in types.items() if t.startswith("Modelica.Blocks.Types.External")}
+
+
+def _table_records(ir: dict, variables, objects: set[str], attrs, tr) -> dict:
+    """rumoca's evaluated tables by id, with a time table's start and shift (arguments of the
+    constructor that rumoca does not pass on) from the parameters of the block holding it."""
+    index = {v["name"]: i for i, v in enumerate(variables)}
+    owner = {}
+    for name in objects:
+        binding = attrs[index[name]]["binding"] if name in index else None
+        ident = tr.sx(binding) if binding is not None else None
+        if ident is not None and ident.is_constant():
+            owner[_int(ident)] = name.rpartition(".")[0]
+
+    def parameter(prefix, name, default):
+        i = index.get(f"{prefix}.{name}" if prefix else name)
+        return tr.coord("variable", i) if i is not None else default
+
+    records = {}
+    for record in ir.get("external_tables", []) or []:
+        prefix = owner.get(record["id"], "")
+        scale = parameter(prefix, "timeScale", 1.0)
+        records[record["id"]] = (record, parameter(prefix, "startTime", 0.0) / scale,
+                                 parameter(prefix, "shiftTime", 0.0) / scale)
+    return records
 
 
 def _reads_pre(st: dict, root: int) -> bool:

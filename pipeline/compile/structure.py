@@ -32,6 +32,8 @@ SYMBOLIC_SOLVE_MAX = 40
 NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
 #: an algebraic loop's residual accepted from Newton's method without the fallback
 LOOP_TOL = 1e-9
+#: an initial system's residual above this after every fallback: no consistent start (NaN)
+INIT_TOL = 1e-6
 DAMPED_ITERATIONS = 30       # Newton steps with a line search (the fallback)
 LINE_SEARCH_STEPS = 12       # step lengths tried: 1, 1/2, ..., 1/2^11
 
@@ -142,7 +144,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
     and SX algebra, instead of the solver's own derivatives through the MX graph (30x slower).
     None when there is no loop, or a block is too large to solve symbolically.
     """
-    sp = ca.jacobian_sparsity(g, z)
+    sp = ca.jacobian_sparsity(g, z)     # structural: an unknown read in a condition counts
     blocks = _blocks(sp, z.numel())
     reads: dict[int, set] = {}          # row -> the unknowns it reads
     for r, c in zip(*sp.get_triplet()):
@@ -200,21 +202,28 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
     return ca.Function("zsol", mx_args, [zsol]), n_nonlinear, form
 
 
-def _loop_solve(name: str, resid: ca.Function, guess: np.ndarray, par: ca.MX) -> ca.MX:
+def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool = False) -> ca.MX:
     """The solution of an algebraic loop 0 = resid(z, par): Newton's method from the start
     values; where it does not converge (it cycles between the branches of a piecewise law, such
     as an amplifier's output limit, or meets a singular Jacobian), Newton's method with a
     backtracking line search from the start values, then polished by Newton. The fallback is
-    evaluated only when needed (a short-circuit conditional); everything stays C-generable."""
+    evaluated only when needed (a short-circuit conditional); everything stays C-generable.
+    ``strict``: NaN where even the fallback leaves a residual above INIT_TOL (Newton's method
+    can stop on a zero step at a singularity, sqrt(x) at x = 0, and return a wrong answer)."""
     quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
-    z1 = quick(ca.DM(guess), par)
+    z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
+    z1 = quick(z0, par)
     ok = ca.mmax(ca.fabs(resid(z1, par))) <= LOOP_TOL
     step = _damped_step(name, resid)
-    z = ca.MX(ca.DM(guess))
+    z = z0
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
-    polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, NEWTON_OPTS)
-    return ca.if_else(ok, z1, polish(z, par), True)
+    polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid,
+                           {**NEWTON_OPTS, "error_on_fail": False} if strict else NEWTON_OPTS)
+    z2 = polish(z, par)
+    if strict:
+        z2 = ca.if_else(ca.mmax(ca.fabs(resid(z2, par))) <= INIT_TOL, z2, np.nan * ca.DM.ones(z2.shape), True)
+    return ca.if_else(ok, z1, z2, True)
 
 
 def _damped_step(name: str, resid: ca.Function) -> ca.Function:
@@ -536,8 +545,7 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     Q = ca.MX.sym("q", U.numel() + P.numel() + 1 + nx)
     cut = np.cumsum([0, U.numel(), P.numel(), 1, nx]).tolist()
     G = ca.Function("G", [X, Q], [R(X, *ca.vertsplit(Q, cut))])
-    rf = ca.rootfinder("init_newton", "fast_newton", G, NEWTON_OPTS)
-    x0 = rf(S, ca.vertcat(U, P, T, S))
+    x0 = _loop_solve("init", G, S, ca.vertcat(U, P, T, S), strict=True)
     return start, ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
 
 
