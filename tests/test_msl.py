@@ -126,3 +126,16 @@ def test_discovery_on_a_user_model_of_msl_parts(msl_path, tmp_path, capsys):
     assert 'annotation(uses(Modelica(version="4.0.0")))' in extended
     assert main(["export", str(tmp_path / "out"), "-o", str(tmp_path / "lib"), "--name", "Parts"]) == 0
     assert 'uses(Modelica(version="4.0.0"))' in (tmp_path / "lib" / "Parts" / "package.mo").read_text()
+
+
+def test_an_initial_system_holding_loop_solves_compiles_and_simulates(msl_path):
+    """The op amp's initial system holds the solves of nested algebraic loops: the fallback of
+    its Newton solve takes its Jacobian in MX (in SX the compile failed: no eval_sx for QR)."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    model = mcl.compile_model([], "Modelica.Electrical.Analog.Examples.AmplifierWithOpAmpDetailed")
+    t = np.linspace(0.0, 1e-3, 101)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []))
+    assert res.ok, res.reason
+    assert np.all(np.isfinite(res.states))

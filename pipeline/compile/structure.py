@@ -230,8 +230,11 @@ def _damped_step(name: str, resid: ca.Function) -> ca.Function:
     """One step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
     decreases |r|^2 enough (Armijo), the shortest when none does."""
     z, par = ca.MX.sym("z", resid.size1_in(0)), ca.MX.sym("par", resid.size1_in(1))
-    zs, ps = ca.SX.sym("z", z.numel()), ca.SX.sym("p", par.numel())
-    jac = ca.Function(f"{name}_jac", [zs, ps], [ca.jacobian(resid(zs, ps), zs)])
+    try:
+        zs, ps = ca.SX.sym("z", z.numel()), ca.SX.sym("p", par.numel())
+        jac = ca.Function(f"{name}_jac", [zs, ps], [ca.jacobian(resid(zs, ps), zs)])
+    except RuntimeError:       # resid holds solves of inner loops (an initial system): in MX
+        jac = ca.Function(f"{name}_jac", [z, par], [ca.jacobian(resid(z, par), z)])
     r = resid(z, par)
     dz = -ca.solve(jac(z, par), r, "qr")
     f0 = ca.dot(r, r)
