@@ -5,7 +5,8 @@ written and with its parameters fitted by least squares (mcl simulations with se
 a linear output-error model and of a polynomial NARX run free on the test input (their orders
 chosen on the last 20 % of the training split, the test splits unseen), and the columns
 "mcl law alone" and "mcl law + joint refit" that :func:`mcl_discovery` fills once discovery can
-run on a case (n/a until then). Each method's CPU seconds are printed; the results go to
+run on a case (the case's model from parts, trained on the training split alone; n/a for a
+case without one). Each method's CPU seconds are printed; the results go to
 benchmarks/results/real_data.json.
 
 The data are the benchmarks' own files split by examples/real/prepare.py; they are looked up in
@@ -49,11 +50,17 @@ class Case:
     direct: bool = False             # the input acts within a sample (input lags from 0, not 1)
     good: str = ""                   # the literature's good-model range on the test split
     initial: callable = None         # initial-state parameters from a split's first measured output
+    parts: tuple | None = None       # (source, model, initial) of the model from parts discovery runs on
 
 
 def _tanks_initial(y0: float) -> dict:
     h2 = y0 / 40.0                   # ks = 40 V/m; tank 1 at the level that holds tank 2 steady
     return {"h1_0": h2, "h2_0": h2}
+
+
+def _tank_parts_initial(y0: float, params: dict) -> dict:
+    h2 = y0 / params.get("sensor.ks", 40.0)
+    return {"tank1.h_start": h2, "tank2.h_start": h2}
 
 
 def _silverbox_initial(y0: float) -> dict:
@@ -70,7 +77,9 @@ CASES = {
         free={"kp": 4.5e-6, "R1": 2e4, "R2": 2e4, "h_op": 0.1}, states={"h1_0": 0.13, "h2_0": 0.13},
         state_scale={"h1_0": 0.05, "h2_0": 0.05}, window=5, tests=("test.csv",), unit=(1.0, "V"),
         good="0.34-0.45 V, linear 0.76 V (examples/real/cascaded_tanks/README.md)",
-        initial=_tanks_initial),
+        initial=_tanks_initial,
+        parts=(EXAMPLES / "cascaded_tanks" / "CascadedTanksParts.mo", "CascadedTanksParts.Cascade",
+               _tank_parts_initial)),
     "silverbox": Case(
         "silverbox", EXAMPLES / "silverbox" / "Silverbox.mo", "Silverbox.Oscillator",
         free={"kf": 150.0, "S.c": 2e5, "D.d": 40.0}, states={"s0": 0.0, "v0": 0.0},
@@ -277,11 +286,36 @@ def select_orders(u, y, fit_and_run, grid, window: int):
 
 # -- the discovery columns (filled by the discovery agent) -----------------------------------------
 
-def mcl_discovery(case: Case) -> dict | None:
-    """mcl's discovery on ``case``: {"law": {test: rms}, "joint": {test: rms}, "cpu_s": ...} for the
-    learned law alone and for the law refitted with the nominal parameters; None while discovery
-    does not yet run on real benchmarks (the columns print n/a)."""
-    return None
+def mcl_discovery(case: Case, root: Path) -> dict | None:
+    """mcl's discovery on ``case`` (its model from parts; trained on the training split only, the
+    test splits unseen): {"law": {test: rms}, "joint": {test: rms}, "cpu_s", "cause"} for the
+    learned law alone and for the law refitted with the nominal parameters (``free: auto``);
+    None for a case without a model from parts (the columns print n/a)."""
+    if case.parts is None:
+        return None
+    import tempfile
+
+    from mcl import Discovery, simulate
+
+    source, model, initial = case.parts
+    t, u, y = load(case, root, "train.csv")
+    cut = slice(0, case.train_samples)
+    c0 = time.process_time()
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Discovery(model, sources=[source], free="auto", libraries=msl_path(), output=Path(tmp) / "run",
+                      verbose=False).fit({"time": t[cut], "u": u[cut], "y": y[cut]})
+        extended = d.extended_model()
+        cal = d.report_.get("calibration") or {}
+        joint = {**{k: v["after"] for k, v in (cal.get("values") or {}).items()}, **(cal.get("laws") or {})}
+        out = {"law": {}, "joint": {}, "cause": d.cause_["effect"] if d.cause_ else None}
+        for key, params in (("law", {}), ("joint", joint)):
+            for name in case.tests:
+                tt, uu, yy = load(case, root, name)
+                p = {**params, **initial(yy[0], params)}
+                res = simulate(extended, {"time": tt, "u": uu}, params=p, t_out=tt)
+                out[key][name] = rms((res.outputs[:, 0] - yy)[case.window:]) if res.ok else float("inf")
+    out["cpu_s"] = time.process_time() - c0
+    return out
 
 
 # -- the table ------------------------------------------------------------------------------------
@@ -344,7 +378,9 @@ def run_case(case: Case, root: Path) -> dict:
     record(f"poly NARX({na},{nb}) deg {degree}", errors, time.process_time() - c0, terms=len(theta),
            validation_rms=val)
 
-    found = mcl_discovery(case)
+    found = mcl_discovery(case, root)
+    if found and found.get("cause"):
+        out["mcl_cause"] = found["cause"]
     for key, label in (("law", "mcl law alone"), ("joint", "mcl law + joint refit")):
         record(label, found[key] if found else {name: None for name in tests},
                found.get("cpu_s", 0.0) if found else 0.0)

@@ -145,7 +145,8 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
     out = {"freed": determined, "not_determined": undetermined,
            "values": {n: {"before": params[n], "after": new[n], "std_error": float(se[k])} for k, n in enumerate(names)
-                      if n in determined}}
+                      if n in determined},
+           "laws": {n: new[n] for n in laws}}      # the laws' parameters refitted with them
     sim = simulate(model, train, new)
     out["train_rms"] = rms(residual(train, model, sim, outputs)) if sim.ok else None
     if validate is not None:
