@@ -1061,6 +1061,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             return flags[1]
         if kind == "initial":
             return flags[0]
+        if kind == "condition":          # an if-equation's branch condition (initial(), a relation)
+            return events.value(i)
         if kind.startswith("pre_"):
             if i in pre_slot:
                 return pre_slot[i]
@@ -1076,6 +1078,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         tr.refuse(f"variable {variables[i]['name']} ({kind})")
 
     tr.coord = coord
+    events = _Events(st, tr, conditions, memory, d, d_pre, flags, located, model)
     tr.table_records = _table_records(ir, variables, objects, attrs, tr)
     eqs = [_residual(op, tr, model) for op in st["continuous_equation_operations"]]
     eqs += [der[i] for i in sorted(init_params)]       # d/dt of an initialisation parameter is 0
@@ -1086,7 +1089,6 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     init += [ca.vec(slot[i]) - ca.vec(tr.sx(attrs[i]["start"])) for i in index["z"]
              if attrs[i].get("fixed") in ([True], True) and attrs[i]["start"] is not None]
     init_residual = ca.vertcat(*init) if init else ca.SX(0, 1)
-    events = _Events(st, tr, conditions, memory, d, d_pre, flags, located, model)
     d_update = events.discrete_update(index["d"], slot, pre_slot, size, variables)
     x_reinit = events.reinit(x, index["x"], slot, variables)
     # an assert's condition is checked, not located: its relations are not state events (as in
