@@ -35,6 +35,9 @@ _BINARY = {
     "not_equal": ca.ne, "and": ca.logic_and, "or": ca.logic_or,
 }
 _RELATIONS = ("greater", "greater_equal", "less", "less_equal")
+#: coordinates that index the model's variables (the roles rumoca gives them)
+_VARIABLE_KINDS = {"state", "algebraic", "output", "input", "parameter", "constant", "discrete_value",
+                   "discrete_real", "variable"}
 _FUNCTIONS = {
     "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin, "acos": ca.acos, "atan": ca.atan,
     "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh, "tanh": ca.tanh, "exp": ca.exp, "log": ca.log,
@@ -1063,6 +1066,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             return flags[0]
         if kind == "condition":          # an if-equation's branch condition (initial(), a relation)
             return events.value(i)
+        if kind.removeprefix("pre_") not in _VARIABLE_KINDS:    # another index space: never a variable
+            tr.refuse(f"a reference of kind '{kind}'")
         if kind.startswith("pre_"):
             if i in pre_slot:
                 return pre_slot[i]
