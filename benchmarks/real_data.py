@@ -284,13 +284,14 @@ def select_orders(u, y, fit_and_run, grid, window: int):
     return best, err
 
 
-# -- the discovery columns (filled by the discovery agent) -----------------------------------------
+# -- the discovery columns -------------------------------------------------------------------------
 
-def mcl_discovery(case: Case, root: Path) -> dict | None:
+def mcl_discovery(case: Case, train, tests: dict) -> dict | None:
     """mcl's discovery on ``case`` (its model from parts; trained on the training split only, the
     test splits unseen): {"law": {test: rms}, "joint": {test: rms}, "cpu_s", "cause"} for the
     learned law alone and for the law refitted with the nominal parameters (``free: auto``);
-    None for a case without a model from parts (the columns print n/a)."""
+    None for a case without a model from parts (the columns print n/a). ``train`` and each of
+    ``tests`` are (time, u, y) of a split."""
     if case.parts is None:
         return None
     import tempfile
@@ -298,7 +299,7 @@ def mcl_discovery(case: Case, root: Path) -> dict | None:
     from mcl import Discovery, simulate
 
     source, model, initial = case.parts
-    t, u, y = load(case, root, "train.csv")
+    t, u, y = train
     cut = slice(0, case.train_samples)
     c0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
@@ -309,8 +310,7 @@ def mcl_discovery(case: Case, root: Path) -> dict | None:
         joint = {**{k: v["after"] for k, v in (cal.get("values") or {}).items()}, **(cal.get("laws") or {})}
         out = {"law": {}, "joint": {}, "cause": d.cause_["effect"] if d.cause_ else None}
         for key, params in (("law", {}), ("joint", joint)):
-            for name in case.tests:
-                tt, uu, yy = load(case, root, name)
+            for name, (tt, uu, yy) in tests.items():
                 p = {**params, **initial(yy[0], params)}
                 res = simulate(extended, {"time": tt, "u": uu}, params=p, t_out=tt)
                 out[key][name] = rms((res.outputs[:, 0] - yy)[case.window:]) if res.ok else float("inf")
@@ -378,7 +378,7 @@ def run_case(case: Case, root: Path) -> dict:
     record(f"poly NARX({na},{nb}) deg {degree}", errors, time.process_time() - c0, terms=len(theta),
            validation_rms=val)
 
-    found = mcl_discovery(case, root)
+    found = mcl_discovery(case, (t, u, y), tests)
     if found and found.get("cause"):
         out["mcl_cause"] = found["cause"]
     for key, label in (("law", "mcl law alone"), ("joint", "mcl law + joint refit")):

@@ -1,10 +1,11 @@
 """Compile once: compiled models kept on disk, keyed by everything that decides the result.
 
 The key is the model name, the content of the user's documents, a fingerprint of every library
-file the front end may read (path, size, modification time), the options, the versions of
-mcl, rumoca and CasADi and the compiler's own source. A hit loads the saved CasADi functions instead of parsing, flattening
-and analysing again (an MSL model: seconds -> a fraction of a second). Only compiles that took
-long enough to be worth it are kept, and the oldest entries are dropped beyond ``MAX_ENTRIES``.
+file the front end may read (path, size, modification time), the options, the versions of mcl,
+rumoca and CasADi and the compiler's own source. A hit loads the saved CasADi functions instead
+of parsing, flattening and analysing again (an MSL model: seconds -> a fraction of a second).
+Only compiles that took long enough to be worth it are kept, and the oldest entries are dropped
+beyond ``MAX_ENTRIES``.
 ``MCL_NO_COMPILE_CACHE=1`` turns it off; ``MCL_CACHE_DIR`` moves it.
 
 Built FMUs are kept beside the compiled models (``fmu/``), keyed by the compile key of the model

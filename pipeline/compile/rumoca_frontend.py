@@ -826,11 +826,10 @@ class _Translator:
         if body.get("derivative") is not None:
             self.refuse(f"function {f['name']} (its derivative)")
         bound = {"params": dict(enumerate(args)), "values": {}, "binders": {}}
-        if ext and ext.get("language") == "builtin":
+        if ext and (ext.get("language") == "builtin" or ext.get("symbol", "").startswith("ModelicaStandardTables_")):
             actual = [self.sx(a["input"], bound) for a in ext.get("arguments", []) if "input" in a]
-            return self.call_builtin(ext.get("symbol", f["name"]), actual)
-        if ext and ext.get("symbol", "").startswith("ModelicaStandardTables_"):
-            actual = [self.sx(a["input"], bound) for a in ext.get("arguments", []) if "input" in a]
+            if ext.get("language") == "builtin":
+                return self.call_builtin(ext.get("symbol", f["name"]), actual)
             return self.call_table(ext["symbol"], actual)
         if ext:
             self.refuse(f"external function {f['name']} ({ext.get('language', '?')} code)")
@@ -994,8 +993,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     # an external object (a table's id: rumoca evaluated its constructor) and a String (a
     # table's name) are constants, not parameters to fit
     objects = _external_objects(ir)
-    role = ["constant" if v["name"] in objects or st["value_types"][v["value_type"]].get("scalar") == "string"
-            else r for v, r in zip(variables, role)]
+    strings = {i for i, v in enumerate(variables) if st["value_types"][v["value_type"]].get("scalar") == "string"}
+    role = ["constant" if v["name"] in objects or i in strings else r for i, (v, r) in enumerate(zip(variables, role))]
     # parameters computed during initialisation (fixed = false, no binding) become constant states
     init_params = {i for i, v in enumerate(variables) if role[i] == "parameter" and attrs[i]["binding"] is None
                    and attrs[i].get("fixed") in ([False], False)}
@@ -1141,7 +1140,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     for j, n in enumerate(names["p"]):
         exprs[n] = resolved[j]
     for i in index["c"]:
-        if st["value_types"][variables[i]["value_type"]].get("scalar") == "string":
+        if i in strings:
             continue        # no number to name (a table's name)
         for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(ca.vec(coord("constant", i)))):
             exprs[n] = e
@@ -1217,7 +1216,7 @@ def _table_records(ir: dict, variables, objects: set[str], attrs, tr) -> dict:
             owner[_int(ident)] = name.rpartition(".")[0]
 
     def parameter(prefix, name, default):
-        i = index.get(f"{prefix}.{name}" if prefix else name)
+        i = index.get(f"{prefix}.{name}")
         return tr.coord("variable", i) if i is not None else default
 
     records = {}
