@@ -16,6 +16,8 @@ log = logging.getLogger("mcl")
 log.addHandler(logging.NullHandler())
 
 _enabled = True
+#: seconds between the progress lines written where stderr is not a terminal (a log file)
+LOG_EVERY = 30.0
 
 
 def enabled() -> bool:
@@ -73,10 +75,11 @@ class Progress:
         self.label, self.total, self.workers = label, total, max(1, int(workers))
         self.done = self.failed = 0
         self.start = time.perf_counter()
-        tty = getattr(sys.stderr, "isatty", lambda: False)()
+        self.tty = getattr(sys.stderr, "isatty", lambda: False)()
+        self.on = enabled and _enabled and total > 0
+        self.said = self.start          # a log file gets a line now and then instead of a bar
         self.bar = tqdm(total=total, desc=label, file=sys.stderr, leave=False, dynamic_ncols=True,
-                        disable=not (enabled and _enabled and total > 0),
-                        mininterval=0.1 if tty else 30.0,   # a log file gets a line now and then
+                        disable=not (self.on and self.tty), mininterval=0.1,
                         bar_format="{desc}: {n_fmt}/{total_fmt} |{bar}| {elapsed}{postfix}")
 
     def eta(self) -> float:
@@ -94,12 +97,16 @@ class Progress:
         self.bar.set_postfix_str(f"{self.failed} failed, ~{left:.0f}s left" if self.failed
                                  else f"~{left:.0f}s left", refresh=False)
         self.bar.update(1)
+        now = time.perf_counter()
+        if self.on and not self.tty and now - self.said >= LOG_EVERY and self.done < self.total:
+            self.said = now
+            log.info("%s: %d/%d, ~%.0f s left", self.label, self.done, self.total, left)
         if self.done == self.total:
             self.close()
 
     def close(self) -> None:
-        if not self.bar.disable and self.done:
+        if self.on and self.done:
             log.info("%s: %d/%d done (%d failed) in %.0f s", self.label, self.done, self.total,
                      self.failed, time.perf_counter() - self.start)
         self.bar.close()
-        self.bar.disable = True
+        self.bar.disable, self.on = True, False

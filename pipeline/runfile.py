@@ -13,6 +13,8 @@
 Optional sections: ``templates`` (list of template specs), ``fitting`` (``max_simulations`` per
 fit, ``screen``: how many candidates, ranked by a linearised first step, are fitted fully;
 ``early_stop: false`` fits them all even where screening or a fit shows they cannot win;
+``max_samples``: the search and its fits see the first this many training samples, 8192 by default,
+while the misfit, the gain and the report use all of them;
 ``algorithm``: levenberg-marquardt, the default, or paper 000's algorithm1 or algorithm3),
 ``refinement`` (``criterion``: bic, aic, aicc or a plugin's; ``method``: simulation, the default, or
 full-discretisation for paper 004's states-and-parameters least squares), ``executor``
@@ -37,6 +39,9 @@ from .errors import did_you_mean
 
 #: no ``templates`` in a run file: discovery picks law families by each component's role
 DEFAULT_TEMPLATES = None
+#: a long record is searched on its first this many samples (each fit simulates it tens of
+#: times; the laws of a system show in a few thousand samples, and the gain is measured on all)
+MAX_SAMPLES = 8192
 CRITERIA = ("bic", "aic", "aicc")   # the built-in criteria (plugins may add more)
 FITTING_ALGORITHMS = ("levenberg-marquardt", "algorithm1", "algorithm3")   # mcl.fit.FITTERS
 METHODS = ("simulation", "full-discretisation")   # the built-in fitters (plugins may add more)
@@ -68,7 +73,8 @@ def schema(option_schemas: dict, kinds: dict) -> dict:
                 "max_simulations": {"type": "integer", "minimum": 5},
                 "algorithm": {"enum": list(FITTING_ALGORITHMS)},
                 "screen": {"type": "integer", "minimum": 1},
-                "early_stop": {"type": "boolean"}}},
+                "early_stop": {"type": "boolean"},
+                "max_samples": {"type": "integer", "minimum": 100}}},
             "refinement": {"type": "object", "additionalProperties": False, "properties": {
                 "criterion": {"enum": kinds.get("criterion", list(CRITERIA))}, "method": {"enum": kinds.get("fitter", list(METHODS))}}},
             "executor": _kind_schema("kind", kinds["executor"], option_schemas.get("executor", {})),
@@ -107,6 +113,7 @@ class RunSpec:
     max_simulations: int = 60
     screen: int = 3
     early_stop: bool = True     # drop candidates screening says cannot compete; stop hopeless fits
+    max_samples: int = MAX_SAMPLES   # the search and the fits see at most this many training samples
     algorithm: str = "levenberg-marquardt"   # the optimiser of every fit (mcl.fit.FITTERS)
     noise: object = None        # the user's noise level(s): a number or {output: level}; None: estimated
     free: object = None         # nominal parameters refitted with the learned laws: names, "auto" or None
@@ -323,6 +330,7 @@ def parse_runfile(path, registry=None) -> tuple[RunSpec, dict]:
                    output=output, templates=raw.get("templates", DEFAULT_TEMPLATES),
                    max_simulations=fitting.get("max_simulations", 60), screen=fitting.get("screen", 3),
                    early_stop=fitting.get("early_stop", True),
+                   max_samples=fitting.get("max_samples", MAX_SAMPLES),
                    algorithm=fitting.get("algorithm", "levenberg-marquardt"),
                    criterion=refinement.get("criterion", "bic"),
                    refinement_method=refinement.get("method", "simulation"),
@@ -475,7 +483,7 @@ def _check_component(problems, key: str, model, name: str, model_name: str) -> N
 #: run-file keys as the arguments of :class:`mcl.Discovery` name them
 ARGUMENTS = {"model.name": "model", "model.sources": "sources", "model.libraries": "libraries",
              "fitting.max_simulations": "max_simulations", "fitting.screen": "screen",
-             "fitting.early_stop": "early_stop", "fitting.algorithm": "algorithm", "refinement.criterion": "criterion",
+             "fitting.early_stop": "early_stop", "fitting.max_samples": "max_samples", "fitting.algorithm": "algorithm", "refinement.criterion": "criterion",
              "refinement.method": "refinement", "data.train": "train", "data.validate": "validate",
              "data.noise": "noise"}
 
@@ -497,6 +505,7 @@ def check_arguments(args: dict, registry=None) -> None:
            "output": str(args["output"]) if args.get("output") is not None else "<temporary>",
            "fitting": {"max_simulations": args.get("max_simulations", 60), "screen": args.get("screen", 3),
                        "early_stop": args.get("early_stop", True),
+                       "max_samples": args.get("max_samples", MAX_SAMPLES),
                        "algorithm": args.get("algorithm", "levenberg-marquardt")},
            "refinement": {"criterion": args.get("criterion", "bic"), "method": args.get("refinement", "simulation")},
            "executor": {"kind": executor} if isinstance(executor, str) else executor}

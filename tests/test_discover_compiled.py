@@ -60,6 +60,21 @@ def test_a_model_with_imports_and_initial_equations_keeps_them(tmp_path):
     assert report["extended"]["recompiled_difference"] < 1e-3
 
 
+def test_a_long_record_is_searched_on_its_head_and_judged_on_all(tmp_path):
+    """``fitting.max_samples``: the search and its fits see the first 300 of 601 samples; the
+    law is still found, and the gain is measured on the whole record."""
+    n = 4
+    name = ladder(tmp_path, n, cubic={2: 0.8})
+    report = run(tmp_path, f"{name}.mo", name, "fitting: {max_samples: 300}\n")
+    R, _ = values(n)
+    assert report["cause"]["component"] == "R2"
+    assert curve_error(report["cause"], lambda v: v / R + 0.8 * v**3) < 0.05
+    assert report["settings"]["samples searched"] == 300
+    g = report["gain"]
+    assert g["train_rms_after"] < 0.3 * g["train_rms_before"]
+    assert g["validation_rms_after"] < 0.3 * g["validation_rms_before"]
+
+
 def test_two_faults_are_both_named(tmp_path):
     n = 4
     name = ladder(tmp_path, n, cubic={2: 0.8}, leak={4: 0.3})

@@ -15,7 +15,7 @@ from pathlib import Path
 from ..data import as_timeseries
 from ..errors import ConfigError, NotFittedError
 from ..progress import console
-from ..runfile import RunSpec
+from ..runfile import MAX_SAMPLES, RunSpec
 from .families import family_of
 from .law import LearnedLaw
 
@@ -28,7 +28,7 @@ class Discovery:
     Parameters mirror the run file: ``model`` (class name), ``sources`` (.mo files or package
     directories; may be empty for a class on the library path), ``unknown`` ("auto" or a
     component name), ``templates``, ``libraries``, ``max_simulations``, ``screen``, ``early_stop``,
-    ``criterion`` ("bic"/"aic"), ``refinement`` ("simulation"/"full-discretisation"),
+    ``max_samples``, ``criterion`` ("bic"/"aic"), ``refinement`` ("simulation"/"full-discretisation"),
     ``executor`` (a kind or ``{kind: ..., options}``), ``second`` (another configuration),
     ``output`` (run directory; a temporary one by default), ``force``, ``verbose``.
 
@@ -40,7 +40,9 @@ class Discovery:
                  max_simulations: int = 60, screen: int = 3, criterion: str = "bic",
                  refinement: str = "simulation", executor="local", second: dict | None = None,
                  report: dict | None = None, output=None, force: bool = False, verbose: bool = True,
-                 early_stop: bool = True, algorithm: str = "levenberg-marquardt", noise=None, free=None):
+                 early_stop: bool = True, algorithm: str = "levenberg-marquardt", noise=None, free=None,
+                 max_samples: int = MAX_SAMPLES):
+        self.max_samples = max_samples
         self.model, self.sources, self.unknown = model, sources, unknown
         self.early_stop, self.algorithm, self.noise, self.free = early_stop, algorithm, noise, free
         self.templates, self.libraries = templates, libraries
@@ -54,7 +56,7 @@ class Discovery:
         self = cls(spec.model_name, spec.sources, spec.unknown, spec.templates, spec.libraries,
                    spec.max_simulations, spec.screen, spec.criterion, spec.refinement_method,
                    spec.executor, spec.second, spec.report, spec.output, force, verbose, spec.early_stop,
-                   spec.algorithm, spec.noise, spec.free)
+                   spec.algorithm, spec.noise, spec.free, spec.max_samples)
         self._spec = spec
         return self
 
@@ -77,7 +79,7 @@ class Discovery:
                        templates=([self.templates] if isinstance(self.templates, (str, dict)) else
                                   list(self.templates)) if self.templates else None,
                        max_simulations=self.max_simulations, screen=self.screen, early_stop=self.early_stop,
-                       criterion=self.criterion,
+                       max_samples=self.max_samples, criterion=self.criterion,
                        refinement_method=self.refinement, executor=executor, second=self.second,
                        report=dict(self.report_options or {}), libraries=as_paths(self.libraries),
                        algorithm=self.algorithm, noise=self.noise, free=self.free)
@@ -126,7 +128,7 @@ class Discovery:
                          "criterion": self.criterion, "refinement": self.refinement,
                          "executor": self.executor, "second": self.second, "report": self.report_options,
                          "output": self.output, "early_stop": self.early_stop, "algorithm": self.algorithm,
-                         "noise": self.noise, "free": self.free})
+                         "noise": self.noise, "free": self.free, "max_samples": self.max_samples})
 
     def __getattr__(self, name: str):
         # called only for attributes never set: the results (ending in _) before fit

@@ -128,10 +128,13 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
 
         raise ConfigError(f"free: {unknown[0]} is not a free parameter of the model"
                           f"{did_you_mean(unknown[0], nominal)}")
-    candidates = [n for n in asked if params[n] != 0.0 and n not in laws]
+    candidates = [n for n in asked if n not in laws]
     r, J = jacobian(model, train, params, laws + candidates)
     if r is None:
         return {"error": "the extended model does not simulate the training data"}
+    if free == "auto":     # flags and parameters no equation reads any more (a law replaced it): not candidates
+        keep = [k for k in range(len(candidates)) if np.any(J[:, len(laws) + k] != 0.0)]
+        candidates, J = [candidates[k] for k in keep], J[:, list(range(len(laws))) + [len(laws) + k for k in keep]]
     determined, undetermined = _determined(r, J, laws, candidates, params, strict=free == "auto")
     log.info("      calibration: %s refitted with the laws%s", ", ".join(determined) or "nothing",
              f"; not determined by the data: {', '.join(undetermined)}" if undetermined else "")
@@ -158,22 +161,41 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
 
 def _determined(r, J, laws, candidates, params, strict: bool) -> tuple[list[str], list[str]]:
     """Which of ``candidates`` the data determine together with the laws: added in order of how
-    much the outputs depend on them, each kept while every parameter's relative standard error
-    stays below :data:`DETERMINED` (with ``strict``; asked-for ones only need a finite one)."""
+    much the outputs depend on them, each kept while its relative standard error stays below
+    :data:`DETERMINED` (with ``strict``; asked-for ones only need a finite one) and its column is
+    not a combination of the others'. A parameter at 0 (an offset, a rest length, an initial
+    state) is measured against the value one Gauss-Newton step gives it: determined when the
+    data move it clearly away from 0."""
     n_law = len(laws)
-    order = sorted(range(len(candidates)), key=lambda k: -np.linalg.norm(J[:, n_law + k]) * abs(params[candidates[k]]))
+    size = lambda k: abs(params[candidates[k]]) or 1.0
+    order = sorted(range(len(candidates)), key=lambda k: -np.linalg.norm(J[:, n_law + k]) * size(k))
     chosen, left = [], []
     for k in order:
         cols = list(range(n_law)) + [n_law + j for j in chosen] + [n_law + k]
         cov = covariance(r, J[:, cols])
         se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        rel = se[-1] / max(abs(params[candidates[k]]), 1e-300)
-        # conditioning of the columns scaled to unit norm: a coefficient of 1e11 (a cubic in
-        # millimetres) is not ill-determined for its size alone
-        Jc = J[:, cols] / np.maximum(np.linalg.norm(J[:, cols], axis=0), 1e-300)
-        cond = np.linalg.cond(Jc) if Jc.size else np.inf
-        if np.isfinite(rel) and cond < 1e8 and (rel < DETERMINED or not strict):
+        value = abs(params[candidates[k]])
+        if value == 0.0:
+            value = abs(float(np.linalg.lstsq(J[:, cols], r, rcond=None)[0][-1]))
+        rel = se[-1] / max(value, 1e-300)
+        if np.isfinite(rel) and _independent(J[:, cols]) and (rel < DETERMINED or not strict):
             chosen.append(k)
         else:
             left.append(k)
     return [candidates[k] for k in chosen], [candidates[k] for k in left]
+
+
+def _independent(J: np.ndarray, tol: float = 1e-3) -> bool:
+    """Whether the last column is not (nearly) a combination of the others, all scaled to unit
+    norm (a coefficient of 1e11, a cubic in millimetres, is not ill-determined for its size
+    alone; laws that share a term among themselves do not make every nominal parameter so). The
+    tolerance is well above the sensitivities' integration error: two parameters that trade off
+    exactly (a gain in and a gain out) differ by that error alone."""
+    Jc = J / np.maximum(np.linalg.norm(J, axis=0), 1e-300)
+    last, others = Jc[:, -1], Jc[:, :-1]
+    if not np.linalg.norm(J[:, -1]) > 0:
+        return False
+    if others.shape[1] == 0:
+        return True
+    left = last - others @ np.linalg.lstsq(others, last, rcond=None)[0]
+    return float(np.linalg.norm(left)) > tol

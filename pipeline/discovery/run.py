@@ -52,7 +52,7 @@ def _outputs_of(model, result, outputs) -> np.ndarray | None:
 
 def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
     """The base model with each of ``bests``' laws put in at its fitted values (pruned terms
-    at 0), its components excluded from further search."""
+    at 0), its components (and those in parallel with them) excluded from further search."""
     from ..services import registry, simulate
 
     if not bests:
@@ -74,8 +74,11 @@ def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
     if not result.ok:
         raise ConfigError(f"the model with the learned laws of {', '.join(b['component'] for b in bests)} does not "
                           f"simulate the training data: {result.reason}")
-    return dataclasses.replace(base, model=model, result=result,
-                               excluded=base.excluded | {b["component"] for b in bests})
+    # a component in parallel with a cause is not searched again: its law would only repeat
+    # terms of the cause's (the data cannot separate them), and the two would be collinear
+    named = {b["component"] for b in bests}
+    named |= {p for b in bests if b.get("mode", "parallel") == "parallel" for p in base.structure.parallel(b["component"])}
+    return dataclasses.replace(base, model=model, result=result, excluded=base.excluded | named)
 
 
 class Causes:
@@ -230,8 +233,14 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         sv = simulate(nominal, validate)
         val0 = rms(residual(validate, nominal, sv, outputs)) if sv.ok else None
         val_y = [_outputs_of(nominal, sv, outputs), None]
-    causes = Causes(spec, train, validate, outputs, part, rundir, reg, noise)
-    found, base = causes.find(Base(nominal, sim0), val0) if significant else ([], Base(nominal, sim0))
+    searched, base0 = train, Base(nominal, sim0)
+    if significant and len(train.time) > spec.max_samples:
+        searched = head(train, spec.max_samples)
+        log.info("      the search fits the first %d of %d training samples (fitting.max_samples); the gain is "
+                 "measured on all", spec.max_samples, len(train.time))
+        base0 = Base(nominal, simulate(nominal, searched))
+    causes = Causes(spec, searched, validate, outputs, part, rundir, reg, noise)
+    found, base = causes.find(base0, val0) if significant else ([], base0)
     rounds = causes.rounds
     report["failed"] = [f for r in rounds for f in failures(r["screening"], r["candidates"])]
     for f in report["failed"]:
@@ -241,12 +250,13 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     for best in found:
         cause = describe(best, best["_base"], spec, train, best["_signals"])
         r = next(r for r in rounds if r["label"] == best["_round"])
-        weigh_unevaluated(cause["evidence"], best, r["candidates"], r["screening"], spec, int(np.isfinite(y_meas).sum()))
+        weigh_unevaluated(cause["evidence"], best, r["candidates"], r["screening"], spec,
+                          int(np.isfinite(searched.select(outputs).values).sum()))
         cause["after"], cause["round"] = best["_after"], best["_round"]
         val_base = best["_after"]["validation_rms"]
         report["causes"].append(cause)
     if found:
-        _how_sure(report, found, base, spec, train, validate, outputs)
+        _how_sure(report, found, base, spec, searched, validate, outputs, train)
     _summarise_rounds(report, rounds)
     extended_y = None
     if report["causes"]:
@@ -275,6 +285,11 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     return report
 
 
+def head(data: TimeSeries, n: int) -> TimeSeries:
+    """The first ``n`` samples of ``data`` (where the model's initial state holds)."""
+    return dataclasses.replace(data, time=data.time[:n], values=data.values[:n])
+
+
 def cpu_seconds() -> float:
     """CPU seconds of this process and its finished workers (user + system)."""
     import resource
@@ -283,9 +298,10 @@ def cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate, outputs) -> None:
+def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate, outputs, whole=None) -> None:
     """Each cause's parameters with standard errors and its curve's band (the laws together, in
-    the extended model); with ``free:``, the laws refitted with the nominal parameters."""
+    the extended model); with ``free:``, the laws refitted with the nominal parameters (both on
+    the samples searched, ``train``; the calibrated RMS on all of them, ``whole``)."""
     from .calibrate import calibrate, uncertainty
 
     params = base.model.parameters
@@ -300,8 +316,13 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
     if spec.free:
         names = [n for law in laws for n, on, held in zip(law["names"], law["active"], law["held"]) if on and not held]
         held = [n for law in laws for n in law["names"] if n not in names]
-        report["calibration"] = {k: v for k, v in calibrate(base.model, train, validate, params, names, spec.free,
-                                                            outputs, held).items() if k != "params"}
+        cal = calibrate(base.model, train, validate, params, names, spec.free, outputs, held)
+        if whole is not None and len(whole.time) > len(train.time) and cal.get("params"):
+            from ..services import simulate
+
+            sim = simulate(base.model, whole, cal["params"])
+            cal["train_rms"] = rms(residual(whole, base.model, sim, outputs)) if sim.ok else None
+        report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
 
 
 def overall(noise: dict) -> float:
@@ -346,7 +367,7 @@ def settings(spec) -> dict:
             "screened in for fitting": spec.screen, "early stop": spec.early_stop,
             "executor": spec.executor.get("kind", "local"),
             "noise": "estimated from the data" if spec.noise is None else spec.noise,
-            "calibration": spec.free or "-"}
+            "calibration": spec.free or "-", "samples searched": spec.max_samples}
 
 
 def software_versions() -> dict:
