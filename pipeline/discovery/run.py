@@ -119,6 +119,9 @@ class Causes:
         def verdict() -> list[dict]:
             bests, why, nominal_score = decide(cands, self.spec, resid, val_base, found.roles, base.structure, rss,
                                                found.signals)
+            if not cands and not found.screening and base.excluded:
+                why = ("no component is left to search (the causes found and the components in parallel "
+                       "with them are not searched again)")
             self.rounds[-1].update(nominal_score=nominal_score, no_cause=why)
             if not bests:
                 log.info("      round %d: %s", len(self.rounds), why)
