@@ -38,7 +38,8 @@ def quiet(on: bool = True):
     try:
         yield
     finally:
-        _enabled, log.level = before, level
+        _enabled = before
+        log.setLevel(level)     # not log.level = ...: setLevel also clears logging's cache of levels
 
 
 @contextlib.contextmanager

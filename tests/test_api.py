@@ -126,3 +126,16 @@ def test_library_code_prints_nothing(capsys, caplog):
     out = capsys.readouterr()
     assert out.out == "" and out.err == ""
     assert "1 terms, cost 1" in caplog.text and "batch: 2/2" not in caplog.text
+
+
+def test_messages_come_back_after_a_quiet_block(caplog):
+    """quiet() restores the logger's level so that logging sees it (its cache of levels too): a
+    run's messages after a quiet calibration are not lost."""
+    from mcl.progress import log, quiet
+
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        log.info("before")
+        with quiet():
+            log.info("hidden")
+        log.info("after")
+    assert "before" in caplog.text and "after" in caplog.text and "hidden" not in caplog.text

@@ -42,6 +42,8 @@ from .inject import NominalForm, compiled, mode_of, rate_variables, with_law
 from .search import search
 from .verdict import decide, failures, role_items, weigh_unevaluated
 
+#: with ``free:``, this many of the winning component's laws are compared after calibration
+CALIBRATED_LAWS = 3
 #: at most this many causes are searched for
 MAX_CAUSES = 3
 
@@ -151,10 +153,63 @@ class Causes:
         return {"train_rms": rms(resid), "validation_rms": val, "significance": left.reason,
                 "misfit_left": "significant" if left.significant else "at the noise level"}
 
+    def calibrated_choice(self, nominal: Base, found: list[dict], bests: list[dict], val0) -> list[dict]:
+        """With ``free:``, the winning component's best laws (up to :data:`CALIBRATED_LAWS`)
+        compared once each is refitted with the freed parameters: a law's shape must not win by
+        standing in for a miscalibrated offset or gain (a hardening spring written as exp(s/s1)
+        beside a force offset, where the calibrated cubic explains the data better)."""
+        from ..progress import quiet
+        from ..stats import criterion as criterion_of
+        from .calibrate import calibrate
+        from .verdict import effect_kind, helps
+
+        if not self.spec.free or len(bests) != 1 or bests[0].get("pair"):
+            return bests
+        best = bests[0]
+        laws = sorted((c for c in self.rounds[-1]["candidates"]
+                       if c.get("component") == best["component"] and c.get("score") is not None
+                       and c.get("family") != "reference" and "parts" not in c and not c.get("failed")
+                       and (val0 is None or helps(c.get("validation_rms"), val0))),
+                      key=lambda c: c["score"])[:CALIBRATED_LAWS]
+        if len(laws) < 2:
+            return bests
+        n_obs = int(np.isfinite(self.y).sum())
+        score = criterion_of(self.spec.criterion).score
+        scored = []
+        for law in laws:
+            trial = dict(law)
+            try:
+                ext = with_causes(nominal, found + [trial], self.train)
+            except ConfigError:
+                continue
+            names = [n for k, (n, on) in enumerate(zip(trial["_names"], trial["active"])) if on and k > 0]
+            held = [n for n in trial["_names"] if n not in names]
+            with quiet():
+                cal = calibrate(ext.model, self.train, None, ext.model.parameters, names, self.spec.free,
+                                self.outputs, held)
+            if cal.get("train_rms") is None:
+                continue
+            k = self.n_params + len(names) + len(cal["freed"])
+            scored.append((score(cal["train_rms"] ** 2 * n_obs, n_obs, k), law))
+        if not scored:
+            return bests
+        value, chosen = min(scored, key=lambda x: x[0])
+        log.info("      with the calibration (free: %s), %s's law: %s", self.spec.free if isinstance(self.spec.free, str)
+                 else ", ".join(self.spec.free), best["component"], chosen.get("equation") or spec_name(chosen["template"]))
+        same = lambda a, b: (a.get("family"), a.get("equation")) == (b.get("family"), b.get("equation"))
+        if same(chosen, best):
+            return bests
+        env = best["_signals"][best["component"]].env() if best["component"] in best["_signals"] else None
+        decided = {k: best[k] for k in ("equivalents", "role", "pair", "_signals", "_base", "_round") if k in best}
+        return [{**chosen, **decided, "delta": best["delta"] + best["score"] - chosen["score"],
+                 "effect_kind": effect_kind(chosen, env), "calibrated_score": value}]
+
     def find(self, nominal: Base, val0) -> tuple[list[dict], Base]:
         found, base, val = [], nominal, val0
         while len(found) < MAX_CAUSES:
             bests = self.round(base, val)
+            if bests:
+                bests = self.calibrated_choice(nominal, found, bests, val)
             extended = None
             while bests and extended is None:
                 try:
