@@ -303,7 +303,6 @@ def mcl_discovery(case: Case, train, tests: dict) -> dict | None:
     import tempfile
 
     from mcl import Discovery, simulate
-
     from mcl.discovery.run import cpu_seconds
 
     source, model, initial = case.parts

@@ -113,10 +113,11 @@ def _gradient(template, w, active, xs):
 
 
 def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dict, laws: list[str],
-              free, outputs, held=()) -> dict:
+              free, outputs, held=(), judged_on: TimeSeries | None = None) -> dict:
     """The laws' parameters ``laws`` refitted together with the nominal parameters ``free``
     (names, or "auto": those the data determine). Returns what was freed, what the data cannot
-    determine, the values with standard errors, and the training and validation RMS."""
+    determine, the values with standard errors, and the training and validation RMS (the
+    training RMS on ``judged_on`` when given: the whole record of which ``train`` is the head)."""
     from ..fit import FitProblem, LevenbergMarquardt
     from ..services import simulate
 
@@ -150,8 +151,9 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
            "values": {n: {"before": params[n], "after": new[n], "std_error": float(se[k])} for k, n in enumerate(names)
                       if n in determined},
            "laws": {n: new[n] for n in laws}}      # the laws' parameters refitted with them
-    sim = simulate(model, train, new)
-    out["train_rms"] = rms(residual(train, model, sim, outputs)) if sim.ok else None
+    whole = judged_on if judged_on is not None else train
+    sim = simulate(model, whole, new)
+    out["train_rms"] = rms(residual(whole, model, sim, outputs)) if sim.ok else None
     if validate is not None:
         sv = simulate(model, validate, new)
         out["validation_rms"] = rms(residual(validate, model, sv, outputs)) if sv.ok else None

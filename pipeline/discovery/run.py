@@ -182,7 +182,7 @@ class Causes:
                 ext = with_causes(nominal, found + [trial], self.train)
             except ConfigError:
                 continue
-            names = [n for k, (n, on) in enumerate(zip(trial["_names"], trial["active"])) if on and k > 0]
+            names = refitted(trial["_names"], trial["active"])
             held = [n for n in trial["_names"] if n not in names]
             with quiet():
                 cal = calibrate(ext.model, self.train, None, ext.model.parameters, names, self.spec.free,
@@ -308,8 +308,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     for best in found:
         cause = describe(best, best["_base"], spec, train, best["_signals"])
         r = next(r for r in rounds if r["label"] == best["_round"])
-        weigh_unevaluated(cause["evidence"], best, r["candidates"], r["screening"], spec,
-                          int(np.isfinite(searched.select(outputs).values).sum()))
+        weigh_unevaluated(cause["evidence"], best, r["candidates"], r["screening"], spec, int(np.isfinite(causes.y).sum()))
         cause["after"], cause["round"] = best["_after"], best["_round"]
         val_base = best["_after"]["validation_rms"]
         report["causes"].append(cause)
@@ -343,6 +342,11 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     return report
 
 
+def refitted(names: list[str], active) -> list[str]:
+    """A law's parameters that are fitted: the active ones but its first (the scale it is held at)."""
+    return [n for k, (n, on) in enumerate(zip(names, active)) if on and k > 0]
+
+
 def head(data: TimeSeries, n: int) -> TimeSeries:
     """The first ``n`` samples of ``data`` (where the model's initial state holds)."""
     return dataclasses.replace(data, time=data.time[:n], values=data.values[:n])
@@ -372,14 +376,9 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
         if law.get("band"):
             cause["law"]["band"] = law["band"]
     if spec.free:
-        names = [n for law in laws for n, on, held in zip(law["names"], law["active"], law["held"]) if on and not held]
+        names = [n for law in laws for n in refitted(law["names"], law["active"])]
         held = [n for law in laws for n in law["names"] if n not in names]
-        cal = calibrate(base.model, train, validate, params, names, spec.free, outputs, held)
-        if whole is not None and len(whole.time) > len(train.time) and cal.get("params"):
-            from ..services import simulate
-
-            sim = simulate(base.model, whole, cal["params"])
-            cal["train_rms"] = rms(residual(whole, base.model, sim, outputs)) if sim.ok else None
+        cal = calibrate(base.model, train, validate, params, names, spec.free, outputs, held, judged_on=whole)
         report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
 
 
