@@ -510,6 +510,11 @@ class _Translator:
         self._compiled: dict = {}          # (function, argument pattern) -> SX Function
         self._function_tags: dict = {}     # its name -> (number of outputs, [(level, message)])
         self._unassigned: dict = {}        # its name -> outputs it never assigns
+        # a loop index met outside its loop: rumoca keeps the for-equations of an if-equation's
+        # branches a parameter rules out; this symbol stands in and must vanish once the
+        # branch is dropped (a condition that turns constant), else the model is refused
+        self.unbound = ca.SX.sym("$loop_index_outside_its_loop")
+        self.unbound_span = None
 
     def operands(self, k: int) -> list[int]:
         body = self.nodes[k][next(iter(self.nodes[k]))]
@@ -584,7 +589,8 @@ class _Translator:
                 try:
                     return ca.SX(bound["binders"][(idx["domain"], idx["ordinal"])])
                 except (TypeError, KeyError):
-                    self.refuse("a for-loop index outside its loop")
+                    self.unbound_span = self.unbound_span or self.span
+                    return self.unbound
             if ck == "function_parameter":
                 ordinal = idx["ordinal"] if isinstance(idx, dict) else idx
                 if bound is None or ordinal not in bound["params"]:
@@ -1128,6 +1134,11 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     def starts(k):
         return bind(ca.vertcat(*[value_of(i, ("start",)) for i in index[k]])) if index[k] else ca.SX(0, 1)
 
+    residual, init_residual = bind(residual), bind(init_residual, 1.0)
+    if ca.depends_on(ca.vertcat(residual, init_residual), tr.unbound):
+        tr.span = tr.unbound_span
+        tr.refuse("a for-loop index outside its loop")
+
     x_fixed = np.array([attrs[i].get("fixed") in ([True], True) and i not in init_params
                         for i in index["x"] for _ in range(size[i])], bool)
     u_start = starts("u")
@@ -1162,7 +1173,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     offsets, pos = {}, 0
     for i in index["d"]:
         offsets[i], pos = pos, pos + size[i]
-    others = ca.vertcat(x, z, u, d, t)
+    others = ca.vertcat(x, z, d)      # time and the inputs are known at the start: those stay
     for j in range(d_start.numel()):     # a start value read from a variable: the iteration sets it
         if ca.depends_on(d_start[j], others):
             d_start[j] = 0
@@ -1185,7 +1196,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         asserts = ca.vertcat(asserts, *[a[0] for a in fn])
         assert_info = [*assert_info, *[(level, message) for _, level, message in fn]]
 
-    return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=bind(residual), init_residual=bind(init_residual, 1.0),
+    return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,

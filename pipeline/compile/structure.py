@@ -213,17 +213,25 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
     z1 = quick(z0, par)
-    ok = ca.mmax(ca.fabs(resid(z1, par))) <= LOOP_TOL
+    ok = _within(resid(z1, par), LOOP_TOL)
     step = _damped_step(name, resid)
-    z = z0
+    # the fallback starts a hair off the start values: a start at a singularity (a tank's
+    # T = H/(m*c) at m = 0) has no Newton step, the point next to it has
+    z = z0 + 1e-6 * (1 + ca.fabs(z0))
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid,
                            {**NEWTON_OPTS, "error_on_fail": False} if strict else NEWTON_OPTS)
     z2 = polish(z, par)
     if strict:
-        z2 = ca.if_else(ca.mmax(ca.fabs(resid(z2, par))) <= INIT_TOL, z2, np.nan * ca.DM.ones(z2.shape), True)
+        z2 = ca.if_else(_within(resid(z2, par), INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
     return ca.if_else(ok, z1, z2, True)
+
+
+def _within(r, tol: float):
+    """max |r| <= tol, false where r holds NaN (CasADi's mmax skips NaN: a Newton solve that
+    failed to NaN would pass for converged and its fallback never run)."""
+    return ca.logic_and(ca.mmax(ca.fabs(r)) <= tol, ca.sumsqr(r) <= r.numel() * tol ** 2)
 
 
 def _damped_step(name: str, resid: ca.Function) -> ca.Function:
@@ -281,7 +289,8 @@ def _build(dae: Dae, name: str = "model") -> Ode:
                          [semi["ode"], semi["alg"], invariants_in(invariants, dae, x_impl, z_orig)])
     xdot, g, inv = sx_fun(X, Z, UP, T)
     zero = ca.DM.zeros(1, 1)
-    absmax = (lambda v: ca.mmax(ca.fabs(v)) if v.numel() else zero)
+    # max |v|, NaN where v holds one (mmax alone skips NaN)
+    absmax = (lambda v: ca.mmax(ca.fabs(v)) + 0 * ca.sumsqr(v) if v.numel() else zero)
 
     # every named variable of the original model, as a function of the ODE's arguments
     probe_names = list(dae.exprs)
@@ -382,7 +391,10 @@ def _hybrid(dae: Dae, name: str) -> Ode:
               "assert": [f"$assert[{k}]" for k in range(dae.asserts.numel())]}
     for key, e in (("update", dae.d_update), ("reinit", dae.x_reinit), ("assert", dae.asserts)):
         exprs.update(zip(hidden[key], ca.vertsplit(e)))
-    d0 = np.array(ca.Function("d0", [dae.p], [dae.d_start])(dae.p_values)).ravel() if nd else np.zeros(0)
+    # the discrete variables' initial values may read time and inputs (an initial algorithm's
+    # count := integer((time - startTime)/period)): taken at the start of each run
+    d0_fun = ca.Function("d0", [dae.p, dae.u, dae.t], [dae.d_start]) if nd else None
+    d0 = np.array(d0_fun(dae.p_values, dae.u_start, 0.0)).ravel() if nd else np.zeros(0)
     aug = dataclasses.replace(
         dae, p=ca.vertcat(dae.p, extra), p_names=[*dae.p_names, *[f"${k}" for k in range(extra.numel())]],
         p_values=np.concatenate([dae.p_values, d0, d0, np.zeros(nx0 + nf)]), exprs=exprs,
@@ -429,7 +441,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         upd = ca.vertcat(*x_new, after[idx["update"]] if nd else ca.MX(0, 1))
         update = expanded(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
                                       ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
-    D0 = ca.Function("d0", [dae.p], [dae.d_start])(P) if nd else ca.MX(0, 1)
+    D0 = d0_fun(P, U, T) if nd else ca.MX(0, 1)
     PA0 = ca.vertcat(P, D0, D0, ca.MX.zeros(nx0 + nf))
     UPT = [U, P, T]
     init = ca.Function("init", UPT, [ca.vertcat(inner.init(U, PA0, T), D0)], ["u", "p", "t"], ["x0"])
@@ -439,7 +451,9 @@ def _hybrid(dae: Dae, name: str) -> Ode:
                                 ["u", "p", "t", "d"], ["x0"])
     S = ca.MX.sym("s", nx + nd)
     SD = S[nx:] if nd else ca.MX(0, 1)       # (an empty slice of MX is 1x0)
-    start = ca.Function("start", [P], [ca.vertcat(inner.start(PA0), D0)], ["p"], ["s"]) if inner.start else None
+    D0s = d0_fun(P, dae.u_start, 0.0) if nd else ca.MX(0, 1)     # guesses: at t = 0, the inputs' starts
+    PA0s = ca.vertcat(P, D0s, D0s, ca.MX.zeros(nx0 + nf))
+    start = ca.Function("start", [P], [ca.vertcat(inner.start(PA0s), D0s)], ["p"], ["s"]) if inner.start else None
     init_start = (ca.Function("init_start", [U, P, T, S], [ca.vertcat(inner.init_start(
         U, ca.vertcat(P, SD, SD, ca.MX.zeros(nx0 + nf)), T, S[:nx]), SD)],
         ["u", "p", "t", "s"], ["x0"]) if inner.init_start else None)
@@ -592,6 +606,12 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
     J = jac(x0)
     if np.all(np.isfinite(J)):
         return J
+    # which equations determine which states is the same next to the singularity (a tank's
+    # T = H/(m*c) at a mass started at 0): read it there
+    for scale in (1e-8, 1e-6, 1e-4):
+        Jn = jac(x0 + scale * (1.0 + np.abs(x0)))
+        if np.all(np.isfinite(Jn)):
+            return Jn
     bad = sorted({names[j] for j in np.flatnonzero(~np.all(np.isfinite(J), axis=0)) if j < len(names)})
     raise ModelicaError("the initial equations have no finite derivative at the start values of "
                         f"{', '.join(bad[:5]) or 'the states'}: start {'them' if len(bad) > 1 else 'it'} "

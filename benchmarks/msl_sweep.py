@@ -1,0 +1,186 @@
+"""A sweep over MSL 4.0.0 examples across the libraries: does each compile, simulate to its stop
+time in mcl's in-process engine, (with --fmu) give an FMU that FMPy validates, and agree with
+rumoca's own simulator where that runs (every common state within 0.2% of its range)?
+
+Each model runs in a fresh process with a time limit, so one hang or crash costs one row.
+Prints a table and the count; ``--json`` keeps the rows.
+
+    python benchmarks/msl_sweep.py [--msl DIR] [--only SUBSTRING] [--fmu] [--json PATH]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: 40 examples across Blocks, Analog, Machines, PowerConverters, Translational, Rotational,
+#: MultiBody, HeatTransfer, FluidHeatFlow, Fluid and FluxTubes (hybrid ones included)
+MODELS = """
+Blocks.Examples.PID_Controller
+Blocks.Examples.Filter
+Blocks.Examples.FilterWithDifferentiation
+Blocks.Examples.LogicalNetwork1
+Blocks.Examples.SlewRateLimiter
+Electrical.Analog.Examples.CauerLowPassAnalog
+Electrical.Analog.Examples.CauerLowPassSC
+Electrical.Analog.Examples.ChuaCircuit
+Electrical.Analog.Examples.AmplifierWithOpAmpDetailed
+Electrical.Analog.Examples.HeatingRectifier
+Electrical.Analog.Examples.OvervoltageProtection
+Electrical.Analog.Examples.Rectifier
+Electrical.Analog.Examples.SeriesResonance
+Electrical.Analog.Examples.DifferenceAmplifier
+Electrical.Analog.Examples.NandGate
+Electrical.Machines.Examples.DCMachines.DCPM_Start
+Electrical.Machines.Examples.DCMachines.DCSE_Start
+Electrical.PowerConverters.Examples.DCDC.ChopperStepDown.ChopperStepDown_R
+Electrical.PowerConverters.Examples.ACDC.RectifierCenterTap2Pulse.ThyristorCenterTap2Pulse_R
+Mechanics.Translational.Examples.Damper
+Mechanics.Translational.Examples.Oscillator
+Mechanics.Translational.Examples.Brake
+Mechanics.Translational.Examples.PreLoad
+Mechanics.Rotational.Examples.First
+Mechanics.Rotational.Examples.Friction
+Mechanics.Rotational.Examples.CoupledClutches
+Mechanics.Rotational.Examples.Backlash
+Mechanics.MultiBody.Examples.Elementary.Pendulum
+Mechanics.MultiBody.Examples.Elementary.DoublePendulum
+Mechanics.MultiBody.Examples.Elementary.FreeBody
+Thermal.HeatTransfer.Examples.TwoMasses
+Thermal.HeatTransfer.Examples.ControlledTemperature
+Thermal.HeatTransfer.Examples.Motor
+Thermal.FluidHeatFlow.Examples.SimpleCooling
+Thermal.FluidHeatFlow.Examples.TwoMass
+Thermal.FluidHeatFlow.Examples.PumpAndValve
+Thermal.FluidHeatFlow.Examples.OneMass
+Fluid.Examples.HeatingSystem
+Magnetic.FluxTubes.Examples.BasicExamples.SaturatedInductor
+Magnetic.FluxTubes.Examples.BasicExamples.QuadraticCoreAirgap
+""".split()
+
+ONE = textwrap.dedent("""
+    import json, os, sys, time
+    import numpy as np
+    msl, name, t_end, fmu = sys.argv[1], sys.argv[2], float(sys.argv[3]), sys.argv[4] == "1"
+    os.environ["MODELICAPATH"] = msl
+    row = {}
+    def done(**kw):
+        row.update(kw); print(json.dumps(row)); sys.exit(0)
+    import mcl
+    from mcl.data import TimeSeries
+    t0 = time.process_time()
+    try:
+        model = mcl.compile_model([], name)
+    except Exception as exc:
+        done(stage="compile", error=f"{type(exc).__name__}: {exc}"[:300])
+    row["compile_s"] = time.process_time() - t0
+    row["states"] = len(model.ode.x_names)
+    if fmu:
+        import tempfile
+        from mcl.compile.fmu.export import build_fmu, validate_fmu
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                build_fmu(model, os.path.join(tmp, "m.fmu"), validate=False)
+                problems = validate_fmu(os.path.join(tmp, "m.fmu"))
+            except Exception as exc:
+                problems = [f"{type(exc).__name__}: {exc}"]
+        if problems:
+            done(stage="fmu", error="; ".join(map(str, problems))[:300])
+    ref = None
+    try:
+        import rumoca
+        m = rumoca.Session([msl]).loads("model E_\\n  extends " + name + ";\\nend E_;\\n", model="E_",
+                                        filename="/sweep/E_.mo")
+        r = m.simulate((0.0, t_end), dt=t_end / 2000)
+        ref = (np.asarray(r.time, float), {n: np.asarray(r[n], float) for n in model.ode.x_names if n in r.names})
+    except Exception as exc:
+        row["rumoca"] = f"{type(exc).__name__}: {exc}"[:120]
+    # on rumoca's grid where it ran (it holds the event instants), else an even one
+    grid = np.unique(np.round(ref[0], 12)) if ref else np.linspace(0.0, t_end, 2001)
+    t1 = time.process_time()
+    res = mcl.simulate(model, TimeSeries(grid, np.zeros((len(grid), 0)), []), t_out=grid)
+    row["simulate_s"] = time.process_time() - t1
+    if not res.ok:
+        done(stage="simulate", error=str(res.reason)[:300])
+    if ref is None:
+        done(stage="ok", compared=0)
+    worst, compared = 0.0, 0
+    for k, n in enumerate(model.ode.x_names):
+        if n not in ref[1]:
+            continue
+        theirs = np.interp(grid, ref[0], ref[1][n])
+        ours = res.states[:, k]
+        span = max(np.ptp(ref[1][n]), 1e-12)
+        # an event instant may fall one sample either side: the nearest of the neighbours counts
+        err = np.abs(ours - theirs)
+        err[1:] = np.minimum(err[1:], np.abs(ours[1:] - theirs[:-1]))
+        err[:-1] = np.minimum(err[:-1], np.abs(ours[:-1] - theirs[1:]))
+        compared += 1
+        if err.max() / span > worst:
+            worst, row["worst_state"] = err.max() / span, n
+    done(stage="ok" if worst <= 2e-3 else "differs", compared=compared, worst=worst)
+""")
+
+
+def stop_time(msl: Path, name: str) -> float:
+    """The example's ``experiment(StopTime=...)``, from its source (1 s where none is given)."""
+    parts = name.split(".")
+    for k in range(len(parts), 0, -1):
+        base = msl.joinpath(*parts[:k])
+        for f in (base.with_suffix(".mo"), base / "package.mo"):
+            if f.is_file():
+                text = f.read_text(encoding="utf-8", errors="replace")
+                start = text.find(f"model {parts[-1]}") if f.stem != parts[-1] else 0
+                found = re.search(r"StopTime\s*=\s*([0-9.eE+-]+)", text[max(start, 0):])
+                return float(found.group(1)) if found else 1.0
+    return 1.0
+
+
+def run_one(msl: Path, name: str, fmu: bool, limit: float) -> dict:
+    t_end = stop_time(msl, name)
+    t = time.perf_counter()
+    try:
+        p = subprocess.run([sys.executable, "-c", ONE, str(msl), name, str(t_end), "1" if fmu else "0"],
+                           capture_output=True, text=True, timeout=limit)
+        lines = [ln for ln in p.stdout.splitlines() if ln.startswith("{")]
+        row = json.loads(lines[-1]) if lines else {
+            "stage": "crash", "error": (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1][:300]}
+    except subprocess.TimeoutExpired:
+        row = {"stage": "timeout", "error": f"more than {limit:.0f} s"}
+    return {"model": name, "stop": t_end, "wall_s": time.perf_counter() - t, **row}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--msl", default=str(ROOT.parent / "shared" / "msl"))
+    ap.add_argument("--only", default="", help="run the models whose name contains this")
+    ap.add_argument("--fmu", action="store_true", help="also build and validate each FMU")
+    ap.add_argument("--limit", type=float, default=600.0, help="seconds per model")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args()
+    msl = Path(args.msl)
+    rows = []
+    for short in MODELS:
+        if args.only and args.only not in short:
+            continue
+        row = run_one(msl, "Modelica." + short, args.fmu, args.limit)
+        rows.append(row)
+        detail = (f"{row.get('compared', 0)} states, worst {row['worst']:.1e} of range" if "worst" in row
+                  else row.get("error") or row.get("rumoca", "rumoca did not run"))
+        print(f"{short:70s} {row['stage']:9s} {row['wall_s']:6.1f} s  {detail}", flush=True)
+    good = sum(r["stage"] == "ok" for r in rows)
+    print(f"\n{good} of {len(rows)} compile{', validate' if args.fmu else ''}, simulate to their stop time "
+          f"and agree with rumoca where it runs")
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
