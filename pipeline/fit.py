@@ -528,6 +528,10 @@ class Algorithm1(Fitter):
         return best[1], cost, message, q
 
 
+#: simulations over which a fit's pace is measured (see LevenbergMarquardt._hopeless)
+STALL = 10
+
+
 class LevenbergMarquardt(Fitter):
     """Low-budget fit: damped Gauss-Newton on the output residuals with the exact Jacobian.
 
@@ -565,15 +569,13 @@ class LevenbergMarquardt(Fitter):
             self.progress(current[2])
         message = "budget reached"
         trusted = False
+        costs = []          # J after each simulation of the loop
         while problem.recorder.simulations - start < self.max_simulations:
             r, Jac, cost = current
             A = Jac[:, free]
             g = A.T @ r
             H = A.T @ A
-            # give up only where the linear model has proven itself (the last step did at least a
-            # quarter of what it predicted): from a poor start it can be far too pessimistic
-            if self.give_up is not None and trusted and self.give_up(float(r @ r - g @ np.linalg.pinv(H) @ g),
-                                                                      float(r @ r)):
+            if self.give_up is not None and self._hopeless(problem, start, r, g, H, costs, trusted):
                 message = "stopped: it cannot beat another candidate"
                 break
             step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-30), g)
@@ -586,6 +588,7 @@ class LevenbergMarquardt(Fitter):
             trial = w.copy()
             trial[free] += step
             new = self._step_data(problem, trial)
+            costs.append(min(cost, new[2]) if new is not None else cost)
             if new is not None and new[2] < cost:
                 rel = (cost - new[2]) / max(cost, 1e-300)
                 trusted = rel >= 0.25 * predicted
@@ -604,6 +607,20 @@ class LevenbergMarquardt(Fitter):
         if 0 < y[start:].sum() < len(y[start:]):
             q.fit(W[start:], y[start:])
         return w, current[2], message, q
+
+    def _hopeless(self, problem, start, r, g, H, costs, trusted) -> bool:
+        """Whether ``give_up`` stops the fit, told what it can reach: what the Gauss-Newton
+        model predicts, where it has proven itself (the last step did at least a quarter of what
+        it predicted: from a poor start it can be far too pessimistic), and no better than the
+        pace of its last STALL simulations carried over the simulations it has left (a slow fit
+        far behind cannot catch up within its budget, whatever the linear model promises)."""
+        rss = float(r @ r)
+        reach = float(rss - g @ np.linalg.pinv(H) @ g) if trusted else None
+        if len(costs) > STALL and costs[-1 - STALL] > 0:
+            left = self.max_simulations - (problem.recorder.simulations - start)
+            paced = rss * min(costs[-1] / costs[-1 - STALL], 1.0) ** (max(left, 0) / STALL)
+            reach = paced if reach is None else max(reach, paced)
+        return reach is not None and self.give_up(reach, rss)
 
     @staticmethod
     def _step_data(problem: FitProblem, w):

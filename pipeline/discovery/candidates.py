@@ -112,6 +112,14 @@ class Context:
     n_obs: int = 0
     algorithm: str = "levenberg-marquardt"   # the optimiser (mcl.fit.FITTERS)
     max_work: int | None = None  # solver steps a candidate's simulation may take (50x the nominal's)
+    floor: float = 0.0          # the RSS of the noise alone (n_obs sigma^2)
+
+    def settled(self, item) -> bool:
+        """Another fit of this round has reached the noise (its RMS within 1.2x of it): a law
+        can then at best tie with it."""
+        if not self.progress_dir or self.floor <= 0:
+            return False
+        return any(o.rss <= 1.44 * self.floor for o in reached(Path(self.progress_dir), exclude=item))
 
     def give_up(self, reachable: float, current: float, item, k: int | None = None,
                 dictionary: int | None = None) -> bool:
@@ -149,6 +157,21 @@ class Context:
                                and reachable > o.rss * (1.0 - np.log(n) / n)):
                 return True
         return False
+
+
+@dataclass
+class GiveUp:
+    """The early stop of one fit (:meth:`Context.give_up`), called as ``give_up(reachable,
+    current, k, dictionary)``; ``settled()`` tells whether another fit has reached the noise."""
+
+    ctx: Context
+    item: object
+
+    def __call__(self, reachable: float, current: float, *size) -> bool:
+        return self.ctx.give_up(reachable, current, self.item, *size)
+
+    def settled(self) -> bool:
+        return self.ctx.settled(self.item)
 
 
 @dataclass
@@ -206,7 +229,7 @@ def fit_task(ctx: Context, item) -> dict:
     w0 = np.concatenate([law.w0 for law in laws])
     shape = isinstance(item, Item) and item.index >= NEURAL_INDEX
     progress = None if not ctx.progress_dir else (lambda rss, *size: publish(Path(ctx.progress_dir), item, rss, *size))
-    give_up = None if shape or not ctx.progress_dir else (lambda reach, now, *size: ctx.give_up(reach, now, item, *size))
+    give_up = None if shape or not ctx.progress_dir else GiveUp(ctx, item)
     if isinstance(item, Pair):        # two laws: each keeps its scale, every term may be pruned
         held, prunable = [], []
         for law in laws:

@@ -107,7 +107,8 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     G(k w) = 0 are one law; default the first), ``prunable`` the terms backward elimination may
     remove (default the first ``n_terms`` but the held); ``prune=False`` keeps every parameter (a
     network has no terms to remove). ``give_up`` (see :class:`mcl.fit.LevenbergMarquardt`)
-    stops a candidate that cannot win; ``progress`` hears of each better RSS."""
+    stops a candidate that cannot win (and its ``settled()``, where it has one, skips the refits
+    on growing windows once another law fits to the noise); ``progress`` hears of each better RSS."""
     from ..fit import FitProblem, fitter
 
     n = len(names)
@@ -158,8 +159,10 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     sims = res.simulations
     start = next((e.cost for e in problem.recorder.evaluations if e.feasible), None)
     windows = horizons(data)
+    # (not when another law already fits to the noise: this one could at best tie with it)
+    settled = getattr(give_up, "settled", None)
     if (len(windows) > 1 and start is not None and rss > 0.5 * start * len(data.time)
-            and not res.message.startswith("stopped")):
+            and not res.message.startswith("stopped") and not (settled and settled())):
         # hardly better than where it started: a law far from the nominal one moves resonances,
         # and a fit to the whole record falls into the local minima phase drift makes; fitted
         # first to its first eighth, quarter and half, each start is close enough for the next

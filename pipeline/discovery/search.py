@@ -345,7 +345,7 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
     ctx = Context(base, signals, rates, train, validate, spec.max_simulations, spec.criterion,
                   spec.refinement_method, str(part / "progress") if spec.early_stop else "", n_obs,
                   algorithm=getattr(spec, "algorithm", "levenberg-marquardt"),
-                  max_work=WORK * steps if steps else None)
+                  max_work=WORK * steps if steps else None, floor=n_obs * sigma**2)
     fit = Batch(ctx, part, rundir, reg, spec.executor)
     by_key = {it.key: it for it in items}
     todo = [items[k] for k in keep] + [Pair(by_key[tuple(p["first"])], by_key[tuple(p["second"])]) for p in pairs]
