@@ -184,6 +184,19 @@ def test_named_unknown_component(tmp_path):
         load_runfile(run)
 
 
+def test_a_named_unknown_that_leaves_misfit_ends_the_search(tmp_path):
+    """Told to look at C with a law that cannot hold the cubic leak (a linear one), misfit stays
+    after C's law is put back: the next round has no component left to search (it used to try
+    C again, whose terminals the law had replaced, and fail) and the run ends with C's law."""
+    run = setup_run(tmp_path, cubic=0.3)
+    run.write_text(run.read_text().replace("unknown: auto", "unknown: C\ntemplates:\n"
+                                           "  - {name: polynomial, lhs: [i], rhs: [dv, v], family: storage}"))
+    assert main(["run", str(run)]) == 0
+    report = json.loads((tmp_path / "out/rc/report.json").read_text())
+    assert [c["component"] for c in report["causes"]] == ["C"]
+    assert "C.v" in report["cause"]["law"]["equation"]
+
+
 def test_early_stop_weighs_parameters_not_only_rss(tmp_path):
     """A fit stops when another cannot be beaten: a smaller law is not stopped by a larger law's
     lower RSS (the criterion may prefer it), a larger law at the same component is stopped by a

@@ -315,8 +315,8 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
     one pass, the promising ones (and pairs of them, when no single law comes near the noise)
     fitted, then the shape stage."""
     comps = [c for c in base.structure.candidates() if c.name not in base.excluded]
-    if spec.unknown != "auto":
-        comps = [base.structure.components[spec.unknown]]
+    if spec.unknown != "auto":       # the pinned component, once (a later round has no other)
+        comps = [c for c in [base.structure.components[spec.unknown]] if c.name not in base.excluded]
     stores = [c.name for c in comps if not balanced(base, train, c)]
     if stores:
         log.info("      not one-ports (their flows do not balance: masses, inertias): %s", ", ".join(stores))
