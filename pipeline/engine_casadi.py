@@ -194,10 +194,12 @@ class _Plan:
         self.na = xa.numel()
         empty = ca.MX.sym("z", 0, 1), ca.MX.sym("u", 0, 1)
         # one oracle for every integrator: its derivatives are built once, so an integrator
-        # over any grid costs milliseconds. It runs in time scaled to the horizon: CasADi's
-        # integrator does not move to an output time within 1e-9 (absolute) of the last,
-        # which on a nanosecond circuit is a whole output interval
-        self.t_origin, self.t_scale = float(t_out[0]), float(t_out[-1] - t_out[0]) or 1.0
+        # over any grid costs milliseconds. Where output times lie closer than a microsecond
+        # it runs in time scaled to the horizon: CasADi's integrator does not move to an output
+        # time within 1e-9 (absolute) of the last, which on a nanosecond circuit is a whole
+        # output interval (elsewhere unscaled: the solver's path, and so a fit's, as before)
+        fine = len(t_out) > 1 and float(np.min(np.diff(t_out))) < 1e-6
+        self.t_origin, self.t_scale = (float(t_out[0]), float(t_out[-1] - t_out[0]) or 1.0) if fine else (0.0, 1.0)
         tau = ca.MX.sym("tau")
         self.oracle = ca.Function("dae", [tau, xa, empty[0], P, empty[1]],
                                   [ca.substitute(fa, T, self.t_origin + self.t_scale * tau) * self.t_scale,
