@@ -215,9 +215,9 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     z1 = quick(z0, par)
     ok = _within(resid(z1, par), LOOP_TOL)
     step = _damped_step(name, resid)
-    # the fallback starts a hair off the start values: a start at a singularity (a tank's
-    # T = H/(m*c) at m = 0) has no Newton step, the point next to it has
-    z = z0 + 1e-6 * (1 + ca.fabs(z0))
+    # the initial system's fallback starts a hair off the start values: a start at a
+    # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has
+    z = z0 + 1e-6 * (1 + ca.fabs(z0)) if strict else z0
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid,
