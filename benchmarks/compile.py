@@ -77,11 +77,17 @@ MCL = textwrap.dedent("""
 """)
 
 
-def run(script: str, *args) -> dict:
-    p = subprocess.run([sys.executable, "-c", script, *map(str, args)], capture_output=True, text=True, timeout=3600)
+def run(script: str, *args, timeout: float = 3600, width: int = 200) -> dict:
+    """``script`` run in a fresh Python: the last JSON line it prints, else {"error": the last
+    line of its stderr}, or {"timeout": seconds} when it runs longer than ``timeout``."""
+    try:
+        p = subprocess.run([sys.executable, "-c", script, *map(str, args)], capture_output=True, text=True,
+                           timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return {"timeout": timeout}
     lines = [ln for ln in p.stdout.splitlines() if ln.startswith("{")]
     if p.returncode or not lines:
-        return {"error": (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1][:200]}
+        return {"error": (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1][:width]}
     return json.loads(lines[-1])
 
 

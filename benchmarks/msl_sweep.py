@@ -12,13 +12,14 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import subprocess
 import sys
 import textwrap
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from compile import run  # noqa: E402  (a script in a fresh process, its last JSON line)
 
 #: 40 examples across Blocks, Analog, Machines, PowerConverters, Translational, Rotational,
 #: MultiBody, HeatTransfer, FluidHeatFlow, Fluid and FluxTubes (hybrid ones included)
@@ -146,14 +147,11 @@ def stop_time(msl: Path, name: str) -> float:
 def run_one(msl: Path, name: str, fmu: bool, limit: float) -> dict:
     t_end = stop_time(msl, name)
     t = time.perf_counter()
-    try:
-        p = subprocess.run([sys.executable, "-c", ONE, str(msl), name, str(t_end), "1" if fmu else "0"],
-                           capture_output=True, text=True, timeout=limit)
-        lines = [ln for ln in p.stdout.splitlines() if ln.startswith("{")]
-        row = json.loads(lines[-1]) if lines else {
-            "stage": "crash", "error": (p.stderr.strip().splitlines() or [f"exit {p.returncode}"])[-1][:300]}
-    except subprocess.TimeoutExpired:
+    row = run(ONE, msl, name, t_end, "1" if fmu else "0", timeout=limit, width=300)
+    if "timeout" in row:
         row = {"stage": "timeout", "error": f"more than {limit:.0f} s"}
+    elif "stage" not in row:
+        row = {"stage": "crash", **row}
     return {"model": name, "stop": t_end, "wall_s": time.perf_counter() - t, **row}
 
 

@@ -289,8 +289,7 @@ def _build(dae: Dae, name: str = "model") -> Ode:
                          [semi["ode"], semi["alg"], invariants_in(invariants, dae, x_impl, z_orig)])
     xdot, g, inv = sx_fun(X, Z, UP, T)
     zero = ca.DM.zeros(1, 1)
-    # max |v|, NaN where v holds one (mmax alone skips NaN)
-    absmax = (lambda v: ca.mmax(ca.fabs(v)) + 0 * ca.sumsqr(v) if v.numel() else zero)
+    absmax = (lambda v: ca.mmax(ca.fabs(v)) if v.numel() else zero)
 
     # every named variable of the original model, as a function of the ODE's arguments
     probe_names = list(dae.exprs)
