@@ -28,9 +28,61 @@ def _int(a) -> int:
     return int(round(float(a) if a.is_constant() else float(ca.evalf(a))))
 
 
+def _flat(a) -> ca.SX:
+    """An array as a column of its elements in Modelica's (row-major) order. Arrays keep their
+    shape while translated: a vector is a column, a matrix its rows and columns."""
+    a = ca.SX(a)
+    return ca.vec(a.T) if a.size2() > 1 else a
+
+
+def _shaped(v: ca.SX, dims) -> ca.SX:
+    """A variable's elements (row-major, as named) in the shape declared: a matrix for two
+    dimensions; a vector otherwise (arrays of three or more dimensions stay flattened)."""
+    if dims is not None and len(dims) == 2 and v.numel() == dims[0] * dims[1]:
+        return ca.reshape(v, dims[1], dims[0]).T
+    return v
+
+
+def _multiply(a, b):
+    """Modelica's ``*``: scaling, the scalar product of two vectors, matrix products."""
+    if a.is_scalar() or b.is_scalar():
+        return ca.times(a, b)
+    (ra, ka), (rb, kb) = a.shape, b.shape
+    if ka == 1 and kb == 1 and ra == rb:
+        return ca.dot(a, b)
+    if ka == 1 and ra == rb:                  # vector * matrix
+        return ca.mtimes(a.T, b).T
+    if ka == rb:
+        return ca.mtimes(a, b)
+    return NotImplemented
+
+
+def _array(items: list) -> ca.SX:
+    """``{a, b, ...}``: a vector of scalars, or the matrix whose rows are the vectors given."""
+    if len(items) > 1 and all(i.size2() == 1 and i.size1() > 1 for i in items) \
+            and len({i.size1() for i in items}) == 1:
+        return ca.horzcat(*items).T
+    return ca.vertcat(*[_flat(i) for i in items]) if items else ca.SX(0, 1)
+
+
+def _size(a, k=None):
+    shape = (a.size1(),) if a.size2() == 1 else a.shape
+    if k is None:
+        return ca.SX(list(shape))
+    j = _int(k) - 1
+    return ca.SX(shape[j] if j < len(shape) else 1)
+
+
+def _dims(*n) -> tuple[int, int]:
+    n = [_int(k) for k in n]
+    return (n[0], 1) if len(n) == 1 else (n[0], int(np.prod(n[1:])))
+
+
 _UNARY = {"negate": lambda a: -a, "plus": lambda a: a, "not": ca.logic_not}
 _BINARY = {
-    "add": ca.plus, "subtract": ca.minus, "multiply": ca.times, "divide": ca.rdivide, "power": ca.power,
+    "add": ca.plus, "subtract": ca.minus, "multiply": _multiply, "divide": ca.rdivide, "power": ca.power,
+    "elementwise_add": ca.plus, "elementwise_subtract": ca.minus, "elementwise_multiply": ca.times,
+    "elementwise_divide": ca.rdivide, "elementwise_power": ca.power,
     "greater": ca.gt, "greater_equal": ca.ge, "less": ca.lt, "less_equal": ca.le, "equal": ca.eq,
     "not_equal": ca.ne, "and": ca.logic_and, "or": ca.logic_or,
 }
@@ -43,21 +95,24 @@ _FUNCTIONS = {
     "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh, "tanh": ca.tanh, "exp": ca.exp, "log": ca.log,
     "log10": ca.log10, "sqrt": ca.sqrt, "abs": ca.fabs, "sign": ca.sign, "floor": ca.floor,
     "ceil": ca.ceil, "min": lambda a, *b: ca.fmin(a, b[0]) if b else ca.mmin(a),
-    "max": lambda a, *b: ca.fmax(a, b[0]) if b else ca.mmax(a), "sum": ca.sum1, "size": lambda a, *_k: ca.SX(a.numel()),
-    # concatenation; arrays are held flattened, so joining vectors (or 1x1 matrices) is vertcat
-    "ones": lambda *n: ca.SX.ones(int(np.prod([_int(k) for k in n])), 1),
-    "zeros": lambda *n: ca.SX.zeros(int(np.prod([_int(k) for k in n])), 1),
-    "fill": lambda v, *n: ca.repmat(v, int(np.prod([_int(k) for k in n])), 1),
-    "scalar": lambda a: a[0], "vector": ca.vec,
-    "promoted_cat1": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
-    "promoted_cat2": lambda *a: ca.vertcat(*[ca.vec(x) for x in a]),
-    "product": lambda a: functools.reduce(ca.times, ca.vertsplit(ca.vec(a)), ca.SX(1)), "noEvent": lambda a: a, "no_event": lambda a: a, "smooth": lambda _o, a: a,
+    "max": lambda a, *b: ca.fmax(a, b[0]) if b else ca.mmax(a), "sum": lambda a: ca.sum1(_flat(a)), "size": _size,
+    "ones": lambda *n: ca.SX.ones(*_dims(*n)), "zeros": lambda *n: ca.SX.zeros(*_dims(*n)),
+    "fill": lambda v, *n: ca.repmat(v, *_dims(*n)),
+    "scalar": lambda a: a[0], "vector": _flat,
+    # [a; b] and [a, b]: scalars and vectors are promoted to one-column matrices
+    "promoted_cat1": lambda *a: ca.vertcat(*a), "promoted_cat2": lambda *a: ca.horzcat(*a),
+    "product": lambda a: functools.reduce(ca.times, ca.vertsplit(_flat(a)), ca.SX(1)), "noEvent": lambda a: a, "no_event": lambda a: a, "smooth": lambda _o, a: a,
     "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.sign(a / b) * ca.floor(ca.fabs(a / b)),   # truncation toward zero
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
-    "identity": lambda n: ca.vec(ca.SX.eye(_int(n))),      # held flattened like every array
-    "cross": lambda a, b: ca.cross(ca.vec(a), ca.vec(b)),
+    "identity": lambda n: ca.SX.eye(_int(n)), "transpose": lambda a: a.T,
+    "cross": lambda a, b: ca.cross(_flat(a), _flat(b)), "skew": lambda a: ca.skew(_flat(a)),
+    "outerProduct": lambda a, b: ca.mtimes(_flat(a), _flat(b).T), "diagonal": lambda a: ca.diag(_flat(a)),
+    "symmetric": lambda a: ca.triu(a) + ca.triu(a, False).T, "ndims": lambda a: ca.SX(1 if a.size2() == 1 else 2),
+    "linspace": lambda a, b, n: a + (b - a) * ca.SX(np.linspace(0, 1, _int(n))),
+    "matrix": lambda a: a, "linear_solve": lambda a, b: ca.solve(a, b),
 }
+_FUNCTIONS["outer_product"] = _FUNCTIONS["outerProduct"]
 
 
 @dataclass
@@ -161,8 +216,16 @@ def _without_modelicapath(fn, *args):
 
 
 def _real(path: str, roots: str) -> str:
-    """A library file by its real path, not through the links of a library root under ``roots``."""
-    return os.path.realpath(path) if path.startswith(roots) else path
+    """A library file by its real path, not through the links of a library root under ``roots``
+    (a file an overlay rewrote, held in the root itself: the library's file it stands for)."""
+    if not path.startswith(roots):
+        return path
+    real = os.path.realpath(path)
+    if real.startswith(roots) and os.path.isdir(os.path.dirname(path)):
+        beside = next((e for e in os.scandir(os.path.dirname(path)) if e.is_symlink()), None)
+        if beside is not None:
+            return os.path.join(os.path.dirname(os.path.realpath(beside.path)), os.path.basename(path))
+    return real
 
 
 def virtual_name(path: Path, digest: str) -> str:
@@ -225,8 +288,9 @@ def library_roots(libraries=(), shadowed=(), used=None, texts=None) -> list[str]
     import hashlib
     import tempfile
 
+    from . import overlays
     from .library import available, library_path
-    from .subset import mirror, units_needed
+    from .subset import link_whole, mirror, units_needed
 
     libs = {n: p.resolve() for n, p in available(library_path(libraries)).items() if n not in shadowed}
     if used is not None:
@@ -234,14 +298,17 @@ def library_roots(libraries=(), shadowed=(), used=None, texts=None) -> list[str]
         libs = {n: p for n, p in libs.items() if p in keep}
     units = units_needed(texts, libs) if texts is not None else {}
     parts = {n: sorted(units[n]) if units.get(n) is not None else None for n in libs}
-    key = hashlib.sha256(repr(sorted((n, str(p), parts[n]) for n, p in libs.items())).encode()).hexdigest()[:16]
+    key = hashlib.sha256(repr((sorted((n, str(p), parts[n]) for n, p in libs.items()), overlays.VERSION))
+                         .encode()).hexdigest()[:16]
     base = roots_dir()
     root = base / key
     if not root.is_dir():
         tmp = Path(tempfile.mkdtemp(dir=base, prefix=".new-"))
         for n, p in libs.items():
-            if parts[n] is None:
-                (tmp / (n if p.is_dir() else f"{n}.mo")).symlink_to(p)
+            if parts[n] is None and p.is_dir():
+                link_whole(tmp / n, p)
+            elif parts[n] is None:
+                (tmp / f"{n}.mo").symlink_to(p)
             else:
                 mirror(tmp / n, p, set(parts[n]))
         try:
@@ -626,8 +693,10 @@ class _Translator:
             return self.call_builtin(body["builtin"], [done[o] for o in self.operands(k)])
         if kind == "call":
             return self.call_function(body, [done[o] for o in self.operands(body.get("owner", k))])
-        if kind in ("array", "record"):      # a record: its fields flattened, in order
-            return ca.vertcat(*[ca.vec(done[o]) for o in self.operands(k)])
+        if kind == "array":
+            return _array([done[o] for o in self.operands(k)])
+        if kind == "record":                 # its fields flattened, in order
+            return ca.vertcat(*[_flat(done[o]) for o in self.operands(k)])
         if kind == "field":
             return self.field(body, done)
         if kind == "index":
@@ -639,11 +708,19 @@ class _Translator:
         if kind == "range":
             return ca.SX(self.range_values(body, done))
         if kind == "function_value":
-            try:
-                return bound["values"][body["definition_ordinal"]]
-            except (TypeError, KeyError, IndexError):
-                self.refuse("a function variable read before it is assigned")
+            value = (bound or {}).get("values", {}).get(body["definition_ordinal"])
+            return value if value is not None else self.unassigned(body)
         self.refuse(f"expression node '{kind}'")
+
+    def unassigned(self, body: dict) -> ca.SX:
+        """A function's array read before it is assigned as a whole (filled element by element):
+        zeros of its declared size; a scalar read before any assignment is refused."""
+        f = self.functions[body["function"]]
+        held = [*f.get("outputs", []), *f.get("locals", [])]
+        dims = self.st["value_types"][held[body["value"]]["value_type"]].get("dimensions") or []
+        if not dims or not all(isinstance(n, int) and n >= 0 for n in dims) or len(dims) > 2:
+            self.refuse("a function variable read before it is assigned")
+        return ca.SX.zeros(dims[0], dims[1] if len(dims) == 2 else 1)
 
     def strings_size(self, k: int) -> int | None:
         """``size(a, 1)`` of an array of strings (a medium's names): its length, which is all
@@ -681,8 +758,10 @@ class _Translator:
         out = []
         for values in itertools.product(*[r for _, _, r in binders]):
             inner = {**bound, "binders": {**bound["binders"], **{(d, i): v for (d, i, _), v in zip(binders, values)}}}
-            out.append(ca.vec(self.sx(body["body"], inner)))
-        return ca.vertcat(*out) if out else ca.SX(0, 1)
+            out.append(self.sx(body["body"], inner))
+        if len(binders) == 2 and out and all(o.is_scalar() for o in out):   # {a[i, j] for i in .., j in ..}
+            return _shaped(ca.vertcat(*out), [len(binders[0][2]), len(binders[1][2])])
+        return _array(out)
 
     def range_values(self, body: dict, done: dict) -> list[float]:
         """``start:step:stop`` with constant bounds, as its values."""
@@ -696,17 +775,18 @@ class _Translator:
         n = int(np.floor((b - a) / h + 1e-9)) + 1
         return [a + j * h for j in range(max(n, 0))]
 
-    def subscript(self, k: int, body: dict, done: dict):
-        """The one subscript of node ``k``: an index (1-based, an expression), the indices of a
-        slice (a list), or None for the whole array."""
+    def selectors(self, k: int, body: dict, done: dict) -> list:
+        """The subscripts of node ``k``, one per dimension: an index (1-based, an expression),
+        the indices of a slice (a list), or None for the whole dimension."""
         subs = self.subscripts[self.sub_offsets[k]: self.sub_offsets[k] + body["subscript_count"]]
-        if len(subs) != 1:
-            self.refuse("an array of more than one dimension subscripted")
-        if subs[0]["kind"] == "whole":
+        return [self._selector(s, done) for s in subs]
+
+    def _selector(self, sub: dict, done: dict):
+        if sub["kind"] == "whole":
             return None
-        if not isinstance(subs[0]["kind"], dict):
-            self.refuse(f"a '{subs[0]['kind']}' subscript")
-        kind, node = next(iter(subs[0]["kind"].items()))
+        if not isinstance(sub["kind"], dict):
+            self.refuse(f"a '{sub['kind']}' subscript")
+        kind, node = next(iter(sub["kind"].items()))
         if kind == "slice":
             target = self.nodes[node]
             if isinstance(target, dict) and "range" in target:
@@ -717,52 +797,111 @@ class _Translator:
             return [int(round(v)) for v in np.array(ca.DM(values)).ravel()]
         if kind != "index":
             self.refuse(f"a '{kind}' subscript")
-        return done[node]
+        i = done[node]
+        return _int(i) if i.is_constant() else i
 
-    def updated(self, k: int, body: dict, done: dict) -> ca.SX:
-        """``a`` with ``a[i] := v`` (a function's assignment to an element)."""
-        base, value, i = ca.vec(done[body["base"]]), done[body["value"]], self.subscript(k, body, done)
-        out = ca.SX(base)
-        if i is None or isinstance(i, list):        # a[:] := v, a[2:3] := v
-            idx = list(range(1, base.numel() + 1)) if i is None else i
-            value = ca.vec(value)
-            if value.numel() not in (1, len(idx)) or not all(1 <= j <= base.numel() for j in idx):
-                self.refuse("an assignment to a slice of another size")
-            for n, j in enumerate(idx):
-                out[j - 1] = value[n] if value.numel() > 1 else value[0]
-            return out
-        if value.numel() != 1:
-            self.refuse("an assignment of an array to an element")
-        if i.is_constant():
-            j = _int(i) - 1
-            if not 0 <= j < base.numel():
-                self.refuse(f"subscript {j + 1} outside an array of {base.numel()}")
-            out[j] = value
-            return out
-        for j in range(base.numel()):
-            out[j] = ca.if_else(i == j + 1, value, base[j])
-        return out
+    def _places(self, base: ca.SX, sels: list) -> tuple[list, list, list[bool]]:
+        """Rows and columns (0-based) that constant subscripts select, and which dimensions
+        remain (a slice keeps its dimension, an index drops it). A vector is one column; a
+        matrix with one subscript is indexed by row."""
+        dims = (base.size1(), base.size2())
+        if len(sels) == 1:
+            sels = [sels[0], None] if dims[1] > 1 else [sels[0], 1]
+        out, keep = [], []
+        for s, n in zip(sels, dims):
+            picked = list(range(1, n + 1)) if s is None else s if isinstance(s, list) else [s]
+            if not all(1 <= j <= n for j in picked):
+                self.refuse(f"subscript {picked} outside an array of {n}")
+            out.append([j - 1 for j in picked])
+            keep.append(isinstance(s, list) or s is None)
+        if len(sels) == 2 and dims[1] == 1 and sels[1] == 1:
+            keep[1] = False
+        return out[0], out[1], keep
+
+    def _each_value(self, base: ca.SX, sels: list):
+        """(condition, constant subscripts) for every value the non-constant subscripts take."""
+        sym = [j for j, s in enumerate(sels) if isinstance(s, ca.SX)]
+        if not sym:
+            yield None, sels
+            return
+        dims = (base.numel(),) if len(sels) == 1 and base.size2() == 1 else (base.size1(), base.size2())
+        for values in itertools.product(*[range(1, dims[j] + 1) for j in sym]):
+            fixed, cond = list(sels), None
+            for j, v in zip(sym, values):
+                fixed[j] = v
+                c = sels[j] == v
+                cond = c if cond is None else ca.logic_and(cond, c)
+            yield cond, fixed
 
     def element(self, k: int, body: dict, done: dict):
-        """``a[i]`` (1-based) of a vector (arrays are held flattened); a subscript that is not a
-        constant selects among the elements with a conditional."""
+        """``a[i]``, ``m[i, j]``, ``m[:, 1]`` (1-based); a subscript that is not a constant
+        selects among the elements with conditionals."""
         base = done[body["base"]]
-        i = self.subscript(k, body, done)
-        if i is None:
-            return base
-        if isinstance(i, list):
-            if not all(1 <= j <= base.numel() for j in i):
-                self.refuse(f"a slice outside an array of {base.numel()}")
-            return ca.vertcat(*[base[j - 1] for j in i]) if i else ca.SX(0, 1)
-        if not i.is_constant():
-            out = ca.SX(0)      # the element whose index i is: a chain of conditionals
-            for j in range(base.numel() - 1, -1, -1):
-                out = ca.if_else(i == j + 1, base[j], out)
-            return out
-        j = _int(i) - 1
-        if not 0 <= j < base.numel():
-            self.refuse(f"subscript {j + 1} outside an array of {base.numel()}")
-        return base[j]
+        sels = self.selectors(k, body, done)
+        if len(sels) > 2:
+            return self.element_nd(body["base"], base, sels)
+        out = None
+        for cond, fixed in self._each_value(base, sels):
+            rows, cols, keep = self._places(base, fixed)
+            value = base[rows, cols]
+            if keep == [False, True]:
+                value = value.T          # a row of a matrix: a vector
+            out = value if cond is None else (ca.if_else(cond, value, out) if out is not None
+                                             else ca.if_else(cond, value, ca.SX.zeros(*value.shape)))
+        return out
+
+    def element_nd(self, node: int, base: ca.SX, sels: list) -> ca.SX:
+        """A part of an array of three or more dimensions (held flattened, row-major), by
+        constant subscripts: the array's declared dimensions place its elements."""
+        dims = self.declared_dims(node)
+        if dims is None or len(dims) != len(sels) or int(np.prod(dims)) != base.numel():
+            self.refuse(f"an array of {len(sels)} dimensions whose size is not known")
+        if any(isinstance(s, ca.SX) for s in sels):
+            self.refuse(f"an array of {len(sels)} dimensions subscripted by a variable")
+        picked = [list(range(1, n + 1)) if s is None else s if isinstance(s, list) else [s]
+                  for s, n in zip(sels, dims)]
+        if not all(1 <= j <= n for p, n in zip(picked, dims) for j in p):
+            self.refuse(f"a subscript outside an array of dimensions {dims}")
+        strides = [int(np.prod(dims[j + 1:])) for j in range(len(dims))]
+        flat = _flat(base)
+        out = ca.vertcat(*[flat[sum((j - 1) * st for j, st in zip(at, strides))] for at in itertools.product(*picked)]) \
+            if all(picked) else ca.SX(0, 1)
+        kept = [len(p) for p, s in zip(picked, sels) if isinstance(s, list) or s is None]
+        return _shaped(out, kept) if len(kept) == 2 else out
+
+    def declared_dims(self, k: int) -> list[int] | None:
+        """The declared dimensions of node ``k``, a variable of the model or of a function."""
+        node = self.nodes[k]
+        body = node.get("coordinate") if isinstance(node, dict) else None
+        vt = None
+        if isinstance(body, dict):
+            (ck, idx), = body.items()
+            if ck == "function_parameter":
+                vt = self.functions[idx["function"]]["parameters"][idx["ordinal"]]["value_type"]
+            elif ck.removeprefix("pre_") in _VARIABLE_KINDS and isinstance(idx, int):
+                vt = self.st["variables"][idx]["value_type"]
+        elif isinstance(node, dict) and "function_value" in node:
+            fv = node["function_value"]
+            f = self.functions[fv["function"]]
+            vt = [*f.get("outputs", []), *f.get("locals", [])][fv["value"]]["value_type"]
+        dims = self.st["value_types"][vt].get("dimensions") if vt is not None else None
+        return dims if dims and all(isinstance(n, int) and n >= 0 for n in dims) else None
+
+    def updated(self, k: int, body: dict, done: dict) -> ca.SX:
+        """``a`` with ``a[i] := v``, ``m[i, :] := v`` (a function's assignment to a part)."""
+        base, value = done[body["base"]], done[body["value"]]
+        sels = self.selectors(k, body, done)
+        out = ca.SX(base)
+        for cond, fixed in self._each_value(base, sels):
+            rows, cols, _ = self._places(base, fixed)
+            v = _flat(value)
+            if v.numel() not in (1, len(rows) * len(cols)):
+                self.refuse("an assignment to a part of an array of another size")
+            new = ca.SX(out) if cond is not None else out
+            for n, (r, c) in enumerate(itertools.product(rows, cols)):
+                new[r, c] = v[n] if v.numel() > 1 else v[0]
+            out = new if cond is None else ca.if_else(cond, new, out)
+        return out
 
     def size_of(self, vt: int) -> int:
         """Number of scalars of a value type (a record's: all its fields')."""
@@ -802,14 +941,14 @@ class _Translator:
         fields = self.st["value_types"][vt].get("record_fields", [])
         start = sum(self.size_of(f["value_type"]) for f in fields[: body["field"]])
         n = self.size_of(fields[body["field"]]["value_type"])
-        value = ca.vec(done[body["base"]])
+        value = _flat(done[body["base"]])
         if value.numel() < start + n:
             self.refuse("a record field outside its record")
-        return value[start:start + n]
+        return _shaped(value[start:start + n], self.st["value_types"][fields[body["field"]]["value_type"]].get("dimensions"))
 
     def function_assert(self, body: dict, bound: dict):
         """An assert in a function: checked like the model's own (a failed result naming it)."""
-        ok = ca.vec(self.sx(body["condition"], bound))
+        ok = _flat(self.sx(body["condition"], bound))
         lit = self.nodes[body["message"]] if body.get("message") is not None else None
         text = lit.get("literal", {}).get("string") if isinstance(lit, dict) else None
         where = self.located.span(self.span) if self.located is not None else None
@@ -1075,16 +1214,17 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             tr.refuse(f"a reference of kind '{kind}'")
         if kind.startswith("pre_"):
             if i in pre_slot:
-                return pre_slot[i]
+                return _shaped(pre_slot[i], dims[i])
             if i in always:          # never changed at an event: pre() is the value
                 return tr.sx(always[i])
             tr.refuse(f"pre() of {variables[i]['name']}")
         if i in slot:
-            return slot[i]
+            return _shaped(slot[i], dims[i])
         if i in always:
             return tr.sx(always[i])
         if role[i] == "constant":
-            return tr.sx(attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"])
+            value = tr.sx(attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"])
+            return _shaped(_flat(value), dims[i])
         tr.refuse(f"variable {variables[i]['name']} ({kind})")
 
     tr.coord = coord
@@ -1092,11 +1232,11 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     tr.table_records = _table_records(ir, variables, objects, attrs, tr)
     eqs = [_residual(op, tr, model) for op in st["continuous_equation_operations"]]
     eqs += [der[i] for i in sorted(init_params)]       # d/dt of an initialisation parameter is 0
-    residual = ca.vertcat(*[ca.vec(e) for e in eqs]) if eqs else ca.SX(0, 1)
+    residual = ca.vertcat(*[_flat(e) for e in eqs]) if eqs else ca.SX(0, 1)
     check_balance(residual, x.numel(), z.numel(), model)
-    init = [ca.vec(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
+    init = [_flat(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
     # an algebraic variable with fixed = true starts at its start value (inertia.a(fixed=true))
-    init += [ca.vec(slot[i]) - ca.vec(tr.sx(attrs[i]["start"])) for i in index["z"]
+    init += [_flat(slot[i]) - _flat(tr.sx(attrs[i]["start"])) for i in index["z"]
              if attrs[i].get("fixed") in ([True], True) and attrs[i]["start"] is not None]
     init_residual = ca.vertcat(*init) if init else ca.SX(0, 1)
     d_update = events.discrete_update(index["d"], slot, pre_slot, size, variables)
@@ -1110,7 +1250,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     def value_of(i, key_order=("binding", "start")):
         node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)
         e = tr.sx(node) if node is not None else ca.SX.zeros(size[i], 1)
-        e = ca.vec(e)
+        e = _flat(e)
         return ca.repmat(e, size[i], 1) if e.numel() == 1 and size[i] > 1 else e
 
     # parameters: an element whose binding depends on other parameters is a dependent one
@@ -1153,10 +1293,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     for i in index["c"]:
         if i in strings:
             continue        # no number to name (a table's name)
-        for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(ca.vec(coord("constant", i)))):
+        for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(_flat(coord("constant", i)))):
             exprs[n] = e
     for i, node in always.items():
-        exprs.setdefault(variables[i]["name"], bind(ca.vec(tr.sx(node))[0]))
+        exprs.setdefault(variables[i]["name"], bind(_flat(tr.sx(node))[0]))
     top = [i for i, v in enumerate(variables) if attrs[i].get("causality") == "output" and "." not in v["name"]]
     outputs = [n for i in top for n in _scalar_names(variables[i]["name"], dims[i])]
     units = {v["name"]: v["attributes"]["unit"] for v in variables if v["attributes"].get("unit")}
@@ -1182,7 +1322,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         tr.span = (init_value.get("provenance") or {}).get("span")
         if i not in offsets:
             tr.refuse(f"an initial value of pre({variables[i]['name']}), which is not held between events")
-        v = ca.vec(bind(ca.vec(tr.sx(init_value["value"]))))
+        v = _flat(bind(_flat(tr.sx(init_value["value"]))))
         for j in range(size[i]):
             e = v[j] if v.numel() > 1 else v[0]
             d_start[offsets[i] + j] = e if not ca.depends_on(e, others) else 0
@@ -1411,9 +1551,9 @@ class _Events:
         for i in held:
             new = pre_slot[i]
             for act, val in reversed(branches[i]):
-                new = ca.if_else(act, ca.vec(val) if val.numel() == size[i] else ca.repmat(val, size[i], 1), new)
-            out.append(ca.vec(new))
-        out += [ca.vec(self.value(c)) for c in sorted(self.memory)]
+                new = ca.if_else(act, _flat(val) if val.numel() == size[i] else ca.repmat(val, size[i], 1), new)
+            out.append(_flat(new))
+        out += [_flat(self.value(c)) for c in sorted(self.memory)]
         return ca.vertcat(*out) if out else ca.SX(0, 1)
 
     def _solved(self, residual: int, slot, held, variables):
@@ -1453,7 +1593,7 @@ class _Events:
             if i not in offsets:
                 self.tr.refuse(f"reinit() of {variables[i]['name']}, which is not a state")
             act = self.active({"when": {"trigger": a["trigger"], "guard": a["guard"]}})
-            val = ca.vec(self.tr.sx(body["value"]))
+            val = _flat(self.tr.sx(body["value"]))
             for j in range(slot[i].numel()):
                 k = offsets[i] + j
                 new[k] = ca.if_else(act, val[j] if val.numel() > 1 else val[0], new[k])
@@ -1473,7 +1613,7 @@ class _Events:
                 level, violated = "warning", ca.logic_not(self.tr.sx(body["condition"]))
             else:
                 self.tr.refuse(f"event action '{kind}'")
-            out.append(ca.vec(violated)[0])
+            out.append(_flat(violated)[0])
             info.append((level, self._message(body.get("message"), a)))
         return (ca.vertcat(*out) if out else ca.SX(0, 1)), info
 
@@ -1502,17 +1642,17 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
     kind = next(iter(op))
     tr.span = ((op[kind].get("provenance") if isinstance(op[kind], dict) else None) or {}).get("span")
     if kind == "residual":
-        return ca.vec(tr.sx(op[kind]["residual"]))
+        return _flat(tr.sx(op[kind]["residual"]))
     if kind != "structured":
         raise UnsupportedConstruct(f"unsupported in {model}: equation of kind '{kind}'")
     eq = op[kind]
     if eq["scalar_view"] == "RowMajorProjection":      # an array equation: its elements
-        return ca.vertcat(*[ca.vec(tr.sx(b)) for b in eq["bodies"]])
+        return ca.vertcat(*[_flat(tr.sx(b)) for b in eq["bodies"]])
     binders = tr.binders(eq["domain"])
     rows = []
     for values in itertools.product(*[r for _, _, r in binders]):
         bound = {"params": {}, "values": {}, "binders": {(dd, i): v for (dd, i, _), v in zip(binders, values)}}
-        rows += [ca.vec(tr.sx(b, bound)) for b in eq["bodies"]]
+        rows += [_flat(tr.sx(b, bound)) for b in eq["bodies"]]
     return ca.vertcat(*rows) if rows else ca.SX(0, 1)
 
 

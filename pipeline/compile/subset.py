@@ -16,6 +16,7 @@ import os
 import re
 from pathlib import Path
 
+from .overlays import files_of, rewritten
 from .sources import KEYWORDS
 
 #: a library smaller than this (bytes of .mo) is taken whole
@@ -142,7 +143,8 @@ def _names_in(path: str, _mtime: int):
 
 
 def mirror(root: Path, library: Path, units: set[Unit]) -> None:
-    """``root``: the directories of ``library`` holding ``units``, with links to those files."""
+    """``root``: the directories of ``library`` holding ``units``, with links to those files
+    (a file an overlay rewrites is written out: :mod:`.overlays`)."""
     root.mkdir(exist_ok=True)
     for unit in units:
         d = root.joinpath(*unit[:-1])
@@ -150,4 +152,34 @@ def mirror(root: Path, library: Path, units: set[Unit]) -> None:
         order = library.joinpath(*unit[:-1], "package.order")
         if order.is_file() and not (d / "package.order").exists():
             (d / "package.order").symlink_to(order)
-        (d / unit[-1]).symlink_to(library.joinpath(*unit))
+        _place(d / unit[-1], library.joinpath(*unit), root.name, unit)
+
+
+def link_whole(root: Path, library: Path) -> None:
+    """``root``: all of ``library`` as one link, or, where an overlay rewrites some of its
+    files, as links beside the directories leading to those files, which are written out."""
+    units = [u for u in files_of(root.name) if rewritten(root.name, u, library.joinpath(*u)) is not None]
+    if not units:
+        root.symlink_to(library)
+        return
+
+    def tree(dst: Path, src: Path, below: list[Unit], depth: int) -> None:
+        dst.mkdir()
+        heads = {u[depth] for u in below}
+        for entry in src.iterdir():
+            if entry.name not in heads:
+                (dst / entry.name).symlink_to(entry)
+            elif entry.is_dir():
+                tree(dst / entry.name, entry, [u for u in below if u[depth] == entry.name], depth + 1)
+            else:
+                _place(dst / entry.name, entry, root.name, next(u for u in below if u[depth] == entry.name))
+
+    tree(root, library, units, 0)
+
+
+def _place(dst: Path, src: Path, library: str, unit: Unit) -> None:
+    text = rewritten(library, unit, src)
+    if text is None:
+        dst.symlink_to(src)
+    else:
+        dst.write_text(text, encoding="utf-8")

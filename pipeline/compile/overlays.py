@@ -1,0 +1,70 @@
+"""Equivalent rewrites of library code that rumoca 0.10.2 cannot lower, applied to mcl's own
+link tree of the library (``library_roots``), never to the user's installation.
+
+Each rewrite applies only where the library's text is exactly the one it was written for (the
+MSL 4.0.0); any other text is left as it is. A rewrite keeps the file's line count, so that
+a message naming a line of the file still names the right one.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+#: changes whenever a rewrite does: the library roots are keyed by it
+VERSION = "1"
+
+# Modelica.Math.Vectors.interpolate: rumoca evaluates the interval search of a branch that a
+# one-row table (nx = 1, the MSL's friction elements' default) rules out, reads x[0] there and
+# refuses every model using it ("missing function value definition for identity 2"). The
+# search written as one loop over the table finds the same interval (the one holding xi,
+# clamped to the first and last) and has no such branch; iLast is only the search's start.
+_INTERPOLATE_SEARCH = (
+    """      i := min(max(iLast, 1), nx - 1);
+      if xi >= x[i] then
+        // search forward
+        while i < nx and xi >= x[i] loop
+          i := i + 1;
+        end while;
+        i := i - 1;
+      else
+        // search backward
+        while i > 1 and xi < x[i] loop
+          i := i - 1;
+        end while;
+      end if;
+""",
+    """      // Search interval (mcl: one loop; rumoca cannot lower the original's search)
+      i := 1;
+      for k in 2:nx - 1 loop
+        if xi >= x[k] then
+          i := k;
+        end if;
+      end for;
+      //
+      //
+      //
+      //
+      //
+      //
+""")
+
+REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
+    ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
+}
+
+
+def files_of(library: str) -> list[tuple[str, ...]]:
+    """The files of ``library`` (below its directory) that a rewrite may change."""
+    return [unit for lib, unit in REWRITES if lib == library]
+
+
+def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
+    """The text of ``path`` with its rewrites, or None when none applies to it."""
+    rewrites = REWRITES.get((library, tuple(unit)))
+    if not rewrites or not path.is_file():
+        return None
+    text = original = path.read_text(encoding="utf-8", errors="replace")
+    for old, new in rewrites:
+        assert old.count("\n") == new.count("\n"), "a rewrite keeps the line count"
+        if text.count(old) == 1:
+            text = text.replace(old, new)
+    return text if text != original else None

@@ -1,0 +1,128 @@
+"""Arrays keep their shape through the rumoca front end: matrices in equations and functions
+(transpose, products, 2-D subscripts, arrays filled element by element), checked against numpy;
+and a MultiBody pendulum (3x3 orientation matrices in every frame) against its own ODE."""
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mcl
+from mcl.data import TimeSeries
+
+MSL = Path(__file__).resolve().parents[2] / "shared" / "msl"
+
+MATRICES = """
+function g
+  input Real A[3,3];
+  input Real v[3];
+  output Real w[3];
+protected
+  Real B[2,3];
+algorithm
+  for i in 1:2 loop
+    for j in 1:3 loop
+      B[i,j] := A[i,j] + i;
+    end for;
+  end for;
+  w := transpose(A)*v + A*v .* v + (v*v)*v + v*A;
+  w[1] := w[1] + A[2,3] + sum(A[:,1]) + sum(A[2,:]) + B[2,1];
+end g;
+
+model Matrices
+  parameter Real A[3,3] = [1,2,3;4,5,6;7,8,10];
+  parameter Real C[2,2] = {{1,2},{3,4}};
+  Real v[3](each start=1, each fixed=true);
+  output Real w[3] = g(A, {1.0,2.0,3.0});
+  output Real q = C[1,2] + identity(3)*v*v + C[2,:]*{1.0,1.0};
+  output Real s = (transpose(C)*C)[1,2] + skew({1.0,2.0,3.0})[1,2];
+equation
+  der(v) = -g(A, v)*1e-3;
+end Matrices;
+"""
+
+
+def test_matrix_expressions_and_functions_follow_modelica(tmp_path):
+    src = tmp_path / "Matrices.mo"
+    src.write_text(MATRICES)
+    model = mcl.compile_model([src], "Matrices")
+    t = np.array([0.0, 1.0])
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((2, 0)), []), t_out=t)
+    assert res.ok, res.reason
+    out = dict(zip(res.output_names, res.outputs[0]))
+
+    A, v, C = np.array([[1, 2, 3], [4, 5, 6], [7, 8, 10.0]]), np.array([1, 2, 3.0]), np.array([[1, 2], [3, 4.0]])
+    w = A.T @ v + (A @ v) * v + (v @ v) * v + v @ A
+    w[0] += A[1, 2] + A[:, 0].sum() + A[1, :].sum() + (A[1, 0] + 2)
+    np.testing.assert_allclose([out[f"w[{k}]"] for k in (1, 2, 3)], w, rtol=1e-12)
+    assert out["q"] == pytest.approx(C[0, 1] + 3 + C[1].sum())       # v(0) = ones: v*v = 3
+    assert out["s"] == pytest.approx((C.T @ C)[0, 1] - 3)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (MSL / "Modelica" / "package.mo").is_file(), reason=f"the MSL is not at {MSL}")
+def test_a_multibody_pendulum_swings_like_its_ode(monkeypatch):
+    from scipy.integrate import solve_ivp
+
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    model = mcl.compile_model([], "Modelica.Mechanics.MultiBody.Examples.Elementary.Pendulum")
+    t = np.linspace(0.0, 3.0, 301)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    phi = res.states[:, model.ode.x_names.index("rev.phi")]
+    # the example: a 1 kg body 0.5 m from a revolute joint (axis z, damping 0.1 N.m.s/rad),
+    # gravity 9.81 along -y, started at rest horizontally; the body's own inertia is 0.001
+    J = 1.0 * 0.5 ** 2 + 0.001
+    ref = solve_ivp(lambda _t, y: [y[1], (-9.81 * 0.5 * np.cos(y[0]) - 0.1 * y[1]) / J], (0, 3), [0, 0],
+                    t_eval=t, rtol=1e-10, atol=1e-12).y[0]
+    assert np.abs(phi - ref).max() < 2e-3 * np.ptp(ref)
+
+
+INTERPOLATE = """
+model Interp
+  parameter Real one[1, 2] = [0, 0.5];
+  parameter Real three[3, 2] = [0, 0; 1, 1; 2, 4];
+  output Real a = Modelica.Math.Vectors.interpolate(one[:, 1], one[:, 2], time, 1);
+  output Real b = Modelica.Math.Vectors.interpolate(three[:, 1], three[:, 2], time, 1);
+end Interp;
+"""
+
+
+@pytest.mark.skipif(not (MSL / "Modelica" / "package.mo").is_file(), reason=f"the MSL is not at {MSL}")
+def test_msl_interpolation_of_one_and_many_rows(tmp_path, monkeypatch):
+    """rumoca refuses the MSL's Vectors.interpolate on a one-row table (the friction elements'
+    default); mcl's overlay of the library's search compiles it, with the same values."""
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    src = tmp_path / "Interp.mo"
+    src.write_text(INTERPOLATE)
+    model = mcl.compile_model([src], "Interp")
+    t = np.array([0.0, 0.5, 1.5, 2.5])
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    np.testing.assert_allclose(res.output("a"), 0.5)
+    np.testing.assert_allclose(res.output("b"), [0.0, 0.5, 2.5, 5.5])     # extrapolated past x = 2
+
+
+def test_an_overlay_rewrites_only_the_text_it_was_written_for(tmp_path):
+    from mcl.compile.overlays import REWRITES
+    from mcl.compile.subset import link_whole
+
+    (old, new), = REWRITES[("Modelica", ("Math", "package.mo"))]
+    lib = tmp_path / "lib" / "Modelica"
+    (lib / "Math").mkdir(parents=True)
+    (lib / "Blocks").mkdir()
+    (lib / "package.mo").write_text("package Modelica end Modelica;\n")
+    (lib / "Math" / "package.mo").write_text("head\n" + old + "tail\n")
+    (lib / "Math" / "Other.mo").write_text("x\n")
+    (tmp_path / "root").mkdir()
+    root = tmp_path / "root" / "Modelica"
+    link_whole(root, lib)
+    written = (root / "Math" / "package.mo")
+    assert not written.is_symlink() and written.read_text() == "head\n" + new + "tail\n"
+    assert (root / "Math" / "Other.mo").is_symlink() and (root / "Blocks").is_symlink()
+    assert (lib / "Math" / "package.mo").read_text() == "head\n" + old + "tail\n"     # the library untouched
+    # another version's text: the whole library is one link
+    (lib / "Math" / "package.mo").write_text("head\n" + old.replace("iLast", "iFirst") + "tail\n")
+    (tmp_path / "again").mkdir()
+    link_whole(tmp_path / "again" / "Modelica", lib)
+    assert (tmp_path / "again" / "Modelica").is_symlink()
