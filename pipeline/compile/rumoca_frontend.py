@@ -43,6 +43,14 @@ def _shaped(v: ca.SX, dims) -> ca.SX:
     return v
 
 
+def _alike(a, b):
+    """Two arrays of one size and different shapes (a matrix and the same elements held
+    flattened: an array of three dimensions, a function's flattened output) as flat columns."""
+    if a.shape != b.shape and not a.is_scalar() and not b.is_scalar() and a.numel() == b.numel():
+        return _flat(a), _flat(b)
+    return a, b
+
+
 def _multiply(a, b):
     """Modelica's ``*``: scaling, the scalar product of two vectors, matrix products."""
     if a.is_scalar() or b.is_scalar():
@@ -674,6 +682,8 @@ class _Translator:
             if op not in _BINARY:
                 self.refuse(f"operator '{op}'")
             lhs, rhs = done[body["lhs"]], done[body["rhs"]]
+            if op != "multiply":
+                lhs, rhs = _alike(lhs, rhs)
             out = _BINARY[op](lhs, rhs)
             if out is NotImplemented:
                 self.refuse(f"operator {op!r} on values of shapes {getattr(lhs, 'shape', lhs)} and {getattr(rhs, 'shape', rhs)}")
@@ -684,7 +694,7 @@ class _Translator:
             ops = [done[o] for o in self.operands(k)]
             out = ops[-1]   # if c1 then a1 elseif c2 then a2 ... else b
             for j in range(len(ops) - 3, -1, -2):
-                out = ca.if_else(ops[j], ops[j + 1], out)
+                out = ca.if_else(ops[j], *_alike(ops[j + 1], out))
             return out
         if kind == "builtin":
             n = self.strings_size(k)
