@@ -466,6 +466,7 @@ class _Hybrid:
         pre = cur.copy()
         u = plan.u_at(t)
         reinit = None         # the states a reinit() sets, applied once the iteration settles
+        seen = set()          # the values met since pre() last changed: meeting one again is a cycle
         for _ in range(MAX_EVENT_ITERATIONS):
             new = np.array(self.update(cur, u, p, t, pre, flags)).ravel()
             if not np.all(np.isfinite(new)):
@@ -473,6 +474,9 @@ class _Hybrid:
             if not np.array_equal(new[:nc], cur[:nc]):
                 reinit = new[:nc].copy()
             new[:nc] = cur[:nc]
+            seen.add((cur[nc:] + 0.0).tobytes())      # + 0.0: -0.0 is 0.0
+            if (new[nc:] + 0.0).tobytes() in seen:
+                new = one_change(cur, new, nc)
             if np.array_equal(new, cur):
                 if np.array_equal(cur, pre):
                     if reinit is None:
@@ -480,6 +484,7 @@ class _Hybrid:
                         return xa
                     cur[:nc], reinit = reinit, None     # then settle again with the new states
                 pre = cur.copy()
+                seen = set()
                 continue
             cur = new
         raise _Stop(f"event iteration did not converge at t = {t:g} (discrete variables keep changing)")
@@ -645,6 +650,19 @@ class _Hybrid:
             return np.array(_mapped(fun, n)(X, U, P if P.shape[1] == n else np.repeat(P[:, :1], n, 1), t[None, :]))
         # on parameters only (the MSL's range checks): one point tells, no loop solved n times
         return np.repeat(np.array(fun(X[:, :1], U[:, :1], P[:, :1], t[:1])), n, axis=1)
+
+
+def one_change(cur: np.ndarray, new: np.ndarray, nc: int) -> np.ndarray:
+    """``cur`` with only the first discrete value that ``new`` changes. Updating all at once,
+    an iteration can swing between two sets of values, each computed from the other (a
+    clutch's locked from startBackward and startBackward from the torque locked gives); one
+    change at a time, in the model's order, the rest are computed from it (as a tool that sorts
+    the discrete equations does) and the iteration settles."""
+    out = cur.copy()
+    changed = np.flatnonzero(new[nc:] != cur[nc:])
+    if changed.size:
+        out[nc + changed[0]] = new[nc + changed[0]]
+    return out
 
 
 @functools.lru_cache(maxsize=64)

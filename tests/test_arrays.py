@@ -126,3 +126,23 @@ def test_an_overlay_rewrites_only_the_text_it_was_written_for(tmp_path):
     (tmp_path / "again").mkdir()
     link_whole(tmp_path / "again" / "Modelica", lib)
     assert (tmp_path / "again" / "Modelica").is_symlink()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (MSL / "Modelica" / "package.mo").is_file(), reason=f"the MSL is not at {MSL}")
+def test_a_clutch_and_a_brake_stick_and_slip(monkeypatch):
+    """The MSL's Rotational Friction example: a clutch (J3 = 1, its friction torque
+    cgeo*fn_max*mu = 1*160*0.5 = 80 N.m) slips while the brake holds the rest of the drive,
+    then sticks. Its event iteration settles only when the discrete values are taken one at a
+    time (updated all at once, locked and startForward swing between two sets)."""
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    model = mcl.compile_model([], "Modelica.Mechanics.Rotational.Examples.Friction")
+    t = np.linspace(0.0, 3.0, 301)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    w = {n: res.states[:, model.ode.x_names.index(n)] for n in ("inertia1.w", "inertia2.w", "inertia3.w")}
+    slip = (t >= 0.8) & (t <= 1.4)
+    assert np.polyfit(t[slip], w["inertia3.w"][slip], 1)[0] == pytest.approx(-80.0, rel=5e-3)
+    assert np.abs(w["inertia1.w"][t >= 0.8]).max() < 1e-6          # braked
+    late = t >= 2.0
+    assert np.abs(w["inertia3.w"][late] - w["inertia2.w"][late]).max() < 1e-6    # the clutch sticks

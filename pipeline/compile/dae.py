@@ -271,6 +271,7 @@ class _Aliases:
         self.of_root: dict[int, set] = {}    # unknown -> candidate rows that (through aliases) read it
         self.waiting: dict[int, set] = {}    # unknown -> rows with a coefficient in it
         self.queue, self.queued = deque(), set()
+        self.modes = None                    # the discrete variables, pre() and the flags
 
     def run(self):
         dae = self.dae
@@ -379,7 +380,9 @@ class _Aliases:
             coef[root] = _add(coef[root], _mul(k, alpha))
             const = _add(const, _mul(k, beta))
         live = sorted(q for q in roots if q is not None and not _is_zero(coef[q]))
-        alg = [q for q in live if q >= self.nx]
+        # the unknown solved for needs a coefficient that cannot vanish with the model's mode
+        # (a clutch's ``if locked then sa else ...``: dividing by it is 0/0 in the other mode)
+        alg = [q for q in live if q >= self.nx and not self._switched(coef[q])]
         if not 1 <= len(live) <= 2 or not alg:
             return None
         e = alg[-1]
@@ -388,6 +391,14 @@ class _Aliases:
         if other:
             return e, (_div(-coef[other[0]], k_e), other[0], _div(-const, k_e))
         return e, (0.0, None, _div(-const, k_e))
+
+    def _switched(self, k) -> bool:
+        if not isinstance(k, ca.SX) or k.is_constant():
+            return False
+        if self.modes is None:
+            d = self.dae
+            self.modes = ca.vertcat(d.d, d.d_pre, d.x_pre, d.flags)
+        return self.modes.numel() > 0 and ca.depends_on(k, self.modes)
 
     def expr(self, e: int) -> ca.SX:
         """w[e] in the unknowns that stay."""

@@ -130,7 +130,7 @@ def _blocks(sp: ca.Sparsity, nz: int):
     return blocks
 
 
-def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
+def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes: ca.SX | None = None):
     """Solve 0 = g(z, args) for z block by block; returns (Function args -> z, #nonlinear blocks,
     the Newton form or None).
 
@@ -162,7 +162,10 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray):
         prev_mx = ca.vertcat(*[solved[c] for c in prev]) if prev else ca.MX(0, 1)
         prev_sx = ca.vertcat(*[newton[c] for c in prev]) if prev and newton is not None else ca.SX(0, 1)
         A = ca.jacobian(gk, zk)
-        small = len(cols) <= SYMBOLIC_SOLVE_MAX
+        # a block whose coefficients change with the model's mode (a clutch's locked: sa's
+        # coefficient is 0 or 1) is solved at run time: eliminated symbolically, its pivots
+        # would be chosen for one mode and divide by zero in another
+        small = len(cols) <= SYMBOLIC_SOLVE_MAX and not (modes is not None and ca.depends_on(A, modes))
         if not ca.depends_on(A, zk):
             b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
             if small:
@@ -280,7 +283,8 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     z_guess = np.array([to_orig.get(str(s), 0.0) for s in ca.vertsplit(zs)])
 
     t = semi["t"]
-    zfun, n_nl, newton = causalise(semi["alg"], zs, [xs, up, t], z_guess)
+    modes = ca.vertcat(*[dae.p[i] for i, n in enumerate(dae.p_names) if n.startswith("$")])
+    zfun, n_nl, newton = causalise(semi["alg"], zs, [xs, up, t], z_guess, modes)
     X, U, P, T = (ca.MX.sym(n, k) for n, k in
                   (("x", xs.numel()), ("u", nu), ("p", dae.p.numel()), ("t", 1)))
     UP = ca.vertcat(U, P)

@@ -133,6 +133,7 @@ typedef struct {
     int piv[NX + 1];
     /* event iteration work */
     double sv[NX + 1], cur[NX + 1], pre[NX + 1], nw[NX + 1], reinit[NX + 1], keep[NX + 1];
+    double seen[MAX_EVENT_ITERATIONS * ND + 1];   /* discrete values met since pre() changed */
     double flags[NF + 1], av[NA + 1];
     int due[NCLOCK + 1];
     const casadi_real** arg;
@@ -228,13 +229,26 @@ static int call_update(Model* m, const double* x, const double* u, double t, con
 }
 #endif
 
+/* Only the first discrete value that nw changes (engine_casadi.one_change): where updating all
+ * at once swings between sets of values, one change at a time lets the iteration settle. */
+static void one_change(const double* cur, double* nw) {
+    int kept = 0;
+    for (int i = NC; i < NX; i++)
+        if (nw[i] != cur[i]) { if (kept) nw[i] = cur[i]; kept = 1; }
+}
+
+static int met(const double* seen, int n, const double* d) {
+    for (int k = 0; k < n; k++) if (same(seen + k * ND, d, ND)) return 1;
+    return 0;
+}
+
 /* Modelica's event iteration at t with the flags in m->flags, on m->st.x. *changed gets bit 1
  * when a discrete value changed, bit 2 when a continuous state did (reinit). */
 static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
 #if HYBRID
     State* s = &m->st;
     double *cur = m->cur, *pre = m->pre, *nw = m->nw;
-    int has_reinit = 0;
+    int has_reinit = 0, nseen = 0;
     memcpy(cur, s->x, NX * sizeof(double));
     memcpy(pre, cur, NX * sizeof(double));
     for (int it = 0; it < MAX_EVENT_ITERATIONS; it++) {
@@ -246,6 +260,9 @@ static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
             if (!isfinite(nw[i])) { logmsg(m, fmi2Error, "event iteration gave non-finite values at t = %g", t); return fmi2Error; }
         if (!same(nw, cur, NC)) { memcpy(m->reinit, nw, NC * sizeof(double)); has_reinit = 1; }
         memcpy(nw, cur, NC * sizeof(double));      /* states keep their values until the rest settles */
+        memcpy(m->seen + nseen * ND, cur + NC, ND * sizeof(double));
+        nseen++;
+        if (met(m->seen, nseen, nw + NC)) one_change(cur, nw);
         if (same(nw, cur, NX)) {
             if (same(cur, pre, NX)) {
                 if (!has_reinit) {
@@ -259,6 +276,7 @@ static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
                 has_reinit = 0;
             }
             memcpy(pre, cur, NX * sizeof(double));
+            nseen = 0;
             continue;
         }
         memcpy(cur, nw, NX * sizeof(double));
