@@ -5,7 +5,7 @@ rumoca's own simulator where that runs (every common state within 0.2% of its ra
 Each model runs in a fresh process with a time limit, so one hang or crash costs one row.
 Prints a table and the count; ``--json`` keeps the rows.
 
-    python benchmarks/msl_sweep.py [--msl DIR] [--only SUBSTRING] [--fmu] [--json PATH]
+    python benchmarks/msl_sweep.py [--msl DIR] [--only SUBSTRING] [--models FILE] [--fmu] [--json PATH]
 """
 from __future__ import annotations
 
@@ -159,13 +159,16 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--msl", default=str(ROOT.parent / "shared" / "msl"))
     ap.add_argument("--only", default="", help="run the models whose name contains this")
+    ap.add_argument("--models", default=None, help="a file of other models to run, one per line "
+                    "(names below Modelica., as in the list above)")
     ap.add_argument("--fmu", action="store_true", help="also build and validate each FMU")
     ap.add_argument("--limit", type=float, default=600.0, help="seconds per model")
     ap.add_argument("--json", default=None)
     args = ap.parse_args()
     msl = Path(args.msl)
     rows = []
-    for short in MODELS:
+    models = Path(args.models).read_text().split() if args.models else MODELS
+    for short in models:
         if args.only and args.only not in short:
             continue
         row = run_one(msl, "Modelica." + short, args.fmu, args.limit)

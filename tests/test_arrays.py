@@ -146,3 +146,22 @@ def test_a_clutch_and_a_brake_stick_and_slip(monkeypatch):
     assert np.abs(w["inertia1.w"][t >= 0.8]).max() < 1e-6          # braked
     late = t >= 2.0
     assert np.abs(w["inertia3.w"][late] - w["inertia2.w"][late]).max() < 1e-6    # the clutch sticks
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not (MSL / "Modelica" / "package.mo").is_file(), reason=f"the MSL is not at {MSL}")
+def test_massless_pipes_at_zero_flow_keep_a_temperature(monkeypatch):
+    """FluidHeatFlow's TwoMass: a pump started from zero flow through massless pipes. At zero
+    flow a junction's enthalpy is multiplied only by flows (semiLinear), so its linear block is
+    singular; mcl keeps its start value there instead of dividing 0 by 0 (rumoca's own
+    simulator fails on it). The two masses then cool towards the ambient, never past it."""
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    model = mcl.compile_model([], "Modelica.Thermal.FluidHeatFlow.Examples.TwoMass")
+    t = np.linspace(0.0, 1.5, 151)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    for name, start in (("heatCapacitor1.T", 313.15), ("heatCapacitor2.T", 333.15)):
+        T = res.states[:, model.ode.x_names.index(name)]
+        assert T[0] == pytest.approx(start)
+        assert np.all((T > 293.15) & (T <= start + 1e-9))
+        assert T[-1] < start - 0.8 * (start - 293.15)

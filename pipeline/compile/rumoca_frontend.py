@@ -1038,7 +1038,7 @@ class _Translator:
         before = len(self.fn_asserts)
         run = _Run(self, f, bound)
         run.block(f.get("statements", []))
-        found, self.fn_asserts = self.fn_asserts[before:], self.fn_asserts[:before]
+        found, self.fn_asserts = _merged(self.fn_asserts[before:]), self.fn_asserts[:before]
         n_out = len(f.get("outputs", [])) or 1
         outs = [run.latest.get(j, ca.SX(0, 1)) for j in range(n_out)]
         name = f"fn{len(self._compiled)}"
@@ -1047,6 +1047,16 @@ class _Translator:
         self._unassigned[name] = {j for j in range(n_out) if j not in run.latest}
         self._compiled[key] = compiled
         return compiled, symbolic
+
+
+def _merged(asserts: list) -> list:
+    """One check per assert message: an assert met in every pass of a loop, or in a function
+    called at each (a medium's), would otherwise be an output of its own each time."""
+    out: dict = {}
+    for violated, level, message in asserts:
+        key = (level, message)
+        out[key] = violated if key not in out else ca.logic_or(out[key], violated)
+    return [(v, level, message) for (level, message), v in out.items()]
 
 
 class _Run:

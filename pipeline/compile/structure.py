@@ -170,6 +170,8 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
             if small:
                 sol_sx = -ca.solve(A, b) if len(cols) > 1 else -b / A
+                if ca.depends_on(A, ca.vertcat(zprev, args[0], args[2], *([modes] if modes is not None else []))):
+                    sol_sx = _or_nearest(sol_sx, A, b, z_guess[cols])     # coefficients that change in a run
                 f = ca.Function(f"blk{k}", [zprev, *args], [sol_sx])
                 sol = f(prev_mx, *mx_args)
                 sol_newton = f(prev_sx, *args) if newton is not None else None
@@ -203,6 +205,18 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         form = (ca.Function("loops", mx_args, [ca.vertcat(*zl_sols)]),
                 ca.Function("z_newton", [*args, ZL], [ca.vertcat(*[newton[c] for c in range(nz)])]))
     return ca.Function("zsol", mx_args, [zsol]), n_nonlinear, form
+
+
+def _or_nearest(sol: ca.SX, A: ca.SX, b: ca.SX, guess) -> ca.SX:
+    """``sol`` of A z + b = 0, or where A is singular (a junction of massless pipes at zero
+    flow: its enthalpy appears only multiplied by the flows) the least-squares solution nearest
+    the start values: the part of z the equations do not fix stays there, as nothing reads it
+    then but through a zero."""
+    g = ca.DM(guess)
+    scale = 1e-12 * (1 + ca.sumsqr(A))
+    nearest = g - ca.solve(ca.mtimes(A.T, A) + scale * ca.SX.eye(A.size2()), ca.mtimes(A.T, ca.mtimes(A, g) + b))
+    s = ca.sum1(sol)
+    return ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), sol, nearest)
 
 
 def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool = False) -> ca.MX:
