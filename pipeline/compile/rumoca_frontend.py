@@ -73,6 +73,27 @@ def _array(items: list) -> ca.SX:
     return ca.vertcat(*[_flat(i) for i in items]) if items else ca.SX(0, 1)
 
 
+def _grown(base: ca.SX, sels: list) -> ca.SX:
+    """``base`` extended with zeros to hold an element one past its end (an array a function
+    fills in order: ``for i in 1:n loop r[i] := ...``); other subscripts leave it as it is."""
+    def need(s):
+        return max(s) if isinstance(s, list) and s else s if isinstance(s, int) else 0
+
+    if len(sels) == 1 and base.size2() <= 1:
+        n = need(sels[0])
+        if n == base.size1() + 1:
+            return ca.vertcat(base, ca.SX.zeros(1, 1)) if base.numel() else ca.SX.zeros(1, 1)
+        return base
+    if len(sels) == 2:
+        rows, cols = max(base.size1(), need(sels[0])), max(base.size2(), need(sels[1]))
+        if (rows, cols) != base.shape and rows <= base.size1() + 1 and cols <= base.size2() + 1:
+            out = ca.SX.zeros(rows, cols)
+            if base.numel():
+                out[:base.size1(), :base.size2()] = base
+            return out
+    return base
+
+
 def _size(a, k=None):
     shape = (a.size1(),) if a.size2() == 1 else a.shape
     if k is None:
@@ -684,7 +705,10 @@ class _Translator:
             lhs, rhs = done[body["lhs"]], done[body["rhs"]]
             if op != "multiply":
                 lhs, rhs = _alike(lhs, rhs)
-            out = _BINARY[op](lhs, rhs)
+            try:
+                out = _BINARY[op](lhs, rhs)
+            except RuntimeError:          # CasADi's dimension mismatch
+                out = NotImplemented
             if out is NotImplemented:
                 self.refuse(f"operator {op!r} on values of shapes {getattr(lhs, 'shape', lhs)} and {getattr(rhs, 'shape', rhs)}")
             if op in _RELATIONS and bound is None and k in self.event_nodes and lhs.numel() == rhs.numel() == 1:
@@ -723,14 +747,16 @@ class _Translator:
         self.refuse(f"expression node '{kind}'")
 
     def unassigned(self, body: dict) -> ca.SX:
-        """A function's array read before it is assigned as a whole (filled element by element):
-        zeros of its declared size; a scalar read before any assignment is refused."""
+        """A function's array read before it is assigned as a whole: an empty array, which
+        assignments to its elements in order (a loop filling it) extend. Its declared size is
+        not used: it may depend on the call's arguments, and rumoca gives one size for all
+        calls. A scalar read before any assignment is refused."""
         f = self.functions[body["function"]]
         held = [*f.get("outputs", []), *f.get("locals", [])]
         dims = self.st["value_types"][held[body["value"]]["value_type"]].get("dimensions") or []
-        if not dims or not all(isinstance(n, int) and n >= 0 for n in dims) or len(dims) > 2:
+        if not dims or len(dims) > 2:
             self.refuse("a function variable read before it is assigned")
-        return ca.SX.zeros(dims[0], dims[1] if len(dims) == 2 else 1)
+        return ca.SX(0, 1)
 
     def strings_size(self, k: int) -> int | None:
         """``size(a, 1)`` of an array of strings (a medium's names): its length, which is all
@@ -901,7 +927,7 @@ class _Translator:
         """``a`` with ``a[i] := v``, ``m[i, :] := v`` (a function's assignment to a part)."""
         base, value = done[body["base"]], done[body["value"]]
         sels = self.selectors(k, body, done)
-        out = ca.SX(base)
+        out = _grown(ca.SX(base), sels)
         for cond, fixed in self._each_value(base, sels):
             rows, cols, _ = self._places(base, fixed)
             v = _flat(value)
