@@ -24,6 +24,9 @@ EXAMPLES = {
     "Modelica.Mechanics.Rotational.Examples.First": 1.0,
     "Modelica.Thermal.HeatTransfer.Examples.TwoMasses": 1.0,
     "Modelica.Blocks.Examples.PID_Controller": 4.0,
+    # tanks started by their level and temperature (T = H/(m*c)); pipes whose flow passes 0
+    "Modelica.Thermal.FluidHeatFlow.Examples.TwoTanks": 1.5,
+    "Modelica.Thermal.FluidHeatFlow.Examples.ParallelCooling": 1.0,
 }
 
 

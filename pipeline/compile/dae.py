@@ -381,7 +381,8 @@ class _Aliases:
             const = _add(const, _mul(k, beta))
         live = sorted(q for q in roots if q is not None and not _is_zero(coef[q]))
         # the unknown solved for needs a coefficient that cannot vanish with the model's mode
-        # (a clutch's ``if locked then sa else ...``: dividing by it is 0/0 in the other mode)
+        # or a condition (a clutch's ``if locked then sa else ...``, a flow's semiLinear:
+        # dividing by it is 0/0 in the other branch)
         alg = [q for q in live if q >= self.nx and not self._switched(coef[q])]
         if not 1 <= len(live) <= 2 or not alg:
             return None
@@ -393,12 +394,17 @@ class _Aliases:
         return e, (0.0, None, _div(-const, k_e))
 
     def _switched(self, k) -> bool:
+        """A coefficient that may be 0 where the model's mode or a condition says so (a
+        conditional, a discrete variable): no pivot."""
         if not isinstance(k, ca.SX) or k.is_constant():
             return False
         if self.modes is None:
             d = self.dae
             self.modes = ca.vertcat(d.d, d.d_pre, d.x_pre, d.flags)
-        return self.modes.numel() > 0 and ca.depends_on(k, self.modes)
+        if self.modes.numel() > 0 and ca.depends_on(k, self.modes):
+            return True
+        f = ca.Function("k", ca.symvar(k), [k])
+        return any(f.instruction_id(i) == ca.OP_IF_ELSE_ZERO for i in range(f.n_instructions()))
 
     def expr(self, e: int) -> ca.SX:
         """w[e] in the unknowns that stay."""

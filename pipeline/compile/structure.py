@@ -621,14 +621,18 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
     states to solve); at a singularity there (sqrt(x) at x = 0), a clear error naming the states,
     not a solve started where Newton's method cannot move."""
     J = jac(x0)
-    if np.all(np.isfinite(J)):
+    flat = lambda M: int(np.sum(~np.any(M != 0, axis=1)))    # equations that move with no state
+    if np.all(np.isfinite(J)) and not flat(J):
         return J
     # which equations determine which states is the same next to the singularity (a tank's
-    # T = H/(m*c) at a mass started at 0): read it there
+    # T = H/(m*c) at a mass started at 0, where T is NaN, or held at its start value by a
+    # singular linear block's fallback so that it moves with no state): read it there
     for scale in (1e-8, 1e-6, 1e-4):
         Jn = jac(x0 + scale * (1.0 + np.abs(x0)))
-        if np.all(np.isfinite(Jn)):
+        if np.all(np.isfinite(Jn)) and (not np.all(np.isfinite(J)) or flat(Jn) < flat(J)):
             return Jn
+    if np.all(np.isfinite(J)):
+        return J
     bad = sorted({names[j] for j in np.flatnonzero(~np.all(np.isfinite(J), axis=0)) if j < len(names)})
     raise ModelicaError("the initial equations have no finite derivative at the start values of "
                         f"{', '.join(bad[:5]) or 'the states'}: start {'them' if len(bad) > 1 else 'it'} "
