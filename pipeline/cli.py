@@ -407,7 +407,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--engine", help="engine by name: casadi (in-process) or fmu")
     p.add_argument("--compiler", help="compiler plugin by name, for Modelica sources")
     p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance, in (0, 1) (default 1e-6)")
-    p.add_argument("--atol", type=float, default=1e-8, help="absolute tolerance, > 0 (default 1e-8)")
+    p.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance, > 0 (default 1e-10)")
     p.add_argument("--time-limit", type=float, default=60.0, help="seconds before giving up, > 0 (default 60)")
     _force_option(p, "a result or plot")
     p.set_defaults(func=cmd_simulate)

@@ -310,3 +310,37 @@ def test_a_nanosecond_circuit_moves_and_a_discrete_start_reads_time(tmp_path):
         v = (1.0 if on else 0.0) + (v - (1.0 if on else 0.0)) * np.exp(-(b - a) / 1e-9)
     exact.append(v)
     assert np.max(np.abs(res.states[:, names.index("v")] - np.array(exact))) < 1e-4   # rtol 1e-6
+
+
+PULSE_EDGE = """
+model PulseEdge "a pulse defined at all times; a switch that holds its state and notes its edges"
+  discrete Real start(start = 0, fixed = true);
+  Boolean y;
+  Boolean off(start = true);
+  discrete Real tSwitch(start = -1, fixed = true);
+  output Real opened = if off then 1 else 0;
+  output Real switched = tSwitch;
+equation
+  when sample(0, 1) then
+    start = time;
+  end when;
+  y = time >= start and time < start + 0.5;   // rumoca lists no event for this relation
+  off = not y;                                // read by edge(): held between events
+  when edge(off) then
+    tSwitch = time;
+  end when;
+end PulseEdge;
+"""
+
+
+def test_a_pulse_edge_updates_a_held_switch(tmp_path):
+    """A relation in a discrete value's definition is an event: the pulse's falling edge at
+    0.5 s (between the clock's ticks) changes ``off`` and fires edge(off)."""
+    (tmp_path / "PulseEdge.mo").write_text(PULSE_EDGE)
+    model = compile_model([tmp_path / "PulseEdge.mo"], "PulseEdge")
+    t = np.linspace(0.0, 2.0, 9)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    phase = t % 1.0
+    np.testing.assert_array_equal(res.output("opened"), (phase >= 0.5).astype(float))
+    np.testing.assert_allclose(res.output("switched"), np.where(t < 0.5, -1.0, np.where(t < 1.5, 0.5, 1.5)))

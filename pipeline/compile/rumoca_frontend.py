@@ -611,6 +611,34 @@ class _Translator:
         # branch is dropped (a condition that turns constant), else the model is refused
         self.unbound = ca.SX.sym("$loop_index_outside_its_loop")
         self.unbound_span = None
+        # rumoca lists the event-generating relations of continuous equations only; those of a
+        # discrete value defined at all times (a pulse's ``time < pulseStart + Twidth``) are
+        # events too (``live``: translating such a value), unless inside noEvent()
+        self.live = 0
+        self._quiet = None
+
+    def live_sx(self, root: int) -> ca.SX:
+        """Node ``root``, a discrete value defined at all times: its relations are events."""
+        self.live += 1
+        try:
+            return self.sx(root)
+        finally:
+            self.live -= 1
+
+    @property
+    def quiet(self) -> set:
+        """The nodes inside noEvent() or smooth(), whose relations generate no events."""
+        if self._quiet is None:
+            stack = [o for k, n in enumerate(self.nodes) if isinstance(n, dict) and
+                     n.get("builtin", {}).get("builtin", "").split(".")[-1] in ("noEvent", "no_event", "smooth")
+                     for o in self.operands(k)]
+            self._quiet = set()
+            while stack:
+                k = stack.pop()
+                if k not in self._quiet:
+                    self._quiet.add(k)
+                    stack.extend(self.children(k))
+        return self._quiet
 
     def operands(self, k: int) -> list[int]:
         body = self.nodes[k][next(iter(self.nodes[k]))]
@@ -711,7 +739,8 @@ class _Translator:
                 out = NotImplemented
             if out is NotImplemented:
                 self.refuse(f"operator {op!r} on values of shapes {getattr(lhs, 'shape', lhs)} and {getattr(rhs, 'shape', rhs)}")
-            if op in _RELATIONS and bound is None and k in self.event_nodes and lhs.numel() == rhs.numel() == 1:
+            if op in _RELATIONS and bound is None and lhs.numel() == rhs.numel() == 1 and \
+                    (k in self.event_nodes or (self.live and k not in self.quiet)):
                 self.relations.append(lhs - rhs)
             return out
         if kind == "conditional":
@@ -1262,12 +1291,12 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             if i in pre_slot:
                 return _shaped(pre_slot[i], dims[i])
             if i in always:          # never changed at an event: pre() is the value
-                return tr.sx(always[i])
+                return tr.live_sx(always[i])
             tr.refuse(f"pre() of {variables[i]['name']}")
         if i in slot:
             return _shaped(slot[i], dims[i])
         if i in always:
-            return tr.sx(always[i])
+            return tr.live_sx(always[i])
         if role[i] == "constant":
             value = tr.sx(attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"])
             return _shaped(_flat(value), dims[i])
@@ -1342,7 +1371,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(_flat(coord("constant", i)))):
             exprs[n] = e
     for i, node in always.items():
-        exprs.setdefault(variables[i]["name"], bind(_flat(tr.sx(node))[0]))
+        exprs.setdefault(variables[i]["name"], bind(_flat(tr.live_sx(node))[0]))
     top = [i for i, v in enumerate(variables) if attrs[i].get("causality") == "output" and "." not in v["name"]]
     outputs = [n for i in top for n in _scalar_names(variables[i]["name"], dims[i])]
     units = {v["name"]: v["attributes"]["unit"] for v in variables if v["attributes"].get("unit")}
@@ -1588,7 +1617,8 @@ class _Events:
                 for target, v in zip(owner["targets"], b["values"]):
                     if target in branches:
                         self.tr.span = (v.get("provenance") or {}).get("span")
-                        branches[target].append((self.active(b["activation"]), self.tr.sx(v["value"])))
+                        value = (self.tr.live_sx if b.get("activation") == "always" else self.tr.sx)(v["value"])
+                        branches[target].append((self.active(b["activation"]), value))
         for eq in self.st.get("discrete_real_equations", []):
             self.tr.span = (eq.get("provenance") or {}).get("span")
             target, value = self._solved(eq["residual"], slot, held, variables)
