@@ -20,96 +20,14 @@ import casadi as ca
 import numpy as np
 
 from . import tables
+from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, shaped
 from .dae import Dae, check_balance, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
-def _int(a) -> int:
-    return int(round(float(a) if a.is_constant() else float(ca.evalf(a))))
-
-
-def _flat(a) -> ca.SX:
-    """An array as a column of its elements in Modelica's (row-major) order. Arrays keep their
-    shape while translated: a vector is a column, a matrix its rows and columns."""
-    a = ca.SX(a)
-    return ca.vec(a.T) if a.size2() > 1 else a
-
-
-def _shaped(v: ca.SX, dims) -> ca.SX:
-    """A variable's elements (row-major, as named) in the shape declared: a matrix for two
-    dimensions; a vector otherwise (arrays of three or more dimensions stay flattened)."""
-    if dims is not None and len(dims) == 2 and v.numel() == dims[0] * dims[1]:
-        return ca.reshape(v, dims[1], dims[0]).T
-    return v
-
-
-def _alike(a, b):
-    """Two arrays of one size and different shapes (a matrix and the same elements held
-    flattened: an array of three dimensions, a function's flattened output) as flat columns."""
-    if a.shape != b.shape and not a.is_scalar() and not b.is_scalar() and a.numel() == b.numel():
-        return _flat(a), _flat(b)
-    return a, b
-
-
-def _multiply(a, b):
-    """Modelica's ``*``: scaling, the scalar product of two vectors, matrix products."""
-    if a.is_scalar() or b.is_scalar():
-        return ca.times(a, b)
-    (ra, ka), (rb, kb) = a.shape, b.shape
-    if ka == 1 and kb == 1 and ra == rb:
-        return ca.dot(a, b)
-    if ka == 1 and ra == rb:                  # vector * matrix
-        return ca.mtimes(a.T, b).T
-    if ka == rb:
-        return ca.mtimes(a, b)
-    return NotImplemented
-
-
-def _array(items: list) -> ca.SX:
-    """``{a, b, ...}``: a vector of scalars, or the matrix whose rows are the vectors given."""
-    if len(items) > 1 and all(i.size2() == 1 and i.size1() > 1 for i in items) \
-            and len({i.size1() for i in items}) == 1:
-        return ca.horzcat(*items).T
-    return ca.vertcat(*[_flat(i) for i in items]) if items else ca.SX(0, 1)
-
-
-def _grown(base: ca.SX, sels: list) -> ca.SX:
-    """``base`` extended with zeros to hold an element one past its end (an array a function
-    fills in order: ``for i in 1:n loop r[i] := ...``); other subscripts leave it as it is."""
-    def need(s):
-        return max(s) if isinstance(s, list) and s else s if isinstance(s, int) else 0
-
-    if len(sels) == 1 and base.size2() <= 1:
-        n = need(sels[0])
-        if n == base.size1() + 1:
-            return ca.vertcat(base, ca.SX.zeros(1, 1)) if base.numel() else ca.SX.zeros(1, 1)
-        return base
-    if len(sels) == 2:
-        rows, cols = max(base.size1(), need(sels[0])), max(base.size2(), need(sels[1]))
-        if (rows, cols) != base.shape and rows <= base.size1() + 1 and cols <= base.size2() + 1:
-            out = ca.SX.zeros(rows, cols)
-            if base.numel():
-                out[:base.size1(), :base.size2()] = base
-            return out
-    return base
-
-
-def _size(a, k=None):
-    shape = (a.size1(),) if a.size2() == 1 else a.shape
-    if k is None:
-        return ca.SX(list(shape))
-    j = _int(k) - 1
-    return ca.SX(shape[j] if j < len(shape) else 1)
-
-
-def _dims(*n) -> tuple[int, int]:
-    n = [_int(k) for k in n]
-    return (n[0], 1) if len(n) == 1 else (n[0], int(np.prod(n[1:])))
-
-
 _UNARY = {"negate": lambda a: -a, "plus": lambda a: a, "not": ca.logic_not}
 _BINARY = {
-    "add": ca.plus, "subtract": ca.minus, "multiply": _multiply, "divide": ca.rdivide, "power": ca.power,
+    "add": ca.plus, "subtract": ca.minus, "multiply": multiply, "divide": ca.rdivide, "power": ca.power,
     "elementwise_add": ca.plus, "elementwise_subtract": ca.minus, "elementwise_multiply": ca.times,
     "elementwise_divide": ca.rdivide, "elementwise_power": ca.power,
     "greater": ca.gt, "greater_equal": ca.ge, "less": ca.lt, "less_equal": ca.le, "equal": ca.eq,
@@ -124,21 +42,21 @@ _FUNCTIONS = {
     "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh, "tanh": ca.tanh, "exp": ca.exp, "log": ca.log,
     "log10": ca.log10, "sqrt": ca.sqrt, "abs": ca.fabs, "sign": ca.sign, "floor": ca.floor,
     "ceil": ca.ceil, "min": lambda a, *b: ca.fmin(a, b[0]) if b else ca.mmin(a),
-    "max": lambda a, *b: ca.fmax(a, b[0]) if b else ca.mmax(a), "sum": lambda a: ca.sum1(_flat(a)), "size": _size,
-    "ones": lambda *n: ca.SX.ones(*_dims(*n)), "zeros": lambda *n: ca.SX.zeros(*_dims(*n)),
-    "fill": lambda v, *n: ca.repmat(v, *_dims(*n)),
-    "scalar": lambda a: a[0], "vector": _flat,
+    "max": lambda a, *b: ca.fmax(a, b[0]) if b else ca.mmax(a), "sum": lambda a: ca.sum1(flat(a)), "size": modelica_size,
+    "ones": lambda *n: ca.SX.ones(*dims_of(*n)), "zeros": lambda *n: ca.SX.zeros(*dims_of(*n)),
+    "fill": lambda v, *n: ca.repmat(v, *dims_of(*n)),
+    "scalar": lambda a: a[0], "vector": flat,
     # [a; b] and [a, b]: scalars and vectors are promoted to one-column matrices
     "promoted_cat1": lambda *a: ca.vertcat(*a), "promoted_cat2": lambda *a: ca.horzcat(*a),
-    "product": lambda a: functools.reduce(ca.times, ca.vertsplit(_flat(a)), ca.SX(1)), "noEvent": lambda a: a, "no_event": lambda a: a, "smooth": lambda _o, a: a,
+    "product": lambda a: functools.reduce(ca.times, ca.vertsplit(flat(a)), ca.SX(1)), "noEvent": lambda a: a, "no_event": lambda a: a, "smooth": lambda _o, a: a,
     "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.sign(a / b) * ca.floor(ca.fabs(a / b)),   # truncation toward zero
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
-    "identity": lambda n: ca.SX.eye(_int(n)), "transpose": lambda a: a.T,
-    "cross": lambda a, b: ca.cross(_flat(a), _flat(b)), "skew": lambda a: ca.skew(_flat(a)),
-    "outerProduct": lambda a, b: ca.mtimes(_flat(a), _flat(b).T), "diagonal": lambda a: ca.diag(_flat(a)),
+    "identity": lambda n: ca.SX.eye(as_int(n)), "transpose": lambda a: a.T,
+    "cross": lambda a, b: ca.cross(flat(a), flat(b)), "skew": lambda a: ca.skew(flat(a)),
+    "outerProduct": lambda a, b: ca.mtimes(flat(a), flat(b).T), "diagonal": lambda a: ca.diag(flat(a)),
     "symmetric": lambda a: ca.triu(a) + ca.triu(a, False).T, "ndims": lambda a: ca.SX(1 if a.size2() == 1 else 2),
-    "linspace": lambda a, b, n: a + (b - a) * ca.SX(np.linspace(0, 1, _int(n))),
+    "linspace": lambda a, b, n: a + (b - a) * ca.SX(np.linspace(0, 1, as_int(n))),
     "matrix": lambda a: a, "linear_solve": lambda a, b: ca.solve(a, b),
 }
 _FUNCTIONS["outer_product"] = _FUNCTIONS["outerProduct"]
@@ -732,7 +650,7 @@ class _Translator:
                 self.refuse(f"operator '{op}'")
             lhs, rhs = done[body["lhs"]], done[body["rhs"]]
             if op != "multiply":
-                lhs, rhs = _alike(lhs, rhs)
+                lhs, rhs = alike(lhs, rhs)
             try:
                 out = _BINARY[op](lhs, rhs)
             except RuntimeError:          # CasADi's dimension mismatch
@@ -747,7 +665,7 @@ class _Translator:
             ops = [done[o] for o in self.operands(k)]
             out = ops[-1]   # if c1 then a1 elseif c2 then a2 ... else b
             for j in range(len(ops) - 3, -1, -2):
-                out = ca.if_else(ops[j], *_alike(ops[j + 1], out))
+                out = ca.if_else(ops[j], *alike(ops[j + 1], out))
             return out
         if kind == "builtin":
             n = self.strings_size(k)
@@ -757,9 +675,9 @@ class _Translator:
         if kind == "call":
             return self.call_function(body, [done[o] for o in self.operands(body.get("owner", k))])
         if kind == "array":
-            return _array([done[o] for o in self.operands(k)])
+            return array_of([done[o] for o in self.operands(k)])
         if kind == "record":                 # its fields flattened, in order
-            return ca.vertcat(*[_flat(done[o]) for o in self.operands(k)])
+            return ca.vertcat(*[flat(done[o]) for o in self.operands(k)])
         if kind == "field":
             return self.field(body, done)
         if kind == "index":
@@ -825,8 +743,8 @@ class _Translator:
             inner = {**bound, "binders": {**bound["binders"], **{(d, i): v for (d, i, _), v in zip(binders, values)}}}
             out.append(self.sx(body["body"], inner))
         if len(binders) == 2 and out and all(o.is_scalar() for o in out):   # {a[i, j] for i in .., j in ..}
-            return _shaped(ca.vertcat(*out), [len(binders[0][2]), len(binders[1][2])])
-        return _array(out)
+            return shaped(ca.vertcat(*out), [len(binders[0][2]), len(binders[1][2])])
+        return array_of(out)
 
     def range_values(self, body: dict, done: dict) -> list[float]:
         """``start:step:stop`` with constant bounds, as its values."""
@@ -863,7 +781,7 @@ class _Translator:
         if kind != "index":
             self.refuse(f"a '{kind}' subscript")
         i = done[node]
-        return _int(i) if i.is_constant() else i
+        return as_int(i) if i.is_constant() else i
 
     def _places(self, base: ca.SX, sels: list) -> tuple[list, list, list[bool]]:
         """Rows and columns (0-based) that constant subscripts select, and which dimensions
@@ -928,11 +846,11 @@ class _Translator:
         if not all(1 <= j <= n for p, n in zip(picked, dims) for j in p):
             self.refuse(f"a subscript outside an array of dimensions {dims}")
         strides = [int(np.prod(dims[j + 1:])) for j in range(len(dims))]
-        flat = _flat(base)
-        out = ca.vertcat(*[flat[sum((j - 1) * st for j, st in zip(at, strides))] for at in itertools.product(*picked)]) \
+        elements = flat(base)
+        out = ca.vertcat(*[elements[sum((j - 1) * st for j, st in zip(at, strides))] for at in itertools.product(*picked)]) \
             if all(picked) else ca.SX(0, 1)
         kept = [len(p) for p, s in zip(picked, sels) if isinstance(s, list) or s is None]
-        return _shaped(out, kept) if len(kept) == 2 else out
+        return shaped(out, kept) if len(kept) == 2 else out
 
     def declared_dims(self, k: int) -> list[int] | None:
         """The declared dimensions of node ``k``, a variable of the model or of a function."""
@@ -956,10 +874,10 @@ class _Translator:
         """``a`` with ``a[i] := v``, ``m[i, :] := v`` (a function's assignment to a part)."""
         base, value = done[body["base"]], done[body["value"]]
         sels = self.selectors(k, body, done)
-        out = _grown(ca.SX(base), sels)
+        out = grown(ca.SX(base), sels)
         for cond, fixed in self._each_value(base, sels):
             rows, cols, _ = self._places(base, fixed)
-            v = _flat(value)
+            v = flat(value)
             if v.numel() not in (1, len(rows) * len(cols)):
                 self.refuse("an assignment to a part of an array of another size")
             new = ca.SX(out) if cond is not None else out
@@ -1006,14 +924,14 @@ class _Translator:
         fields = self.st["value_types"][vt].get("record_fields", [])
         start = sum(self.size_of(f["value_type"]) for f in fields[: body["field"]])
         n = self.size_of(fields[body["field"]]["value_type"])
-        value = _flat(done[body["base"]])
+        value = flat(done[body["base"]])
         if value.numel() < start + n:
             self.refuse("a record field outside its record")
-        return _shaped(value[start:start + n], self.st["value_types"][fields[body["field"]]["value_type"]].get("dimensions"))
+        return shaped(value[start:start + n], self.st["value_types"][fields[body["field"]]["value_type"]].get("dimensions"))
 
     def function_assert(self, body: dict, bound: dict):
         """An assert in a function: checked like the model's own (a failed result naming it)."""
-        ok = _flat(self.sx(body["condition"], bound))
+        ok = flat(self.sx(body["condition"], bound))
         lit = self.nodes[body["message"]] if body.get("message") is not None else None
         text = lit.get("literal", {}).get("string") if isinstance(lit, dict) else None
         where = self.located.span(self.span) if self.located is not None else None
@@ -1056,7 +974,7 @@ class _Translator:
     def call_table(self, symbol: str, args):
         """A lookup in one of the MSL's tables (the C library's function, as an expression)."""
         ident = args[0] if args else None
-        key = _int(ident) if ident is not None and ident.is_constant() else None
+        key = as_int(ident) if ident is not None and ident.is_constant() else None
         if key not in self.table_records:
             self.refuse(f"table function {symbol} on a table that is not a constant of the model")
         try:
@@ -1289,17 +1207,17 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             tr.refuse(f"a reference of kind '{kind}'")
         if kind.startswith("pre_"):
             if i in pre_slot:
-                return _shaped(pre_slot[i], dims[i])
+                return shaped(pre_slot[i], dims[i])
             if i in always:          # never changed at an event: pre() is the value
                 return tr.live_sx(always[i])
             tr.refuse(f"pre() of {variables[i]['name']}")
         if i in slot:
-            return _shaped(slot[i], dims[i])
+            return shaped(slot[i], dims[i])
         if i in always:
             return tr.live_sx(always[i])
         if role[i] == "constant":
             value = tr.sx(attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"])
-            return _shaped(_flat(value), dims[i])
+            return shaped(flat(value), dims[i])
         tr.refuse(f"variable {variables[i]['name']} ({kind})")
 
     tr.coord = coord
@@ -1307,11 +1225,11 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     tr.table_records = _table_records(ir, variables, objects, attrs, tr)
     eqs = [_residual(op, tr, model) for op in st["continuous_equation_operations"]]
     eqs += [der[i] for i in sorted(init_params)]       # d/dt of an initialisation parameter is 0
-    residual = ca.vertcat(*[_flat(e) for e in eqs]) if eqs else ca.SX(0, 1)
+    residual = ca.vertcat(*[flat(e) for e in eqs]) if eqs else ca.SX(0, 1)
     check_balance(residual, x.numel(), z.numel(), model)
-    init = [_flat(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
+    init = [flat(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
     # an algebraic variable with fixed = true starts at its start value (inertia.a(fixed=true))
-    init += [_flat(slot[i]) - _flat(tr.sx(attrs[i]["start"])) for i in index["z"]
+    init += [flat(slot[i]) - flat(tr.sx(attrs[i]["start"])) for i in index["z"]
              if attrs[i].get("fixed") in ([True], True) and attrs[i]["start"] is not None]
     init_residual = ca.vertcat(*init) if init else ca.SX(0, 1)
     d_update = events.discrete_update(index["d"], slot, pre_slot, size, variables)
@@ -1325,7 +1243,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     def value_of(i, key_order=("binding", "start")):
         node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)
         e = tr.sx(node) if node is not None else ca.SX.zeros(size[i], 1)
-        e = _flat(e)
+        e = flat(e)
         return ca.repmat(e, size[i], 1) if e.numel() == 1 and size[i] > 1 else e
 
     # parameters: an element whose binding depends on other parameters is a dependent one
@@ -1368,10 +1286,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     for i in index["c"]:
         if i in strings:
             continue        # no number to name (a table's name)
-        for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(_flat(coord("constant", i)))):
+        for n, e in zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(flat(coord("constant", i)))):
             exprs[n] = e
     for i, node in always.items():
-        exprs.setdefault(variables[i]["name"], bind(_flat(tr.live_sx(node))[0]))
+        exprs.setdefault(variables[i]["name"], bind(flat(tr.live_sx(node))[0]))
     top = [i for i, v in enumerate(variables) if attrs[i].get("causality") == "output" and "." not in v["name"]]
     outputs = [n for i in top for n in _scalar_names(variables[i]["name"], dims[i])]
     units = {v["name"]: v["attributes"]["unit"] for v in variables if v["attributes"].get("unit")}
@@ -1397,7 +1315,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         tr.span = (init_value.get("provenance") or {}).get("span")
         if i not in offsets:
             tr.refuse(f"an initial value of pre({variables[i]['name']}), which is not held between events")
-        v = _flat(bind(_flat(tr.sx(init_value["value"]))))
+        v = flat(bind(flat(tr.sx(init_value["value"]))))
         for j in range(size[i]):
             e = v[j] if v.numel() > 1 else v[0]
             d_start[offsets[i] + j] = e if not ca.depends_on(e, others) else 0
@@ -1439,7 +1357,7 @@ def _table_records(ir: dict, variables, objects: set[str], attrs, tr) -> dict:
         binding = attrs[index[name]]["binding"] if name in index else None
         ident = tr.sx(binding) if binding is not None else None
         if ident is not None and ident.is_constant():
-            owner[_int(ident)] = name.rpartition(".")[0]
+            owner[as_int(ident)] = name.rpartition(".")[0]
 
     def parameter(prefix, name, default):
         i = index.get(f"{prefix}.{name}")
@@ -1627,9 +1545,9 @@ class _Events:
         for i in held:
             new = pre_slot[i]
             for act, val in reversed(branches[i]):
-                new = ca.if_else(act, _flat(val) if val.numel() == size[i] else ca.repmat(val, size[i], 1), new)
-            out.append(_flat(new))
-        out += [_flat(self.value(c)) for c in sorted(self.memory)]
+                new = ca.if_else(act, flat(val) if val.numel() == size[i] else ca.repmat(val, size[i], 1), new)
+            out.append(flat(new))
+        out += [flat(self.value(c)) for c in sorted(self.memory)]
         return ca.vertcat(*out) if out else ca.SX(0, 1)
 
     def _solved(self, residual: int, slot, held, variables):
@@ -1669,7 +1587,7 @@ class _Events:
             if i not in offsets:
                 self.tr.refuse(f"reinit() of {variables[i]['name']}, which is not a state")
             act = self.active({"when": {"trigger": a["trigger"], "guard": a["guard"]}})
-            val = _flat(self.tr.sx(body["value"]))
+            val = flat(self.tr.sx(body["value"]))
             for j in range(slot[i].numel()):
                 k = offsets[i] + j
                 new[k] = ca.if_else(act, val[j] if val.numel() > 1 else val[0], new[k])
@@ -1689,7 +1607,7 @@ class _Events:
                 level, violated = "warning", ca.logic_not(self.tr.sx(body["condition"]))
             else:
                 self.tr.refuse(f"event action '{kind}'")
-            out.append(_flat(violated)[0])
+            out.append(flat(violated)[0])
             info.append((level, self._message(body.get("message"), a)))
         return (ca.vertcat(*out) if out else ca.SX(0, 1)), info
 
@@ -1718,17 +1636,17 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
     kind = next(iter(op))
     tr.span = ((op[kind].get("provenance") if isinstance(op[kind], dict) else None) or {}).get("span")
     if kind == "residual":
-        return _flat(tr.sx(op[kind]["residual"]))
+        return flat(tr.sx(op[kind]["residual"]))
     if kind != "structured":
         raise UnsupportedConstruct(f"unsupported in {model}: equation of kind '{kind}'")
     eq = op[kind]
     if eq["scalar_view"] == "RowMajorProjection":      # an array equation: its elements
-        return ca.vertcat(*[_flat(tr.sx(b)) for b in eq["bodies"]])
+        return ca.vertcat(*[flat(tr.sx(b)) for b in eq["bodies"]])
     binders = tr.binders(eq["domain"])
     rows = []
     for values in itertools.product(*[r for _, _, r in binders]):
         bound = {"params": {}, "values": {}, "binders": {(dd, i): v for (dd, i, _), v in zip(binders, values)}}
-        rows += [_flat(tr.sx(b, bound)) for b in eq["bodies"]]
+        rows += [flat(tr.sx(b, bound)) for b in eq["bodies"]]
     return ca.vertcat(*rows) if rows else ca.SX(0, 1)
 
 
