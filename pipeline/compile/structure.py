@@ -95,6 +95,13 @@ def reduce_index(dae: Dae):
     impl = dict(x_impl=dae.x, dx_impl=dae.dx, z=dae.z, alg=dae.residual, t=dae.t, p=up)
     try:
         red, stats = ca.dae_reduce_index(impl, {})
+    except RuntimeError:
+        # CasADi's slips where a variable is differentiated twice (a joint's angle in a
+        # multibody chain): the same algorithm, assembled by variable
+        from .pantelides import reduce_index as pantelides
+
+        red, stats = pantelides(impl)
+    try:
         semi, state_to_orig, _phi = ca.dae_map_semi_expl(impl, red)
     except RuntimeError as exc:
         raise ModelicaError(f"index reduction failed (structurally singular model?): "
@@ -620,20 +627,28 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
     """The initial system's Jacobian at the start values ``x0`` (it chooses which equations and
     states to solve); at a singularity there (sqrt(x) at x = 0), a clear error naming the states,
     not a solve started where Newton's method cannot move."""
-    J = jac(x0)
+    def at(x):
+        try:
+            return jac(x)
+        except RuntimeError:          # a loop's solve inside fails there: no numbers at all
+            return None
+
+    ok = lambda M: M is not None and bool(np.all(np.isfinite(M)))
     flat = lambda M: int(np.sum(~np.any(M != 0, axis=1)))    # equations that move with no state
-    if np.all(np.isfinite(J)) and not flat(J):
+    J = at(x0)
+    if ok(J) and not flat(J):
         return J
     # which equations determine which states is the same next to the singularity (a tank's
     # T = H/(m*c) at a mass started at 0, where T is NaN, or held at its start value by a
     # singular linear block's fallback so that it moves with no state): read it there
     for scale in (1e-8, 1e-6, 1e-4):
-        Jn = jac(x0 + scale * (1.0 + np.abs(x0)))
-        if np.all(np.isfinite(Jn)) and (not np.all(np.isfinite(J)) or flat(Jn) < flat(J)):
+        Jn = at(x0 + scale * (1.0 + np.abs(x0)))
+        if ok(Jn) and (not ok(J) or flat(Jn) < flat(J)):
             return Jn
-    if np.all(np.isfinite(J)):
+    if ok(J):
         return J
-    bad = sorted({names[j] for j in np.flatnonzero(~np.all(np.isfinite(J), axis=0)) if j < len(names)})
+    bad = [] if J is None else sorted({names[j] for j in np.flatnonzero(~np.all(np.isfinite(J), axis=0))
+                                       if j < len(names)})
     raise ModelicaError("the initial equations have no finite derivative at the start values of "
                         f"{', '.join(bad[:5]) or 'the states'}: start {'them' if len(bad) > 1 else 'it'} "
                         "away from the singularity")
