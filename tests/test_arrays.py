@@ -165,3 +165,37 @@ def test_massless_pipes_at_zero_flow_keep_a_temperature(monkeypatch):
         assert T[0] == pytest.approx(start)
         assert np.all((T > 293.15) & (T <= start + 1e-9))
         assert T[-1] < start - 0.8 * (start - 293.15)
+
+
+VECTORISED = """
+function sq "a function of scalars"
+  input Real x;
+  input Real c;
+  output Real y;
+algorithm
+  y := x*x + c;
+end sq;
+
+model Vectorised
+  parameter Real v[2] = {2.0, 4.0};
+  Real s[2](each start = 1.0, each fixed = true);
+  output Real y[3] = sq({1.0, 2.0, 3.0}, 1.0);
+  output Real w[2] = sq(v, 0.5);
+equation
+  der(s) = -sq(s, 0.0);     // each s' = -s^2: s(t) = 1/(1 + t)
+end Vectorised;
+"""
+
+
+def test_a_function_of_scalars_called_on_a_vector_applies_to_each_element(tmp_path):
+    """Modelica's vectorised call: f(v) is {f(v[i])} (rumoca writes it as a comprehension;
+    inside f, x*x of a vector would be a scalar product)."""
+    (tmp_path / "Vectorised.mo").write_text(VECTORISED)
+    model = mcl.compile_model([tmp_path / "Vectorised.mo"], "Vectorised")
+    t = np.array([0.0, 1.0])
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((2, 0)), []), t_out=t)
+    assert res.ok, res.reason
+    out = dict(zip(res.output_names, res.outputs[0]))
+    np.testing.assert_allclose([out[f"y[{k}]"] for k in (1, 2, 3)], [2.0, 5.0, 10.0])
+    np.testing.assert_allclose([out["w[1]"], out["w[2]"]], [4.5, 16.5])
+    np.testing.assert_allclose(res.states[-1], [0.5, 0.5], rtol=1e-5)

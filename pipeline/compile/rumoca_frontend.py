@@ -534,6 +534,7 @@ class _Translator:
         # events too (``live``: translating such a value), unless inside noEvent()
         self.live = 0
         self._quiet = None
+        self.projected: set = set()       # domains of the array equation being translated whole
 
     def live_sx(self, root: int) -> ca.SX:
         """Node ``root``, a discrete value defined at all times: its relations are events."""
@@ -737,7 +738,8 @@ class _Translator:
         """``{f(i) for i in 1:n}``: the body at each value of the domain's binders (row-major);
         binders of an enclosing loop keep the values they have."""
         bound = bound or {"params": {}, "values": {}, "binders": {}}
-        binders = [b for b in self.binders(body["domain"]) if (b[0], b[1]) not in bound["binders"]]
+        binders = [b for b in self.binders(body["domain"]) if (b[0], b[1]) not in bound["binders"]
+                   and b[0] not in self.projected]
         out = []
         for values in itertools.product(*[r for _, _, r in binders]):
             inner = {**bound, "binders": {**bound["binders"], **{(d, i): v for (d, i, _), v in zip(binders, values)}}}
@@ -1641,7 +1643,13 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
         raise UnsupportedConstruct(f"unsupported in {model}: equation of kind '{kind}'")
     eq = op[kind]
     if eq["scalar_view"] == "RowMajorProjection":      # an array equation: its elements
-        return ca.vertcat(*[flat(tr.sx(b)) for b in eq["bodies"]])
+        # translated as whole arrays: a comprehension in it does not run over the equation's
+        # own domain, which rumoca gives as its parent
+        tr.projected = {d for d, _, _ in tr.binders(eq["domain"])} if eq.get("domain") is not None else set()
+        try:
+            return ca.vertcat(*[flat(tr.sx(b)) for b in eq["bodies"]])
+        finally:
+            tr.projected = set()
     binders = tr.binders(eq["domain"])
     rows = []
     for values in itertools.product(*[r for _, _, r in binders]):
