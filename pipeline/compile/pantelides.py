@@ -142,7 +142,7 @@ def reduce_index(impl: dict) -> tuple[dict, dict]:
                 k = parent[k]
             explicit += [at[k] for k in chain[1:]]
     explicit = sorted(set(explicit))
-    implicit = [k for k in range(len(xs)) if k not in set(explicit)]
+    implicit = sorted(set(range(len(xs))) - set(explicit))
     zs = ca.vertsplit(z)
     z_new = [zs[i - 2 * nx] for i in range(2 * nx, V.numel()) if var_order[i] == 0 and graph.der[i] < 0]
     pick = lambda items, idx: ca.vertcat(*[items[k] for k in idx]) if idx else ca.SX(0, 1)

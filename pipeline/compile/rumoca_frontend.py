@@ -799,8 +799,6 @@ class _Translator:
                 self.refuse(f"subscript {picked} outside an array of {n}")
             out.append([j - 1 for j in picked])
             keep.append(isinstance(s, list) or s is None)
-        if len(sels) == 2 and dims[1] == 1 and sels[1] == 1:
-            keep[1] = False
         return out[0], out[1], keep
 
     def _each_value(self, base: ca.SX, sels: list):
@@ -831,8 +829,9 @@ class _Translator:
             value = base[rows, cols]
             if keep == [False, True]:
                 value = value.T          # a row of a matrix: a vector
-            out = value if cond is None else (ca.if_else(cond, value, out) if out is not None
-                                             else ca.if_else(cond, value, ca.SX.zeros(*value.shape)))
+            if cond is None:
+                return value
+            out = ca.if_else(cond, value, ca.SX.zeros(*value.shape) if out is None else out)
         return out
 
     def element_nd(self, node: int, base: ca.SX, sels: list) -> ca.SX:
@@ -859,16 +858,12 @@ class _Translator:
         node = self.nodes[k]
         body = node.get("coordinate") if isinstance(node, dict) else None
         vt = None
-        if isinstance(body, dict):
+        if isinstance(body, dict) and "function_parameter" not in body:
             (ck, idx), = body.items()
-            if ck == "function_parameter":
-                vt = self.functions[idx["function"]]["parameters"][idx["ordinal"]]["value_type"]
-            elif ck.removeprefix("pre_") in _VARIABLE_KINDS and isinstance(idx, int):
+            if ck.removeprefix("pre_") in _VARIABLE_KINDS and isinstance(idx, int):
                 vt = self.st["variables"][idx]["value_type"]
-        elif isinstance(node, dict) and "function_value" in node:
-            fv = node["function_value"]
-            f = self.functions[fv["function"]]
-            vt = [*f.get("outputs", []), *f.get("locals", [])][fv["value"]]["value_type"]
+        elif isinstance(body, dict) or (isinstance(node, dict) and "function_value" in node):
+            vt = self.value_type(k)
         dims = self.st["value_types"][vt].get("dimensions") if vt is not None else None
         return dims if dims and all(isinstance(n, int) and n >= 0 for n in dims) else None
 
@@ -896,9 +891,10 @@ class _Translator:
             n *= sum(self.size_of(f["value_type"]) for f in t.get("record_fields", []))
         return n
 
-    def record_type(self, k: int) -> int:
-        """The value type of node ``k``, a record value: a call's output, a constructor, a
-        function's parameter or variable, a field of one, either branch of a conditional."""
+    def value_type(self, k: int) -> int:
+        """The value type of node ``k`` (a record value, an array of a function): a call's
+        output, a constructor, a function's parameter or variable, a field of one, either
+        branch of a conditional."""
         node = self.nodes[k]
         kind = next(iter(node)) if isinstance(node, dict) else node
         body = node[kind] if isinstance(node, dict) else None
@@ -914,15 +910,15 @@ class _Translator:
             ref = body["function_parameter"]
             return self.functions[ref["function"]]["parameters"][ref["ordinal"]]["value_type"]
         if kind == "field":
-            fields = self.st["value_types"][self.record_type(body["base"])].get("record_fields", [])
+            fields = self.st["value_types"][self.value_type(body["base"])].get("record_fields", [])
             return fields[body["field"]]["value_type"]
         if kind == "conditional":
-            return self.record_type(self.operands(k)[1])
+            return self.value_type(self.operands(k)[1])
         self.refuse(f"a record field of a '{kind}' expression")
 
     def field(self, body: dict, done: dict):
         """Field ``body["field"]`` of a record value (a record-valued call or constructor)."""
-        vt = self.record_type(body["base"])
+        vt = self.value_type(body["base"])
         fields = self.st["value_types"][vt].get("record_fields", [])
         start = sum(self.size_of(f["value_type"]) for f in fields[: body["field"]])
         n = self.size_of(fields[body["field"]]["value_type"])

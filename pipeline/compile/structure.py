@@ -162,6 +162,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     newton: dict[int, ca.SX] | None = {}      # the Newton form's z, in args and the loops' zl
     zl_syms, zl_sols = [], []
     n_nonlinear = 0
+    running = ca.vertcat(args[0], args[2])     # states and time (blocks that read a mode are not symbolic)
     for k, (rows, cols) in enumerate(blocks):
         gk, zk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[zs[c] for c in cols])
         prev = sorted(set().union(*[reads.get(r, set()) for r in rows]) - set(cols))
@@ -177,8 +178,8 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
             if small:
                 sol_sx = -ca.solve(A, b) if len(cols) > 1 else -b / A
-                if ca.depends_on(A, ca.vertcat(zprev, args[0], args[2], *([modes] if modes is not None else []))):
-                    sol_sx = _or_nearest(sol_sx, A, b, z_guess[cols])     # coefficients that change in a run
+                if ca.depends_on(A, ca.vertcat(zprev, running)):      # coefficients that change in a run
+                    sol_sx = _or_nearest(sol_sx, A, b, z_guess[cols])
                 f = ca.Function(f"blk{k}", [zprev, *args], [sol_sx])
                 sol = f(prev_mx, *mx_args)
                 sol_newton = f(prev_sx, *args) if newton is not None else None
@@ -634,16 +635,16 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
             return None
 
     ok = lambda M: M is not None and bool(np.all(np.isfinite(M)))
-    flat = lambda M: int(np.sum(~np.any(M != 0, axis=1)))    # equations that move with no state
+    idle = lambda M: int(np.sum(~np.any(M != 0, axis=1)))    # equations that move with no state
     J = at(x0)
-    if ok(J) and not flat(J):
+    if ok(J) and not idle(J):
         return J
     # which equations determine which states is the same next to the singularity (a tank's
     # T = H/(m*c) at a mass started at 0, where T is NaN, or held at its start value by a
     # singular linear block's fallback so that it moves with no state): read it there
     for scale in (1e-8, 1e-6, 1e-4):
         Jn = at(x0 + scale * (1.0 + np.abs(x0)))
-        if ok(Jn) and (not ok(J) or flat(Jn) < flat(J)):
+        if ok(Jn) and (not ok(J) or idle(Jn) < idle(J)):
             return Jn
     if ok(J):
         return J
