@@ -344,3 +344,30 @@ def test_a_pulse_edge_updates_a_held_switch(tmp_path):
     phase = t % 1.0
     np.testing.assert_array_equal(res.output("opened"), (phase >= 0.5).astype(float))
     np.testing.assert_allclose(res.output("switched"), np.where(t < 0.5, -1.0, np.where(t < 1.5, 0.5, 1.5)))
+
+
+def test_div_mod_rem_keep_the_model_whole_and_switch_at_each_integer(tmp_path):
+    """rumoca numbers the nodes of div/mod/rem's quotient without listing them: every node
+    after one used to be read as another. A sawtooth of a state integrates exactly."""
+    (tmp_path / "Saw.mo").write_text("""
+model Saw
+  parameter Integer n = -7;
+  parameter Real q = div(n, 2) + 10*rem(n, 2) + 100*mod(n, 2) "-3 - 10 + 100";
+  Real s(start = 0, fixed = true);
+  Real y(start = 0, fixed = true);
+  output Real out;
+equation
+  der(s) = 1;
+  der(y) = mod(s, 0.3);
+  out = q;
+end Saw;
+""")
+    model = compile_model([tmp_path / "Saw.mo"], "Saw")
+    assert model.ode.zero is not None                 # mod of a state: an event at each tooth
+    t = np.linspace(0, 1, 11)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    assert res.output("out")[0] == pytest.approx(87)
+    tooth = 0.3 ** 2 / 2
+    exact = [np.floor(v / 0.3) * tooth + (v % 0.3) ** 2 / 2 for v in t]
+    assert np.max(np.abs(res.states[:, model.ode.x_names.index("y")] - exact)) < 5e-6

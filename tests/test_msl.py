@@ -27,6 +27,8 @@ EXAMPLES = {
     # tanks started by their level and temperature (T = H/(m*c)); pipes whose flow passes 0
     "Modelica.Thermal.FluidHeatFlow.Examples.TwoTanks": 1.5,
     "Modelica.Thermal.FluidHeatFlow.Examples.ParallelCooling": 1.0,
+    # filters whose coefficients come from multi-output functions and mod(order, 2)
+    "Modelica.Blocks.Examples.FilterWithRiseTime": 4.0,
 }
 
 

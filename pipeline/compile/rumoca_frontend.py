@@ -499,6 +499,7 @@ class _Translator:
     limit; a function call interprets the function's body in its own context."""
 
     def __init__(self, storage: dict, model: str, located: "Located | None" = None):
+        _whole_arena(storage)
         self.st, self.model, self.located = storage, model, located
         expr = storage["expressions"]
         self.nodes, self.operand_list = expr["nodes"], expr["operands"]
@@ -534,6 +535,7 @@ class _Translator:
         # events too (``live``: translating such a value), unless inside noEvent()
         self.live = 0
         self._quiet = None
+        self._call_groups = None           # (owner, function) -> the call carrying the arguments
         self.projected: set = set()       # domains of the array equation being translated whole
 
     def live_sx(self, root: int) -> ca.SX:
@@ -564,6 +566,25 @@ class _Translator:
         n = body.get("operand_count", 0)
         return self.operand_list[self.offsets[k]: self.offsets[k] + n]
 
+    def call_operands(self, k: int) -> list[int]:
+        """The arguments of call ``k``. The calls for the outputs of one multi-output call share
+        an owner (the first call, or the equation holding them all), and only one of them
+        carries the arguments."""
+        body = self.nodes[k]["call"]
+        if body.get("operand_count", 0) or body.get("owner") is None:
+            return self.operands(k)
+        if self._call_groups is None:
+            self._call_groups = {}
+            for j, n in enumerate(self.nodes):
+                b = n.get("call") if isinstance(n, dict) else None
+                if b and b.get("operand_count", 0) and b.get("owner") is not None:
+                    self._call_groups.setdefault((b["owner"], b["function"]), j)
+        first = self._call_groups.get((body["owner"], body["function"]))
+        if first is None:
+            owner = self.nodes[body["owner"]]
+            return self.operands(body["owner"]) if isinstance(owner, dict) and "call" in owner else []
+        return self.operands(first)
+
     def refuse(self, what: str):
         where = self.located.span(self.span) if self.located is not None else None
         raise UnsupportedConstruct(f"unsupported in {self.model}: {what}", where=where)
@@ -576,10 +597,10 @@ class _Translator:
         body = node[kind]
         if kind == "unary":
             return [body["operand"]]
-        if kind == "binary":
+        if kind in ("binary", "runtime_quotient_owner"):
             return [body["lhs"], body["rhs"]]
-        if kind == "call":           # a second output's call names the first as its owner
-            return self.operands(body.get("owner", k))
+        if kind == "call":
+            return self.call_operands(k)
         if kind == "builtin" and self.strings_size(k) is not None:
             return self.operands(k)[1:]
         if kind in ("conditional", "builtin", "array"):
@@ -662,6 +683,11 @@ class _Translator:
                     (k in self.event_nodes or (self.live and k not in self.quiet)):
                 self.relations.append(lhs - rhs)
             return out
+        if kind == "runtime_quotient_owner":          # div, mod, rem: an event where a/b crosses an integer
+            a, b = alike(done[body["lhs"]], done[body["rhs"]])
+            if bound is None and a.numel() == 1 and k not in self.quiet:
+                self.relations.append(ca.sin(np.pi * a / b))
+            return self.call_builtin(body["builtin"], [a, b])
         if kind == "conditional":
             ops = [done[o] for o in self.operands(k)]
             out = ops[-1]   # if c1 then a1 elseif c2 then a2 ... else b
@@ -674,7 +700,7 @@ class _Translator:
                 return ca.SX(n)
             return self.call_builtin(body["builtin"], [done[o] for o in self.operands(k)])
         if kind == "call":
-            return self.call_function(body, [done[o] for o in self.operands(body.get("owner", k))])
+            return self.call_function(body, [done[o] for o in self.call_operands(k)])
         if kind == "array":
             return array_of([done[o] for o in self.operands(k)])
         if kind == "record":                 # its fields flattened, in order
@@ -1117,8 +1143,31 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
                                    where=located.find(rf"\b(model|block|class)\s+{model.split('.')[-1]}\b")) from None
 
 
+#: arena slots rumoca 0.10.2 keeps after a div/mod/rem node (its event quotient) but does not serialise
+_QUOTIENT_SLOTS = 6
+
+
+def _whole_arena(st: dict):
+    """rumoca's expression list lacks the nodes a ``runtime_quotient_owner`` (div, mod, rem)
+    owns, while every reference counts them: each later node would be read as another.
+    Placeholders restore the numbering (once; nothing references them)."""
+    ex = st["expressions"]
+    if ex.get("whole") or not any(isinstance(n, dict) and "runtime_quotient_owner" in n for n in ex["nodes"]):
+        ex["whole"] = True
+        return
+    nodes, prov = [], []
+    for n, p in zip(ex["nodes"], ex["provenance"]):
+        nodes.append(n)
+        prov.append(p)
+        if isinstance(n, dict) and "runtime_quotient_owner" in n:
+            nodes += [{"quotient_slot": {}}] * _QUOTIENT_SLOTS
+            prov += [p] * _QUOTIENT_SLOTS
+    ex["nodes"], ex["provenance"], ex["whole"] = nodes, prov, True
+
+
 def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     st = ir["storage"]
+    _whole_arena(st)
     variables = st["variables"]
     _refuse_events(st, located, model)
     dims = [list(st["value_types"][v["value_type"]]["dimensions"] or []) for v in variables]
