@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 #: changes whenever a rewrite does: the library roots are keyed by it
-VERSION = "1"
+VERSION = "5"
 
 # Modelica.Math.Vectors.interpolate: rumoca evaluates the interval search of a branch that a
 # one-row table (nx = 1, the MSL's friction elements' default) rules out, reads x[0] there and
@@ -47,8 +47,53 @@ _INTERPOLATE_SEARCH = (
       //
 """)
 
+# Modelica.Math.BooleanVectors.firstTrueIndex: rumoca refuses a return inside a loop ("a
+# non-guarded nested return"). Keeping the first true index found does the same.
+_FIRST_TRUE = (
+    """      if b[i] then
+         index :=i;
+         return;
+      end if;
+""",
+    """      if b[i] and index == 0 then
+         index :=i;
+         // mcl: the first one is kept (rumoca cannot lower a return in a loop)
+      end if;
+""")
+
+# Modelica.Mechanics.Translational.Components.MassWithStopAndFriction extends a class nested in
+# itself, PartialFrictionWithStop; rumoca then reads the nested class's own variables as the
+# enclosing model's ("reference to non-constant variable 's' from a lexically nested class").
+# The nested class serves only as this base: its contents written in the model instead (header,
+# annotation and end commented out) are the same model.
+_FRICTION_WITH_STOP = [
+    ("  extends PartialFrictionWithStop;\n",
+     "  // mcl: PartialFrictionWithStop's contents are inlined below (rumoca misreads them nested)\n"),
+    ("""  encapsulated partial model PartialFrictionWithStop
+    "Base model of Coulomb friction elements with stop"
+""", """  // (PartialFrictionWithStop)
+  //
+"""),
+    ("""    annotation (Documentation(info="<html>
+<p>
+Basic model for Coulomb friction that models the stuck phase in a reliable way.<br>
+Additionally, a left and right stop are handled.
+</p>
+</html>"));
+  end PartialFrictionWithStop;
+""", """    //
+    //
+    //
+    //
+    //
+    //
+  // (end PartialFrictionWithStop)
+""")]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
+    ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
+    ("Modelica", ("Mechanics", "Translational", "Components", "MassWithStopAndFriction.mo")): _FRICTION_WITH_STOP,
 }
 
 

@@ -1360,8 +1360,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     for init_value in st.get("initial_discrete_values", []):
         i = init_value["target"]
         tr.span = (init_value.get("provenance") or {}).get("span")
-        if i not in offsets:
-            tr.refuse(f"an initial value of pre({variables[i]['name']}), which is not held between events")
+        if i not in offsets:        # not held: its pre() is read nowhere (MultiSwitch's pre(u) = false)
+            continue
         v = flat(bind(flat(tr.sx(init_value["value"]))))
         for j in range(size[i]):
             e = v[j] if v.numel() > 1 else v[0]
