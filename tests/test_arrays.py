@@ -200,28 +200,3 @@ def test_a_function_of_scalars_called_on_a_vector_applies_to_each_element(tmp_pa
     np.testing.assert_allclose([out["w[1]"], out["w[2]"]], [4.5, 16.5])
     np.testing.assert_allclose(res.states[-1], [0.5, 0.5], rtol=1e-5)
 
-
-@pytest.mark.skipif(not (MSL / "Modelica" / "package.mo").is_file(), reason=f"the MSL is not at {MSL}")
-def test_a_sliding_mass_with_coulomb_friction_stops_and_sticks(tmp_path, monkeypatch):
-    """MassWithStopAndFriction extends a class nested in itself, which rumoca misreads; the
-    overlay writes that class's contents in the model. A block launched at 3 m/s on a surface
-    with 4 N of Coulomb friction (m = 2 kg) decelerates at 2 m/s², stops at 1.5 s after
-    2.25 m, and stays stuck."""
-    monkeypatch.setenv("MODELICAPATH", str(MSL))
-    (tmp_path / "Slide.mo").write_text("""
-model Slide
-  import Modelica.Mechanics.Translational;
-  Translational.Components.MassWithStopAndFriction brick(m = 2, F_prop = 0, F_Coulomb = 4,
-    F_Stribeck = 0, fexp = 0, L = 0, smax = 100, smin = -100,
-    s(start = 0, fixed = true), v(start = 3, fixed = true));
-end Slide;
-""")
-    model = mcl.compile_model([tmp_path / "Slide.mo"], "Slide")
-    t = np.linspace(0.0, 3.0, 31)
-    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
-    assert res.ok, res.reason
-    s = res.states[:, model.ode.x_names.index("brick.s")]
-    v = res.states[:, model.ode.x_names.index("brick.v")]
-    tc = np.minimum(t, 1.5)
-    assert np.abs(v - (3 - 2 * tc)).max() < 1e-6
-    assert np.abs(s - (3 * tc - tc ** 2)).max() < 1e-4          # of 2.25 m (the default tolerances)

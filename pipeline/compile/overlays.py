@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 #: changes whenever a rewrite does: the library roots are keyed by it
-VERSION = "5"
+VERSION = "6"
 
 # Modelica.Math.Vectors.interpolate: rumoca evaluates the interval search of a branch that a
 # one-row table (nx = 1, the MSL's friction elements' default) rules out, reads x[0] there and
@@ -90,9 +90,20 @@ Additionally, a left and right stop are handled.
   // (end PartialFrictionWithStop)
 """)]
 
+# Modelica.Mechanics.Rotational.Components.LossyGear: rumoca evaluates a parameter bound to a
+# call of the two-output Vectors.interpolate as an array, and refuses the parameter that tests it
+# (tau_bf_a_0: "expected Boolean, got Array"). A one-output function around the same call.
+_LOSSY_GEAR = [
+    (f"Modelica.Math.Vectors.interpolate(lossTable[:,1], lossTable[:,{k}], 0, 1)",
+     f"interpolate1_(lossTable[:,1], lossTable[:,{k}], 0)") for k in (2, 3, 4, 5)
+] + [("  // Calculate tau_bf_a_0 from the following equations\n",
+      "  function interpolate1_ input Real x[:]; input Real y[size(x, 1)]; input Real xi; output Real yi; "
+      "algorithm (yi, ) := Modelica.Math.Vectors.interpolate(x, y, xi, 1); end interpolate1_;\n")]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
+    ("Modelica", ("Mechanics", "Rotational", "Components", "LossyGear.mo")): _LOSSY_GEAR,
     ("Modelica", ("Mechanics", "Translational", "Components", "MassWithStopAndFriction.mo")): _FRICTION_WITH_STOP,
 }
 
