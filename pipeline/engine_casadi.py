@@ -147,6 +147,10 @@ class _Budget:
         per_point = max(int(allowed // n_points), 1)
         if per_point >= 256:          # fewer steps per point: most calls need few
             return n_points, _pow2(min(per_point, cap)), bound
+        if self.points:               # points that may each take 8x the steps they have taken
+            need = _pow2(min(max(64, int(8 * self.steps / self.points)), cap))
+            if allowed >= 2 * need:   # (each call is a restart: small steps, fresh Jacobians)
+                return min(n_points, int(allowed // need)), need, bound
         n = max(1, int(allowed // min(cap, 4096)))
         n = min(n_points, 1 << (n.bit_length() - 1))
         return n, _pow2(max(min(int(allowed // n), cap), 16)), bound
@@ -228,6 +232,11 @@ class _Plan:
         self.time_event_at = {int(np.searchsorted(t_int, te)) for te in events}
         restarts = sorted({int(np.searchsorted(t_int, te)) for te in events} | set(self.tick_at))
         pieces = np.split(np.arange(1, len(t_int)), restarts)
+        # with state events, a call integrates past the first crossing and is redone from there:
+        # short calls waste little. Without, each call is a restart of the solver (small steps
+        # and fresh Jacobians again: 3x the steps of one call on a MultiBody pendulum), and the
+        # budget alone sizes the calls
+        n_chunks = N_CHUNKS if model.ode.zero is not None else 1
         chunks = []
         for piece in pieces:
             if not len(piece):
@@ -238,7 +247,7 @@ class _Plan:
                 chunks.append(head)
             rest = piece[len(head):]
             if len(rest):
-                chunks += list(np.array_split(rest, min(N_CHUNKS, len(rest))))
+                chunks += list(np.array_split(rest, min(n_chunks, len(rest))))
         self.chunks = [] if nx == 0 else chunks   # purely algebraic: nothing to integrate
         N = len(t_out)
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
