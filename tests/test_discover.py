@@ -214,3 +214,17 @@ def test_early_stop_weighs_parameters_not_only_rss(tmp_path):
     assert not ctx.give_up(0.02200, 0.02276, storage, k=4, dictionary=6)   # can improve on it
     assert ctx.give_up(0.0300, 0.0301, Item("R1", 0, {}), k=2, dictionary=3)   # 400 ln(1.3) behind
     assert not ctx.give_up(0.0300, 0.0600, Item("R1", 0, {}), k=2, dictionary=3)  # far from its optimum
+
+
+def test_a_fit_reads_only_the_waves_before_its_own(tmp_path):
+    """Fits run in waves of as many as there are workers; a fit of one wave is never stopped by
+    another of the same wave (which of them finishes first is a race), only by earlier waves."""
+    import dataclasses
+
+    from mcl.discovery.candidates import Context, Item, publish
+
+    ctx = Context(None, {}, {}, None, None, 10, "bic", "simulation", str(tmp_path), n_obs=400)
+    lead, behind = Item("R1", 0, {}), Item("R2", 0, {})
+    publish(tmp_path, lead, 0.0200, k=2, dictionary=3, wave="w1")
+    assert not dataclasses.replace(ctx, wave="w1").give_up(0.0300, 0.0301, behind, k=2, dictionary=3)
+    assert dataclasses.replace(ctx, wave="w2").give_up(0.0300, 0.0301, behind, k=2, dictionary=3)

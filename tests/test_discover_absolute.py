@@ -145,7 +145,8 @@ def test_a_law_at_the_affine_outlet_starts_as_the_nominal_model(tmp_path):
     signals = law_signals(model, nominal.states, nominal.time, data, comps)
     assert [role_of(signals[c.name].env()) for c in comps] == ["absolute", "static"]
     specs = families("absolute", signals["Outlet1"].env())
-    assert [f["family"] for f in specs] == ["absolute"] and specs[0]["rhs"] == ["1", "va", "va^2", "va^3"]
+    assert [f["family"] for f in specs] == ["absolute", "absolute"] and specs[0]["rhs"] == ["1", "va", "va^2", "va^3"]
+    assert specs[1]["rhs"] == ["1", "sqrt(abs(va))*sign(va)"]        # a free outflow (Torricelli)
     template, w0, form = start_of(SimpleNamespace(signals=signals), Item("Outlet1", 0, specs[0]))
     assert form.exact and set(form.coefficients) == {"va", "1"}
     assert abs(form.coefficients["va"] - 1 / 2.53) < 1e-9 and abs(form.coefficients["1"] - 0.4 / 2.53) < 1e-9

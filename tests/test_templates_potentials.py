@@ -109,6 +109,8 @@ def test_roles_and_families_for_laws_in_a_potential():
            "va": h1, "vb": h2}
     assert role_of(env) == "absolute"
     assert families("absolute", env) == [{"name": "polynomial", "lhs": ["i"], "rhs": ["1", "va", "va^2", "va^3"],
+                                          "family": "absolute"},
+                                         {"name": "polynomial", "lhs": ["i"], "rhs": ["1", "sqrt(abs(va))*sign(va)"],
                                           "family": "absolute"}]
     # a linear conductor between two bodies whose temperatures both vary: radiation is tried,
     # in units of the span; not where one side is held, nor for potentials that cross 0

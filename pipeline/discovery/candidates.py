@@ -4,8 +4,10 @@ A candidate is an :class:`Item` (one component, one law family) or a :class:`Pai
 two components, fitted together: two faults at once). :func:`build` puts its laws into the base
 model's DAE (:mod:`.inject`); :func:`fit_task`, the executor's task, fits and prunes them and
 returns the result as a dict (a pair's dict holds one part per law), written to the run
-directory as it finishes. Running fits publish the best RSS they have reached, so that a fit that
-cannot win stops (:meth:`Context.give_up`), whichever worker it runs in.
+directory as it finishes. Finished fits publish the RSS they reached, so that a later fit that
+cannot win stops (:meth:`Context.give_up`), whichever worker it runs in. Fits run in waves of as
+many as there are workers, and a fit reads only the waves before its own (all finished): which
+fits stop, and so the answer, does not depend on which worker got ahead.
 """
 from __future__ import annotations
 
@@ -108,18 +110,19 @@ class Context:
     budget: int                 # simulations per fit
     criterion: str
     method: str                 # simulation | full-discretisation
-    progress_dir: str           # running and finished fits publish their RSS here ('' = no early stop)
+    progress_dir: str           # finished fits publish their RSS here ('' = no early stop)
     n_obs: int = 0
     algorithm: str = "levenberg-marquardt"   # the optimiser (mcl.fit.FITTERS)
     max_work: int | None = None  # solver steps a candidate's simulation may take (50x the nominal's)
     floor: float = 0.0          # the RSS of the noise alone (n_obs sigma^2)
+    wave: str = ""              # the wave this context's fits run in (they do not read each other)
 
     def settled(self, item) -> bool:
         """Another fit of this round has reached the noise (its RMS within 1.2x of it): a law
         can then at best tie with it."""
         if not self.progress_dir or self.floor <= 0:
             return False
-        return any(o.rss <= 1.44 * self.floor for o in reached(Path(self.progress_dir), exclude=item))
+        return any(o.rss <= 1.44 * self.floor for o in reached(Path(self.progress_dir), item, self.wave))
 
     def give_up(self, reachable: float, current: float, item, k: int | None = None,
                 dictionary: int | None = None) -> bool:
@@ -136,7 +139,7 @@ class Context:
         components that can tie run to their end: the verdict compares them."""
         if not self.progress_dir:
             return False
-        others = reached(Path(self.progress_dir), exclude=item)
+        others = reached(Path(self.progress_dir), item, self.wave)
         if not others:
             return False
         n = max(self.n_obs, 2)
@@ -228,7 +231,7 @@ def fit_task(ctx: Context, item) -> dict:
     names = [n for law in laws for n in law.names]
     w0 = np.concatenate([law.w0 for law in laws])
     shape = isinstance(item, Item) and item.index >= NEURAL_INDEX
-    progress = None if not ctx.progress_dir else (lambda rss, *size: publish(Path(ctx.progress_dir), item, rss, *size))
+    progress = None
     give_up = None if shape or not ctx.progress_dir else GiveUp(ctx, item)
     if isinstance(item, Pair):        # two laws: each keeps its scale, every term may be pruned
         held, prunable = [], []
@@ -309,22 +312,24 @@ class Reached(NamedTuple):
     rss: float
     k: int | None = None
     dictionary: int | None = None
+    wave: str = ""
 
 
-def publish(directory: Path, item, rss: float, k: int | None = None, dictionary: int | None = None) -> None:
-    """A running or finished fit's RSS (with its free parameters, chosen among ``dictionary``
-    terms), where the other fits (in any worker) read it."""
+def publish(directory: Path, item, rss: float, k: int | None = None, dictionary: int | None = None,
+            wave: str = "") -> None:
+    """A finished fit's RSS (with its free parameters, chosen among ``dictionary`` terms), where
+    the fits of later waves (in any worker) read it."""
     if rss is None or not np.isfinite(rss):
         return
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{item.component}_{item.index}.json"
     tmp = path.with_suffix(f".{id(path)}.tmp")
-    tmp.write_text(json.dumps(Reached(item.component, float(rss), k, dictionary)._asdict()))
+    tmp.write_text(json.dumps(Reached(item.component, float(rss), k, dictionary, wave)._asdict()))
     tmp.replace(path)
 
 
-def reached(directory: Path, exclude=None) -> list[Reached]:
-    """What every fit of this round (but ``exclude``) that has published has reached."""
+def reached(directory: Path, exclude=None, wave: str = "") -> list[Reached]:
+    """What every fit of this round (but ``exclude``, and those of ``wave``) has reached."""
     out = []
     own = f"{exclude.component}_{exclude.index}.json" if exclude is not None else None
     for f in directory.glob("*.json") if directory.is_dir() else []:
@@ -332,6 +337,8 @@ def reached(directory: Path, exclude=None) -> list[Reached]:
             continue
         try:
             d = json.loads(f.read_text())
+            if wave and d.get("wave") == wave:
+                continue
             k, dictionary = (None if d.get(key) is None else int(d[key]) for key in ("k", "dictionary"))
             out.append(Reached(str(d.get("component", "")), float(d["rss"]), k, dictionary))
         except (OSError, ValueError, KeyError, TypeError):

@@ -136,6 +136,10 @@ def families(role: str, env: dict | None = None) -> list[dict]:
         s = unit_of(env[x]) if env is not None else 1.0
         out.insert(0, {"name": "polynomial", "lhs": ["i"], "rhs": ["1", *(scaled(x, k, s) for k in (1, 2, 3))],
                        "family": "absolute"})
+        # a free outflow (Torricelli, an orifice to the open): the flow goes with the square
+        # root of the level, a law of one parameter that a cubic only approximates
+        out.insert(1, {"name": "polynomial", "lhs": ["i"], "rhs": ["1", f"sqrt(abs({x}))*sign({x})"],
+                       "family": "absolute"})
     return out
 
 

@@ -184,17 +184,26 @@ class Batch:
         todo = [it for it in items if not _done(part / it.file)]
         log.info("      fitting %d candidate(s) (%d already done)", len(items), len(items) - len(todo))
 
-        def checkpoint(k, r):
-            it = todo[k]
-            if isinstance(r, TaskFailed):
-                r = {"component": it.component, "template": it.spec, "failed": r.reason, "score": None}
-            self.rundir.write_json(str((part / it.file).relative_to(self.rundir.partial)), r)
-            if self.ctx.progress_dir and r.get("rss") is not None and not r.get("failed"):
-                publish(Path(self.ctx.progress_dir), it, r["rss"], *free_parameters(r))
+        def checkpoint(wave, ctx):
+            def save(k, r):
+                it = wave[k]
+                if isinstance(r, TaskFailed):
+                    r = {"component": it.component, "template": it.spec, "failed": r.reason, "score": None}
+                self.rundir.write_json(str((part / it.file).relative_to(self.rundir.partial)), r)
+                if ctx.progress_dir and r.get("rss") is not None and not r.get("failed"):
+                    publish(Path(ctx.progress_dir), it, r["rss"], *free_parameters(r), wave=ctx.wave)
+            return save
 
         if todo:
             with self.reg.executor(self.executor) as ex:
-                ex.map(fit_task, todo, context=self.ctx, timeout=3600, label="candidates", on_result=checkpoint)
+                # waves of as many fits as workers, each reading only the finished waves before
+                # it: the early stops, and so the answer, are the same however the workers race
+                size = max(1, int(getattr(ex, "workers", 1))) if self.ctx.progress_dir else len(todo)
+                for start in range(0, len(todo), size):
+                    wave = todo[start:start + size]
+                    ctx = dataclasses.replace(self.ctx, wave=f"{part.name}:{wave[0].file}")
+                    ex.map(fit_task, wave, context=ctx, timeout=3600, label="candidates",
+                           on_result=checkpoint(wave, ctx))
         out = [json.loads((part / it.file).read_text()) for it in items]
         leading = [it for it, r in zip(items, out) if stopped(r) and _leads(r, out)]
         if leading and self.ctx.progress_dir:
