@@ -82,9 +82,13 @@ def check_balance(residual: ca.SX, nx: int, nz: int, name: str) -> None:
                             f"unknowns ({nx} states, {nz} algebraic variables)")
 
 
-def resolve_parameters(values: ca.SX, p_all: ca.SX, free: list[int], name: str) -> tuple[ca.SX, ca.SX]:
+def resolve_parameters(values: ca.SX, p_all: ca.SX, free: list[int], name: str,
+                       names: list[str] | None = None, p_values=None) -> tuple[ca.SX, ca.SX]:
     """The free parameters' symbols ``p`` and every parameter of ``p_all`` as an expression of
-    them: a dependent parameter's binding (``values``, in ``p_all``) substituted to a fixed point."""
+    them: a dependent parameter's binding (``values``, in ``p_all``) substituted to a fixed point.
+    Bindings that read each other only through a branch a free parameter rules out (the MSL's
+    m_flow_small = if use_eps_Re then eps*m_flow_nominal else ..., and m_flow_nominal the other
+    way) are taken at the free parameters' values (``p_values``): fixed numbers of the model."""
     p = ca.SX.sym("p", len(free))
     own = dict(zip(free, ca.vertsplit(p)))
     resolved = ca.vertcat(*[own.get(j, e) for j, e in enumerate(ca.vertsplit(p_all))]) if p_all.numel() else p_all
@@ -93,8 +97,19 @@ def resolve_parameters(values: ca.SX, p_all: ca.SX, free: list[int], name: str) 
             return p, resolved
         new = ca.vertsplit(ca.substitute(values, p_all, resolved))
         resolved = ca.vertcat(*[own.get(j, e) for j, e in enumerate(new)])
+    if ca.depends_on(resolved, p_all) and p_values is not None and len(free):
+        at = ca.substitute(resolved, p, ca.DM(np.asarray(p_values, float)))
+        for _ in range(p_all.numel() - len(free) + 1):
+            if not ca.depends_on(at, p_all):
+                break
+            at = ca.substitute(at, p_all, at)
+        resolved = ca.vertcat(*[e if not ca.depends_on(e, p_all) or ca.depends_on(a, p_all) else a
+                                for e, a in zip(ca.vertsplit(resolved), ca.vertsplit(at))])
     if ca.depends_on(resolved, p_all):
-        raise ModelicaError(f"model {name}: parameter bindings are circular")
+        label = names if names is not None and len(names) == p_all.numel() else list(map(str, ca.vertsplit(p_all)))
+        cycle = [label[j] for j, e in enumerate(ca.vertsplit(resolved)) if ca.depends_on(e, p_all)]
+        raise ModelicaError(f"model {name}: parameter bindings are circular: {', '.join(cycle[:6])}"
+                            f"{' ...' if len(cycle) > 6 else ''} each read another of them")
     return p, resolved
 
 
@@ -157,7 +172,7 @@ def from_pymoca(model, name: str = "model") -> Dae:
     free = [i for i, v in enumerate(values) if not isinstance(v, ca.MX)]
     p_names = [p_all_names[i] for i in free]
     p_values = np.array([0.0 if np.isnan(values[i]) else values[i] for i in free])
-    p, resolved = resolve_parameters(value_exprs, p_all, free, name)
+    p, resolved = resolve_parameters(value_exprs, p_all, free, name, p_all_names, p_values)
 
     def bind(e):
         return ca.substitute(e, p_all, resolved)

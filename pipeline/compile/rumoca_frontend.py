@@ -1299,7 +1299,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     free = [j for j, v in enumerate(elements) if v.is_constant()]
     p_names = [names["p"][j] for j in free]
     p_values = np.array([float(elements[j]) for j in free])
-    p, resolved = resolve_parameters(values, p_all, free, model)
+    p, resolved = resolve_parameters(values, p_all, free, model, names["p"], p_values)
 
     # between events pre(v) is v, initial() and terminal() are false (initial() true in the
     # initial equations) and no clock ticks
