@@ -371,3 +371,4 @@ end Saw;
     tooth = 0.3 ** 2 / 2
     exact = [np.floor(v / 0.3) * tooth + (v % 0.3) ** 2 / 2 for v in t]
     assert np.max(np.abs(res.states[:, model.ode.x_names.index("y")] - exact)) < 5e-6
+
