@@ -38,6 +38,7 @@ from scipy.optimize import minimize
 from .data import TimeSeries
 from .errors import ConfigError, DataError
 from .feasibility import LogisticFeasibility, binary_entropy
+from .stats import gram_inverse
 
 LOG_EPS = 1e-12
 
@@ -615,7 +616,7 @@ class LevenbergMarquardt(Fitter):
         pace of its last STALL simulations carried over the simulations it has left (a slow fit
         far behind cannot catch up within its budget, whatever the linear model promises)."""
         rss = float(r @ r)
-        reach = float(rss - g @ np.linalg.pinv(H) @ g) if trusted else None
+        reach = float(rss - g @ gram_inverse(H) @ g) if trusted else None
         if len(costs) > STALL and costs[-1 - STALL] > 0:
             left = self.max_simulations - (problem.recorder.simulations - start)
             paced = rss * min(costs[-1] / costs[-1 - STALL], 1.0) ** (max(left, 0) / STALL)

@@ -457,3 +457,15 @@ def bic(rss: float, n: int, k: int) -> float:
 
 def aic(rss: float, n: int, k: int) -> float:
     return CRITERIA["aic"].score(rss, n, k)
+
+
+def gram_inverse(G: np.ndarray) -> np.ndarray:
+    """The pseudo-inverse of a Gram matrix G = S^T S, taken on S's columns scaled to unit norm:
+    columns of very different sizes (a sinh law's 1e-15 coefficient beside a pump gain) would
+    otherwise leave the pseudo-inverse only the largest one's direction (its cut-off is relative
+    to the largest singular value), and every other parameter a variance and a gain of ~0."""
+    G = np.atleast_2d(np.asarray(G, float))
+    d = np.sqrt(np.clip(np.diag(G), 0.0, None))
+    d = np.where(d > 0, d, 1.0)
+    return np.linalg.pinv(G / np.outer(d, d)) / np.outer(d, d)
+

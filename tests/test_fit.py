@@ -160,6 +160,8 @@ def test_algorithm3_starts_from_a_pretrained_feasibility_model(rc_template, tmp_
                    directory=tmp_path, progress=False)
     assert pre.model.predict_proba([[1.0, 0.5, 0.3]])[0] > pre.model.predict_proba([[1.0, 0.5, -0.3]])[0]
     problem = FitProblem(model, hidden_cubic_data(), names)
-    res = Algorithm3("Powell", maxfev=400, feasibility=pre.model).fit(problem, [0.1, 0.1, 0.1])
+    # 600 simulations: since loops are torn, other points fail (5 of the first 400) and Powell
+    # is at 10 % after 400
+    res = Algorithm3("Powell", maxfev=600, feasibility=pre.model).fit(problem, [0.1, 0.1, 0.1])
     assert res.feasibility is pre.model and pre.model.n_updates_ > 0   # updated online from there
     assert max(map(abs, recovered(res))) < 0.05

@@ -51,8 +51,8 @@ def test_newton_form_gives_the_solvers_derivatives(cauer):
     params = ["Rnl.w3", "c3"]
     newton = sens.Linearisation(cauer, res.states, res.time, u, cauer.parameter_vector(), params)
     out = cauer.ode.out      # a new function object: the linearisation's cache knows the other
-    plain = dataclasses.replace(cauer.ode, loops=None, given=None,
-                                out=ca.Function("out", out.mx_in(), out.call(out.mx_in())))
+    args = out.mx_in()
+    plain = dataclasses.replace(cauer.ode, loops=None, given=None, out=ca.Function("out", args, out.call(args)))
     solver = sens.Linearisation(type(cauer)(cauer.name, plain, cauer.info), res.states, res.time, u,
                                 cauer.parameter_vector(), params)
     assert newton.fun.n_in() == 5 and solver.fun.n_in() == 4

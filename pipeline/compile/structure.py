@@ -412,7 +412,8 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     loops, given = _newton_functions(newton, args, names, sx_fun, orig_fun, probe_sx, U, P)
     # SX evaluates faster than the MX call graph where there is no Newton or QR solve in it; a
     # loop's Newton solve expands too (a torn loop of one unknown), but as every iteration and
-    # the fallback unrolled, all evaluated at each call: 1.6x the MX call on the Cauer filter
+    # the fallback unrolled, all evaluated at each call, and its Jacobian through them all: the
+    # Cauer example takes 21 CPU-s so, 12 with the loop solved in MX
     if not n_nl:
         ode, out, alg_res, drift, probe, init, checks, start, init_start = map(
             expanded, (ode, out, alg_res, drift, probe, init, checks, start, init_start))

@@ -17,11 +17,11 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..progress import log
-from ..stats import rms
+from ..stats import gram_inverse, rms
 from .fitters import FIT_OPTIONS, residual
 
 #: a parameter is determined by the data when its standard error is below this share of its value
-DETERMINED = 0.1
+DETERMINED = 1.0
 #: resamples of the block bootstrap
 RESAMPLES = 200
 
@@ -44,7 +44,7 @@ def jacobian(model, data: TimeSeries, params: dict, names: list[str]):
 def covariance(r: np.ndarray, J: np.ndarray) -> np.ndarray:
     """s^2 (J^T J)^+ with s^2 = RSS / (n - k): the parameters' covariance at a least-squares fit."""
     n, k = J.shape
-    return float(r @ r) / max(n - k, 1) * np.linalg.pinv(J.T @ J)
+    return float(r @ r) / max(n - k, 1) * gram_inverse(J.T @ J)
 
 
 def bootstrap(r: np.ndarray, J: np.ndarray, blocks: int = 40, seed: int = 0) -> np.ndarray:
@@ -52,7 +52,7 @@ def bootstrap(r: np.ndarray, J: np.ndarray, blocks: int = 40, seed: int = 0) -> 
     r* resampled in blocks (``blocks`` of them, drawn with replacement: each block keeps the
     residual's correlation within it)."""
     n = len(r)
-    H = np.linalg.pinv(J.T @ J)
+    H = gram_inverse(J.T @ J)
     size = max(n // blocks, 1)
     pieces = [np.arange(s, min(s + size, n)) for s in range(0, n, size)]
     centred = r - r.mean()

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..errors import MclError
-from ..stats import criterion as criterion_of, rss as rss_of
+from ..stats import criterion as criterion_of, gram_inverse, rss as rss_of
 
 #: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
 #: and measured inputs (linear between samples) make CVODES stop at every kink; 10x looser
@@ -183,7 +183,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         free = np.flatnonzero(active & ~held)
         if sim.ok:
             S = sim.sensitivities[:, problem.idx, :].reshape(-1, len(free))
-            H_inv = np.linalg.pinv(S.T @ S)
+            H_inv = gram_inverse(S.T @ S)
             est = w[free] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
         elif last:
             # a law near the edge of what simulates (a capacitance term crossing zero at the

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..sensitivity import Linearisation
 from ..simulation import prepare_inputs
+from ..stats import gram_inverse
 from .inject import ACROSS, FLOW
 
 
@@ -112,5 +113,5 @@ def predicted_rss(S: np.ndarray, r: np.ndarray) -> float:
     ok = np.isfinite(r)
     S, r = S[ok], r[ok]
     g = S.T @ r
-    gain = float(g @ np.linalg.pinv(S.T @ S) @ g) if S.size else 0.0
+    gain = float(g @ gram_inverse(S.T @ S) @ g) if S.size else 0.0
     return float(max(r @ r - gain, 0.0))

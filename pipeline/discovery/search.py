@@ -21,7 +21,7 @@ from ..errors import ConfigError
 from ..executor import TaskFailed
 from ..progress import log
 from ..sensitivity import fine_grid
-from ..stats import criterion as criterion_of
+from ..stats import criterion as criterion_of, gram_inverse
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
 from .families import distillations, families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
@@ -136,7 +136,7 @@ class Screening:
             return None
         j = [c for k in keys for c in self.columns[k]]
         g = self.g[j]
-        return float(max(self.rss0 - g @ np.linalg.pinv(self.G[np.ix_(j, j)]) @ g, 0.0))
+        return float(max(self.rss0 - g @ gram_inverse(self.G[np.ix_(j, j)]) @ g, 0.0))
 
     def singles(self, items: list[Item]) -> list[dict]:
         out = []
