@@ -242,9 +242,13 @@ def _tear(rows: list, unknowns: list):
     for r, j in zip(*ca.jacobian_sparsity(g, z).get_triplet()):
         reads[r].add(j)
 
-    def pivot(r, j):
-        coef = ca.jacobian(rows[r], unknowns[j])
-        return coef.is_constant() and float(coef) != 0
+    pivots: dict[tuple[int, int], bool] = {}
+
+    def pivot(r, j):                            # (asked again each pass: kept)
+        if (r, j) not in pivots:
+            coef = ca.jacobian(rows[r], unknowns[j])
+            pivots[r, j] = coef.is_constant() and float(coef) != 0
+        return pivots[r, j]
 
     order, tears, residual, decided = [], [], [], set()
     open_rows = list(range(len(rows)))
