@@ -499,7 +499,6 @@ class _Translator:
     limit; a function call interprets the function's body in its own context."""
 
     def __init__(self, storage: dict, model: str, located: "Located | None" = None):
-        _whole_arena(storage)
         self.st, self.model, self.located = storage, model, located
         expr = storage["expressions"]
         self.nodes, self.operand_list = expr["nodes"], expr["operands"]
@@ -1150,7 +1149,7 @@ _QUOTIENT_SLOTS = 6
 def _whole_arena(st: dict):
     """rumoca's expression list lacks the nodes a ``runtime_quotient_owner`` (div, mod, rem)
     owns, while every reference counts them: each later node would be read as another.
-    Placeholders restore the numbering (once; nothing references them)."""
+    Placeholders restore the numbering (once, where the IR comes in; nothing references them)."""
     ex = st["expressions"]
     if ex.get("whole") or not any(isinstance(n, dict) and "runtime_quotient_owner" in n for n in ex["nodes"]):
         ex["whole"] = True
@@ -1193,7 +1192,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         if len(branches) == 1 and branches[0].get("activation") == "always" and len(owner["targets"]) == 1:
             node = branches[0]["values"][0]["value"]
             target = owner["targets"][0]
-            if target not in pre_read and not _reads_pre(st, node):
+            if target not in pre_read and not _reads_pre(tr, node):
                 always[target] = node
     index = {"x": [], "z": [], "u": [], "p": [], "c": [], "d": []}
     for i, r in enumerate(role):
@@ -1419,9 +1418,9 @@ def _table_records(ir: dict, variables, objects: set[str], attrs, tr) -> dict:
     return records
 
 
-def _reads_pre(st: dict, root: int) -> bool:
-    nodes = st["expressions"]["nodes"]
-    tr_ops = _OperandIndex(st)
+def _reads_pre(tr: "_Translator", root: int) -> bool:
+    """Whether the expression at ``root`` reads a pre() value."""
+    nodes = tr.nodes
     stack, seen = [root], set()
     while stack:
         k = stack.pop()
@@ -1435,18 +1434,8 @@ def _reads_pre(st: dict, root: int) -> bool:
         body = node[kind]
         if kind == "coordinate" and isinstance(body, dict) and next(iter(body)).startswith("pre_"):
             return True
-        stack += tr_ops.children(k)
+        stack += tr.children(k)
     return False
-
-
-class _OperandIndex:
-    """Children of IR nodes (operands are stored in one table)."""
-
-    def __init__(self, st: dict):
-        self.tr = _Translator(st, "")
-
-    def children(self, k):
-        return self.tr.children(k)
 
 
 def _pre_reads(st: dict) -> set[int]:

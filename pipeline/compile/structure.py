@@ -192,10 +192,10 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         else:
             n_nonlinear += 1
             par = ca.vertcat(zprev, *args)
-            tears, residual, whole = _tear([gs[r] for r in rows], [zs[c] for c in cols])
+            torn, residual, whole = _tear([gs[r] for r in rows], [zs[c] for c in cols])
+            tears = ca.vertcat(*[zs[cols[i]] for i in torn])
             resid = ca.Function(f"loop{k}", [tears, par], [residual])
-            t_guess = np.array([z_guess[cols[i]] for i in _positions(tears, [zs[c] for c in cols])])
-            t_sol = _loop_solve(f"loop{k}", resid, t_guess, ca.vertcat(prev_mx, *mx_args))
+            t_sol = _loop_solve(f"loop{k}", resid, z_guess[[cols[i] for i in torn]], ca.vertcat(prev_mx, *mx_args))
             spread = ca.Function(f"torn{k}", [tears, zprev, *args], [whole])
             sol = spread(t_sol, prev_mx, *mx_args)
             if tears.numel() <= SYMBOLIC_SOLVE_MAX and newton is not None:
@@ -222,14 +222,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     return ca.Function("zsol", mx_args, [zsol]), n_nonlinear, form
 
 
-def _positions(part: ca.SX, whole: list) -> list[int]:
-    names = {str(v): i for i, v in enumerate(whole)}
-    return [names[str(v)] for v in ca.vertsplit(part)]
-
-
 def _tear(rows: list, unknowns: list):
-    """An algebraic loop torn: (tearing variables t, residual r(t), the loop's unknowns as
-    expressions of t). An unknown that an equation gives explicitly once the ones before are
+    """An algebraic loop torn: (the positions of its tearing variables t among ``unknowns``,
+    residual r(t), the loop's unknowns as expressions of t). An unknown that an equation gives explicitly once the ones before are
     known (it appears there linearly, with a constant coefficient: a parameter's could be set
     to 0, w1 in w1*i = v^3, and the loop would then pass for solvable) is computed, not
     iterated; where none is, the unknown read by most open equations becomes a tearing
@@ -269,7 +264,7 @@ def _tear(rows: list, unknowns: list):
             tears.append(j)
             decided.add(j)
     if len(tears) >= n or len(residual) != len(tears):
-        return z, g, z
+        return list(range(n)), g, z
     syms, vals = [], []                         # the explicit unknowns, as expressions of t
     value = {j: unknowns[j] for j in tears}
     for r, j in order:
@@ -280,7 +275,7 @@ def _tear(rows: list, unknowns: list):
     res = ca.vertcat(*[rows[r] for r, in residual])
     if syms:
         res = ca.substitute(res, ca.vertcat(*syms), ca.vertcat(*vals))
-    return ca.vertcat(*[unknowns[j] for j in tears]), res, ca.vertcat(*[value[j] for j in range(n)])
+    return tears, res, ca.vertcat(*[value[j] for j in range(n)])
 
 
 def _or_nearest(sol: ca.SX, A: ca.SX, b: ca.SX, guess) -> ca.SX:

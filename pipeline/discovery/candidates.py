@@ -231,7 +231,6 @@ def fit_task(ctx: Context, item) -> dict:
     names = [n for law in laws for n in law.names]
     w0 = np.concatenate([law.w0 for law in laws])
     shape = isinstance(item, Item) and item.index >= NEURAL_INDEX
-    progress = None
     give_up = None if shape or not ctx.progress_dir else GiveUp(ctx, item)
     if isinstance(item, Pair):        # two laws: each keeps its scale, every term may be pruned
         held, prunable = [], []
@@ -240,7 +239,7 @@ def fit_task(ctx: Context, item) -> dict:
             held += [k == 0 for k in range(len(law.names))]
             prunable += [0 < k < n_terms for k in range(len(law.names))]
         fit = FitOutcome(*fit_and_prune(model, ctx.train, names, w0, 2 * ctx.budget, ctx.criterion, give_up=give_up,
-                                        progress=progress, held=held, prunable=prunable, algorithm=ctx.algorithm,
+                                        held=held, prunable=prunable, algorithm=ctx.algorithm,
                                         max_work=ctx.max_work))
     else:
         # the shape stage (a network, then distilled laws with fitted scales) always simulates:
@@ -250,7 +249,7 @@ def fit_task(ctx: Context, item) -> dict:
         fitter = registry().fitter("simulation" if shape else ctx.method)
         fit = fitter.fit(model, ctx.train, names, w0, template, ctx.criterion,
                          ctx.budget * (3 if item.index == NEURAL_INDEX else 1), give_up=give_up,
-                         prune=bool(getattr(template, "terms", None)), progress=progress,
+                         prune=bool(getattr(template, "terms", None)),
                          algorithm=ctx.algorithm, max_work=ctx.max_work)
     res = fit.result if fit.result is not None else simulate(model, ctx.train, dict(zip(names, fit.w)))
     out = {"component": item.component, "template": item.spec, "rss": fit.rss, "score": fit.score,
