@@ -58,3 +58,72 @@ equation
 end Gearbox;
 """, "Gearbox", t := np.linspace(0.0, 2.0, 21))
     assert np.polyfit(t[t > 0.5], state("J1.w")[t > 0.5], 1)[0] == pytest.approx(1.0, rel=1e-4)
+
+
+@pytest.mark.parametrize("kind, order", [("Butterworth", 3), ("ChebyshevI", 3), ("ChebyshevI", 4)])
+def test_normalized_filters_match_scipy(tmp_path, monkeypatch, kind, order):
+    """Blocks.Continuous.Filter: a normalized Chebyshev filter finds its -3 dB correction with
+    two while-loops and a Streams.error, and odd orders fill arrays in branches on their size,
+    which rumoca cannot lower; the overlays bound the loops and merge the branches. The step
+    response of each filter matches scipy's analog prototype scaled to the MSL's -3 dB
+    (10^(-3/20)) at f_cut, with the MSL's gain 1 at DC."""
+    from scipy import optimize, signal
+
+    f_cut, t = 2.0, np.linspace(0.0, 1.5, 151)
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    (tmp_path / "Lowpass.mo").write_text(f"""
+model Lowpass
+  import Modelica.Blocks;
+  Blocks.Sources.Step step(startTime = 0.5);
+  Blocks.Continuous.Filter F(analogFilter = Blocks.Types.AnalogFilter.{kind}, order = {order},
+    f_cut = {f_cut}, A_ripple = 0.5);
+  output Real y = F.y;
+equation
+  connect(step.y, F.u);
+end Lowpass;
+""")
+    model = mcl.compile_model([tmp_path / "Lowpass.mo"], "Lowpass")
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    proto = signal.butter(order, 1.0, analog=True) if kind == "Butterworth" else signal.cheby1(order, 0.5, 1.0, analog=True)
+    proto = (proto[0] * proto[1][-1] / proto[0][-1], proto[1])       # the MSL's filters pass DC at gain 1
+    gain = lambda w: abs(np.polyval(proto[0], 1j * w) / np.polyval(proto[1], 1j * w))  # noqa: E731
+    w3 = 1.0 if kind == "Butterworth" else optimize.brentq(lambda w: gain(w) - 10 ** (-3 / 20), 1.0, 10.0)
+    b, a = signal.butter(order, 2 * np.pi * f_cut, analog=True) if kind == "Butterworth" else \
+        signal.lp2lp(*proto, wo=2 * np.pi * f_cut / w3)
+    late = t >= 0.5
+    _, ref = signal.step((b, a), T=t[late] - 0.5)
+    assert np.abs(res.output("y")[late] - ref).max() < 1e-3
+    assert np.abs(res.output("y")[~late]).max() < 1e-9
+
+
+def test_a_filters_output_differentiated_three_times(tmp_path, monkeypatch):
+    """MSL's FilterWithDifferentiation, as an engineer would write it: Der blocks differentiate
+    a third-order Bessel filter's output three times (an index-4 DAE; the filter's coefficients
+    are parameters computed in its initial equations, which become dependent parameters).
+    Each Der block's output is the time derivative of its input (central differences)."""
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    (tmp_path / "Smooth.mo").write_text("""
+model Smooth
+  import Modelica.Blocks;
+  Blocks.Sources.Sine source(f = 0.5);
+  Blocks.Continuous.Filter F(analogFilter = Blocks.Types.AnalogFilter.Bessel, order = 3, f_cut = 2);
+  Blocks.Continuous.Der d1;
+  Blocks.Continuous.Der d2;
+  output Real y = F.y;
+  output Real dy = d1.y;
+  output Real ddy = d2.y;
+equation
+  connect(source.y, F.u);
+  connect(F.y, d1.u);
+  connect(d1.y, d2.u);
+end Smooth;
+""")
+    model = mcl.compile_model([tmp_path / "Smooth.mo"], "Smooth")
+    t = np.linspace(0.0, 2.0, 2001)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    y, dy, ddy = (res.output(n) for n in ("y", "dy", "ddy"))
+    assert np.ptp(y) > 0.5
+    assert np.abs(np.gradient(y, t) - dy)[5:-5].max() < 1e-3 * np.ptp(dy)
+    assert np.abs(np.gradient(dy, t) - ddy)[5:-5].max() < 1e-3 * np.ptp(ddy)

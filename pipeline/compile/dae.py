@@ -262,6 +262,75 @@ def eliminate_aliases(dae: Dae) -> Dae:
                                relations=relations, d_update=d_update, x_reinit=x_reinit, asserts=asserts)
 
 
+def fold_initial_parameters(dae: Dae) -> Dae:
+    """A state that never changes (its equation is der(x) = 0: a parameter with fixed = false,
+    computed in the initial equations, as the MSL's filters compute their coefficients) whose
+    initial equation gives it explicitly from parameters (and states folded before it) is a
+    dependent parameter: its expression replaces it everywhere, and it leaves the states.
+    Initialisation then has no Newton iteration over it, which from its start value 0 may meet
+    a singular point (sqrt(c0 - c1^2/4) at c0 = c1 = 0), and index reduction no constant state
+    to differentiate."""
+    nx, ni = dae.x.numel(), dae.init_residual.numel()
+    if nx == 0 or ni == 0:
+        return dae
+    xs, dxs = ca.vertsplit(dae.x), ca.vertsplit(dae.dx)
+    position = {v.name(): j for j, v in enumerate(dxs)}
+    still = {}                                     # state -> its residual row der(x) = 0
+    for r, e in enumerate(ca.vertsplit(dae.residual)):
+        if e.is_symbolic() and e.name() in position:
+            still[position[e.name()]] = r
+    if not still:
+        return dae
+    init = ca.vertsplit(dae.init_residual)
+    others = ca.vertcat(dae.dx, dae.z, dae.u, dae.t, dae.d, dae.d_pre, dae.x_pre, dae.flags)
+    bad = set(ca.jacobian_sparsity(dae.init_residual, others).get_triplet()[0]) if others.numel() else set()
+    rows, cols = ca.jacobian_sparsity(dae.init_residual, dae.x).get_triplet()
+    reads: dict[int, set] = {}
+    for r, c in zip(rows, cols):
+        reads.setdefault(r, set()).add(c)
+    pending = [r for r in range(ni) if r not in bad and reads.get(r) and reads[r] <= still.keys()]
+    solved, used = {}, set()
+    while True:
+        progress = False
+        for r in pending:
+            if r in used or len(reads[r] - solved.keys()) != 1:
+                continue
+            j = next(iter(reads[r] - solved.keys()))
+            e = init[r]
+            if solved:
+                e = ca.substitute(e, ca.vertcat(*[xs[k] for k in solved]), ca.vertcat(*solved.values()))
+            coef = ca.jacobian(e, xs[j])
+            if not coef.is_constant() or float(coef) == 0:
+                continue                       # nonlinear in it: left to the initial solve
+            solved[j] = ca.substitute(-e / float(coef), xs[j], ca.SX(0)) + 0
+            used.add(r)
+            progress = True
+        if not progress:
+            break
+    if not solved:
+        return dae
+    keep = [j for j in range(nx) if j not in solved]
+    pick = lambda v: v[keep] if keep else ca.SX(0, 1)  # noqa: E731
+    drop_rows = {still[j] for j in solved}
+    old = [*[xs[j] for j in solved], *[dxs[j] for j in solved]]
+    new = [*solved.values(), *[ca.SX(0)] * len(solved)]
+    if dae.x_pre.numel() == nx:
+        old += [dae.x_pre[j] for j in solved]
+        new += list(solved.values())
+    names = list(dae.exprs)
+    res = ca.vertsplit(dae.residual)
+    parts = [ca.vertcat(*[res[r] for r in range(len(res)) if r not in drop_rows]),
+             ca.vertcat(*[init[r] for r in range(ni) if r not in used]),
+             dae.relations, dae.d_update, pick(dae.x_reinit) if dae.x_reinit.numel() == nx else dae.x_reinit,
+             dae.asserts, pick(dae.x_start), dae.z_start, dae.d_start, *[dae.exprs[n] for n in names]]
+    out = ca.substitute(parts, [ca.vertcat(*old)], [ca.vertcat(*new)])
+    return dataclasses.replace(
+        dae, x=pick(dae.x), dx=pick(dae.dx), x_pre=pick(dae.x_pre) if dae.x_pre.numel() == nx else dae.x_pre,
+        residual=out[0], init_residual=out[1], relations=out[2], d_update=out[3], x_reinit=out[4],
+        asserts=out[5], x_start=out[6], z_start=out[7], d_start=out[8], exprs=dict(zip(names, out[9:])),
+        x_names=[dae.x_names[j] for j in keep], x_fixed=dae.x_fixed[keep])
+
+
 class _Aliases:
     """Alias equations found among the rows linear in the unknowns (without der(), inputs or
     time). Each eliminated unknown ``e`` is ``alpha * w[root] + beta`` of one unknown that stays

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 
 #: changes whenever a rewrite does: the library roots are keyed by it
-VERSION = "6"
+VERSION = "12"
 
 # Modelica.Math.Vectors.interpolate: rumoca evaluates the interval search of a branch that a
 # one-row table (nx = 1, the MSL's friction elements' default) rules out, reads x[0] there and
@@ -100,9 +100,81 @@ _LOSSY_GEAR = [
       "  function interpolate1_ input Real x[:]; input Real y[size(x, 1)]; input Real xi; output Real yi; "
       "algorithm (yi, ) := Modelica.Math.Vectors.interpolate(x, y, xi, 1); end interpolate1_;\n")]
 
+# Modelica.Blocks.Continuous.Internal.Filter.Utilities (every normalized Butterworth or
+# Chebyshev filter, the band filters): rumoca lowers no while-loop whose iteration count it
+# cannot bound. Each is written as a bounded for-loop whose body runs while the condition
+# holds, the same function wherever the original ends within the bound: findInterval's
+# growth of alpha by 1.1 (200 steps reach 1.9e8; normalized filters need alpha near 1) and
+# Brent's root search (converged to 100 eps within 60 or so steps; 200 allowed).
+_FIND_INTERVAL = (
+    """            if residue < 0 then
+               alpha_max :=alpha;
+            else
+               while residue >= 0 loop
+                  alpha := 1.1*alpha;
+                  residue := normalizationResidue(c1, c2, alpha);
+               end while;
+               alpha_max :=alpha;
+            end if;
+""",
+    """            // mcl: a bounded loop (rumoca cannot lower the while-loop)
+            for iter in 1:200 loop
+               if residue >= 0 then
+                  alpha := 1.1*alpha;
+                  residue := normalizationResidue(c1, c2, alpha);
+               end if;
+            end for;
+            alpha_max :=alpha;
+            //
+""")
+_BRENT = [("          while not found loop\n", "          for iter in 1:200 loop if not found then // mcl: bounded\n", 2),
+          ("            end if;\n          end while;\n", "            end if;\n          end if; end for;\n", 2),
+          # Streams.error in a function (rumoca refuses the call statement): assert(false, ...)
+          ("            error(\n", "            assert(false,\n", 2),
+          # rumoca wants the output defined on every path of the bounded loop
+          ("          // Initialize variables\n", "          u := u_min; // Initialize variables (mcl: u defined)\n", 2),
+]
+
+# Modelica.Blocks.Continuous.Internal.Filter.base: rumoca cannot lower a branch on an array's
+# size that fills the array in a loop (ChebyshevI, odd orders: "missing function value
+# definition") or reads its element 1 where it has none (Bessel, even orders). ChebyshevI's two
+# loops as one with the branch inside; Bessel's den1[1]*alpha for its 0 or 1 elements as den1*alpha.
+_FILTER_BASE = [
+    ("""          if size(cr,1) == 0 then
+             for i in 1:size(c0, 1) loop
+                den2[i,1] :=1/(cosh(fac)^2 - cos((2*i - 1)*pi/(2*order))^2);
+                den2[i,2] :=2*den2[i, 1]*sinh(fac)*cos((2*i - 1)*pi/(2*order));
+             end for;
+          else
+             for i in 1:size(c0, 1) loop
+                den2[i,1] :=1/(cosh(fac)^2 - cos(i*pi/order)^2);
+                den2[i,2] :=2*den2[i, 1]*sinh(fac)*cos(i*pi/order);
+             end for;
+          end if;
+""", """          // mcl: one loop (rumoca cannot lower a loop in each branch of this if)
+             for i in 1:size(c0, 1) loop
+                den2[i,1] :=if size(cr,1) == 0 then 1/(cosh(fac)^2 - cos((2*i - 1)*pi/(2*order))^2)
+                  else 1/(cosh(fac)^2 - cos(i*pi/order)^2);
+                den2[i,2] :=2*den2[i, 1]*sinh(fac)*(if size(cr,1) == 0 then cos((2*i - 1)*pi/(2*order))
+                  else cos(i*pi/order));
+             end for;
+          //
+          //
+          //
+          //
+"""),
+    ("""           if size(cr,1) == 1 then
+             den1[1] := den1[1]*alpha;
+           end if;
+""", """           // mcl: den1 has 0 or 1 elements (rumoca reads den1[1] of an empty den1)
+             den1 := den1*alpha;
+           //
+""")]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
+    ("Modelica", ("Blocks", "Continuous.mo")): [_FIND_INTERVAL, *_BRENT, *_FILTER_BASE],
     ("Modelica", ("Mechanics", "Rotational", "Components", "LossyGear.mo")): _LOSSY_GEAR,
     ("Modelica", ("Mechanics", "Translational", "Components", "MassWithStopAndFriction.mo")): _FRICTION_WITH_STOP,
 }
@@ -119,8 +191,8 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
     if not rewrites or not path.is_file():
         return None
     text = original = path.read_text(encoding="utf-8", errors="replace")
-    for old, new in rewrites:
+    for old, new, *times in rewrites:       # (old, new[, how many times old occurs])
         assert old.count("\n") == new.count("\n"), "a rewrite keeps the line count"
-        if text.count(old) == 1:
+        if text.count(old) == (times or [1])[0]:
             text = text.replace(old, new)
     return text if text != original else None

@@ -21,7 +21,7 @@ import numpy as np
 
 from . import tables
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, shaped
-from .dae import Dae, check_balance, resolve_parameters
+from .dae import Dae, check_balance, fold_initial_parameters, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
@@ -723,13 +723,16 @@ class _Translator:
         """A function's array read before it is assigned as a whole: an empty array, which
         assignments to its elements in order (a loop filling it) extend. Its declared size is
         not used: it may depend on the call's arguments, and rumoca gives one size for all
-        calls. A scalar read before any assignment is refused."""
+        calls. A scalar read before any assignment is undefined (NaN): rumoca writes an
+        if-statement's assignment as ``v := if c then e else v``, whose else-branch reads v
+        before it has a value; the condition masks it where the branch is taken, and a real
+        use of it shows as NaN."""
         f = self.functions[body["function"]]
         held = [*f.get("outputs", []), *f.get("locals", [])]
         dims = self.st["value_types"][held[body["value"]]["value_type"]].get("dimensions") or []
-        if not dims or len(dims) > 2:
-            self.refuse("a function variable read before it is assigned")
-        return ca.SX(0, 1)
+        if len(dims) > 2:
+            self.refuse("a function array of more than two dimensions read before it is assigned")
+        return ca.SX(0, 1) if dims else ca.SX(np.nan)
 
     def strings_size(self, k: int) -> int | None:
         """``size(a, 1)`` of an array of strings (a medium's names): its length, which is all
@@ -1292,10 +1295,14 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         e = flat(e)
         return ca.repmat(e, size[i], 1) if e.numel() == 1 and size[i] > 1 else e
 
-    # parameters: an element whose binding depends on other parameters is a dependent one
+    # parameters: an element whose binding depends on other parameters is a dependent one;
+    # an Integer, Boolean or enumeration is structural (it sizes arrays, picks an element or
+    # a branch: a filter's order and kind) and stays at its value, as other tools evaluate it
     values = ca.vertcat(*[value_of(i) for i in index["p"]]) if index["p"] else ca.SX(0, 1)
     elements = ca.vertsplit(values)
-    free = [j for j, v in enumerate(elements) if v.is_constant()]
+    real = [st["value_types"][variables[i]["value_type"]].get("scalar") == "real"
+            for i in index["p"] for _ in range(size[i])]
+    free = [j for j, v in enumerate(elements) if v.is_constant() and real[j]]
     p_names = [names["p"][j] for j in free]
     p_values = np.array([float(elements[j]) for j in free])
     p, resolved = resolve_parameters(values, p_all, free, model, names["p"], p_values)
@@ -1375,7 +1382,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         asserts = ca.vertcat(asserts, *[a[0] for a in fn])
         assert_info = [*assert_info, *[(level, message) for _, level, message in fn]]
 
-    return Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
+    return fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
@@ -1385,7 +1392,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                d_update=bind_event(d_update) if nd else ca.SX(0, 1),
                x_reinit=bind_event(x_reinit) if x.numel() else ca.SX(0, 1),
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
-               assert_info=assert_info)
+               assert_info=assert_info))
 
 
 def _external_objects(ir: dict) -> set[str]:

@@ -95,17 +95,19 @@ def reduce_index(dae: Dae):
     impl = dict(x_impl=dae.x, dx_impl=dae.dx, z=dae.z, alg=dae.residual, t=dae.t, p=up)
     try:
         red, stats = ca.dae_reduce_index(impl, {})
+        semi, state_to_orig, _phi = ca.dae_map_semi_expl(impl, red)
     except RuntimeError:
         # CasADi's slips where a variable is differentiated twice (a joint's angle in a
-        # multibody chain): the same algorithm, assembled by variable
+        # multibody chain), or its reduction is one its own map calls singular (a filter's
+        # output differentiated three times): the same algorithm, assembled by variable
         from .pantelides import reduce_index as pantelides
 
         red, stats = pantelides(impl)
-    try:
-        semi, state_to_orig, _phi = ca.dae_map_semi_expl(impl, red)
-    except RuntimeError as exc:
-        raise ModelicaError(f"index reduction failed (structurally singular model?): "
-                            f"{str(exc).strip().splitlines()[-1]}") from None
+        try:
+            semi, state_to_orig, _phi = ca.dae_map_semi_expl(impl, red)
+        except RuntimeError as exc:
+            raise ModelicaError(f"index reduction failed (structurally singular model?): "
+                                f"{str(exc).strip().splitlines()[-1]}") from None
     if ca.depends_on(red["I"], dae.u):
         used = [n for i, n in enumerate(dae.u_names) if ca.depends_on(red["I"], dae.u[i])]
         raise UnsupportedConstruct(
@@ -303,9 +305,10 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     z1 = quick(z0, par)
     ok = _within(resid(z1, par), LOOP_TOL)
     step = _damped_step(name, resid)
-    # the initial system's fallback starts a hair off the start values: a start at a
-    # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has
-    z = z0 + 1e-6 * (1 + ca.fabs(z0)) if strict else z0
+    # the fallback starts a hair off the start values: a start at a singularity (a tank's
+    # T = H/(m*c) at m = 0, a saturation law's |B|^n with n < 1 at B = 0) has no Newton
+    # step, the point next to it has
+    z = z0 + 1e-6 * (1 + ca.fabs(z0))
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid,
