@@ -44,6 +44,7 @@ SENS_SCALE = 1e-6
 DETECTION_POINTS = 400    # at least this many points over the horizon where relations are checked
 MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
+PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
 #: a call of the solver may use this share of the wall time still left
 CALL_SHARE = 0.4
 #: output points of a run's first call (whose steps and seconds size the calls after it)
@@ -98,6 +99,11 @@ def _check_grid(t_out, u: TimeSeries):
 
 class _Stop(Exception):
     """A simulation ends early: its reason is the failed result's."""
+
+
+class _SolverFailed(_Stop):
+    """The solver gave up (an error, or too much work where time was not short): a hybrid run
+    first looks for a crossing it ran into (:meth:`_Hybrid.probe`)."""
 
 
 class _Budget:
@@ -318,7 +324,7 @@ class _Plan:
                 if bound is not None and "TOO_MUCH_WORK" in str(exc):
                     failed = steps
                     continue
-                raise _Stop(f"solver error before t = {self.t_int[sub[-1]]:g}: {_last_line(exc)}") from None
+                raise _SolverFailed(f"solver error before t = {self.t_int[sub[-1]]:g}: {_last_line(exc)}") from None
             failed = None
             budget.record(_nsteps(integ), clock.elapsed, len(sub))
             traj[:, sub] = xf
@@ -550,9 +556,15 @@ class _Hybrid:
         pos = 0
         while pos < len(idx):
             rest = idx[pos:]
-            plan.advance(x0, t0, rest, p, budget, traj)
-            crossing = None
-            if self.zero is not None:
+            try:
+                plan.advance(x0, t0, rest, p, budget, traj)
+            except _SolverFailed:
+                crossing = self.probe(plan, x0, t0, rest, p, budget, traj) if self.zero is not None else None
+                if crossing is None or self.count >= MAX_EVENTS:
+                    raise
+            else:
+                crossing = None
+            if crossing is None and self.zero is not None:
                 cols = np.r_[rest[0] - 1, rest]
                 G = self.signs(plan, cols, traj, p)
                 G0 = self.g(plan, x0, p, t0)      # at the restart point, not the grid point
@@ -564,16 +576,15 @@ class _Hybrid:
                     j = hits[0]
                     ta = t0 if j == 0 else t_int[rest[j - 1]]
                     xa = x0 if j == 0 else traj[:, rest[j - 1]]
-                    crossing = (j, ta, xa, np.flatnonzero(flip[:, j]), G[:, j])
+                    crossing = (j, ta, xa, np.flatnonzero(flip[:, j]), G[:, j], t_int[rest[j]])
             if crossing is None:
                 self.at_point(plan, rest[-1], p, traj)
                 return
-            j, ta, xa, rels, g_a = crossing
-            tb = t_int[rest[j]]
+            j, ta, xa, rels, g_a, tb = crossing
             self.count += 1
             t_star, x_star = self.locate(plan, xa, ta, tb, p, rels, g_a, budget)
             x_star = self.iterate(plan, x_star, p, t_star, self.flags())
-            if t_star >= tb:          # located at the grid point itself
+            if t_star >= t_int[rest[j]]:          # located at the grid point itself
                 traj[:, rest[j]] = x_star
                 self.at_point(plan, rest[j], p, traj)
                 pos += j + 1
@@ -581,6 +592,37 @@ class _Hybrid:
             else:
                 pos += j
                 t0, x0 = t_star, x_star
+
+    def probe(self, plan, x0, t0, rest, p, budget, traj):
+        """After the solver gave up on the grid points ``rest``: the same points one at a time,
+        an interval that fails halved, until a relation changes sign (a crossing the failed
+        call ran past: a current chattering through zero because the arc that would quench
+        it at 0.6 mA was never seen). The crossing as :meth:`advance` takes it (its interval
+        may end between grid points), or None where there is none before the failure."""
+        t_int = plan.t_int
+        xa, ta = np.asarray(x0, float), t0
+        g_a = self.g(plan, xa, p, ta)
+        for j, k in enumerate(rest):
+            tb = t_int[k]
+            while True:
+                budget.check(ta)
+                try:
+                    xb = plan.hop(xa, p, ta, tb, budget, steps=PROBE_STEPS)
+                except RuntimeError:
+                    if tb - ta <= 1e-12 * max(1.0, abs(tb)):
+                        return None
+                    tb = 0.5 * (ta + tb)
+                    continue
+                g_b = self.g(plan, xb, p, tb)
+                flips = np.flatnonzero(np.sign(g_b) != np.sign(g_a))
+                if flips.size:
+                    return j, ta, xa, flips, g_a, tb
+                xa, ta, g_a = xb, tb, g_b
+                if tb == t_int[k]:
+                    traj[:, k] = xb
+                    break
+                tb = t_int[k]
+        return None
 
     def at_point(self, plan, k, p, traj):
         """A time event or clock ticks at grid point ``k``: the event iteration there (with the
