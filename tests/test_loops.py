@@ -76,4 +76,4 @@ end Sq;
     assert res.ok, res.reason
     current = lambda s: ((np.sqrt(1 + 4 * (2 + s)) - 1) / 2) ** 2
     ref = [quad(current, 0, s)[0] for s in t]
-    assert np.abs(res.states[:, model.ode.x_names.index("x")] - ref).max() < 1e-5
+    assert np.abs(res.states[:, model.ode.x_names.index("x")] - ref).max() < 1e-4      # of 3.4 (the default tolerances)

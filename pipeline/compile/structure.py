@@ -305,10 +305,17 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     z1 = quick(z0, par)
     ok = _within(resid(z1, par), LOOP_TOL)
     step = _damped_step(name, resid)
-    # the fallback starts a hair off the start values: a start at a singularity (a tank's
-    # T = H/(m*c) at m = 0, a saturation law's |B|^n with n < 1 at B = 0) has no Newton
-    # step, the point next to it has
-    z = z0 + 1e-6 * (1 + ca.fabs(z0))
+    # the initial system's fallback starts a hair off the start values: a start at a
+    # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
+    # A run's loops move only off a start where the law has no finite derivative (|B|^n with
+    # n < 1 at B = 0); one where it is finite but singular (w2 v^2 + w3 v^3 = w1 i at v = 0,
+    # a cubic's double root) stays the model's to resolve
+    off = z0 + 1e-6 * (1 + ca.fabs(z0))
+    if strict:
+        z = off
+    else:
+        s = ca.sum1(ca.vec(step.jac(z0, par)))
+        z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), z0, off)
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid,
@@ -345,7 +352,9 @@ def _damped_step(name: str, resid: ca.Function) -> ca.Function:
     body = ca.Function(f"{name}_ls", [z, par], [z + alpha * dz])
     r = resid(z, par)
     done = ca.dot(r, r) <= LOOP_TOL ** 2     # converged: the rest of the steps cost one residual
-    return ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)])
+    step = ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)])
+    step.jac = jac
+    return step
 
 
 def build_ode(dae: Dae, name: str = "model") -> Ode:
