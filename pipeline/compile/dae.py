@@ -302,7 +302,7 @@ def fold_initial_parameters(dae: Dae) -> Dae:
             coef = ca.jacobian(e, xs[j])
             if not coef.is_constant() or float(coef) == 0:
                 continue                       # nonlinear in it: left to the initial solve
-            solved[j] = ca.substitute(-e / float(coef), xs[j], ca.SX(0)) + 0
+            solved[j] = ca.substitute(-e / float(coef), xs[j], ca.SX(0))
             used.add(r)
             progress = True
         if not progress:

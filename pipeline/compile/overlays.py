@@ -100,8 +100,8 @@ _LOSSY_GEAR = [
       "  function interpolate1_ input Real x[:]; input Real y[size(x, 1)]; input Real xi; output Real yi; "
       "algorithm (yi, ) := Modelica.Math.Vectors.interpolate(x, y, xi, 1); end interpolate1_;\n")]
 
-# Modelica.Blocks.Continuous.Internal.Filter.Utilities (every normalized Butterworth or
-# Chebyshev filter, the band filters): rumoca lowers no while-loop whose iteration count it
+# Modelica.Blocks.Continuous.Internal.Filter.Utilities (the -3 dB normalization of ChebyshevI
+# filters, the only base filter calling it): rumoca lowers no while-loop whose iteration count it
 # cannot bound. Each is written as a bounded for-loop whose body runs while the condition
 # holds, the same function wherever the original ends within the bound: findInterval's
 # growth of alpha by 1.1 (200 steps reach 1.9e8; normalized filters need alpha near 1) and

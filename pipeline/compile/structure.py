@@ -304,7 +304,7 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
     z1 = quick(z0, par)
     ok = _within(resid(z1, par), LOOP_TOL)
-    step = _damped_step(name, resid)
+    step, jac = _damped_step(name, resid)
     # the initial system's fallback starts a hair off the start values: a start at a
     # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
     # A run's loops move only off a start where the law has no finite derivative (|B|^n with
@@ -314,7 +314,7 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     if strict:
         z = off
     else:
-        s = ca.sum1(ca.vec(step.jac(z0, par)))
+        s = ca.sum1(ca.vec(jac(z0, par)))
         z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), z0, off)
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
@@ -332,9 +332,9 @@ def _within(r, tol: float):
     return ca.logic_and(ca.mmax(ca.fabs(r)) <= tol, ca.sumsqr(r) <= r.numel() * tol ** 2)
 
 
-def _damped_step(name: str, resid: ca.Function) -> ca.Function:
+def _damped_step(name: str, resid: ca.Function) -> tuple[ca.Function, ca.Function]:
     """One step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
-    decreases |r|^2 enough (Armijo), the shortest when none does."""
+    decreases |r|^2 enough (Armijo), the shortest when none does; and the Jacobian it uses."""
     z, par = ca.MX.sym("z", resid.size1_in(0)), ca.MX.sym("par", resid.size1_in(1))
     try:
         zs, ps = ca.SX.sym("z", z.numel()), ca.SX.sym("p", par.numel())
@@ -352,9 +352,7 @@ def _damped_step(name: str, resid: ca.Function) -> ca.Function:
     body = ca.Function(f"{name}_ls", [z, par], [z + alpha * dz])
     r = resid(z, par)
     done = ca.dot(r, r) <= LOOP_TOL ** 2     # converged: the rest of the steps cost one residual
-    step = ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)])
-    step.jac = jac
-    return step
+    return ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)]), jac
 
 
 def build_ode(dae: Dae, name: str = "model") -> Ode:
