@@ -51,6 +51,11 @@ CALL_SHARE = 0.4
 FIRST_CALL = 8
 
 
+#: a relation's value from lhs - rhs, by its operator
+_TRUTH = {"greater": lambda g: g > 0, "greater_equal": lambda g: g >= 0,
+          "less": lambda g: g < 0, "less_equal": lambda g: g <= 0}
+
+
 class CasadiEngine(Engine):
     """Simulate a :class:`CompiledModel` in this process."""
 
@@ -80,7 +85,7 @@ class CasadiEngine(Engine):
     def _plan(self, model, u, t_out, sel, opts):
         # a cached plan holds its model, so the id cannot be reused while the entry exists
         key = (id(model), id(model.ode.ode), u.time.tobytes(), u.values.tobytes(),
-               t_out.tobytes(), sel, opts.rtol, opts.atol, opts.max_steps)
+               t_out.tobytes(), sel, opts.rtol, opts.atol, opts.max_steps, opts.state_bound is None)
         if key not in self._plans:
             self._plans[key] = _Plan(model, u, t_out, list(sel), opts)
             if len(self._plans) > _CACHE_SIZE:
@@ -144,7 +149,10 @@ class _Budget:
         elif not self.points:        # the first call: a fixed few points, its cost then measured
             n_points = min(n_points, FIRST_CALL)
         allowed, bound = math.inf, None
-        if self.rate is not None:
+        # a work budget alone sizes the calls where there is one (it bounds their cost, and the
+        # time is checked between them): sized by the measured rate, a noisy first call made
+        # restarts, and so a fit's path, depend on the machine's load
+        if self.rate is not None and self.opts.max_work is None:
             allowed, bound = share * max(self.opts.time_limit - self.clock.elapsed, 0.0) / self.rate, "time"
         if self.opts.max_work is not None and self.opts.max_work - self.steps < allowed:
             allowed, bound = max(self.opts.max_work - self.steps, 1), "work"
@@ -201,6 +209,14 @@ class _Plan:
             dS = ca.mtimes(ca.jacobian(f, X), S) + ca.mtimes(ca.jacobian(f, P)[:, sel], ca.diag(_sens_scale(P[sel])))
             xa, fa = ca.vertcat(X, ca.vec(S)), ca.vertcat(f, ca.vec(dS))
         fa = ca.densify(fa)       # CVODES takes dense right-hand sides (a state held constant is a structural 0)
+        # a run that leaves the caller's bound on |x| (a candidate law that blows up) is frozen
+        # there, which the solver crosses in a few steps, and then stopped: left to run, one
+        # such run took 30000 steps where a fit's others took 4000 (only where a bound is
+        # asked for: the guard makes the solver's Jacobian dense)
+        B = ca.MX.sym("bound")
+        if opts.state_bound is not None:
+            fa = fa * (ca.mmax(ca.fabs(X)) <= B)
+        P = ca.vertcat(P, B)
         self.na = xa.numel()
         empty = ca.MX.sym("z", 0, 1), ca.MX.sym("u", 0, 1)
         # one oracle for every integrator: its derivatives are built once, so an integrator
@@ -243,6 +259,9 @@ class _Plan:
         # and fresh Jacobians again: 3x the steps of one call on a MultiBody pendulum), and the
         # budget alone sizes the calls
         n_chunks = N_CHUNKS if model.ode.zero is not None else 1
+        # chunks of a share of the whole grid, not of each piece: with a clock ticking every
+        # few grid points, a piece split N_CHUNKS ways is a restart at every point
+        size = max(1, math.ceil((len(t_int) - 1) / n_chunks))
         chunks = []
         for piece in pieces:
             if not len(piece):
@@ -253,7 +272,7 @@ class _Plan:
                 chunks.append(head)
             rest = piece[len(head):]
             if len(rest):
-                chunks += list(np.array_split(rest, min(n_chunks, len(rest))))
+                chunks += list(np.array_split(rest, math.ceil(len(rest) / size)))
         self.chunks = [] if nx == 0 else chunks   # purely algebraic: nothing to integrate
         N = len(t_out)
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
@@ -297,10 +316,12 @@ class _Plan:
         integ = self._integrators[key]
         clock = Stopwatch(0)
         try:
-            xf = integ(x0=x, p=np.concatenate([p, [ta, tb - ta]]))["xf"]
+            xf = integ(x0=x, p=np.concatenate([p, [self.bound, ta, tb - ta]]))["xf"]
         finally:
             budget.record(_nsteps(integ), clock.elapsed)
-        return np.array(xf).ravel()
+        xf = np.array(xf).ravel()
+        self.within_bound(xf[None, : self.nx].T, [tb])
+        return xf
 
     def advance(self, x, t0, idx, p, budget: _Budget, traj):
         """Integrate from ``x`` at ``t0`` over the grid points ``idx``, filling ``traj``; each
@@ -318,7 +339,7 @@ class _Plan:
             integ = self.integrator(t0, self.t_int[sub], steps)
             clock = Stopwatch(0)
             try:
-                xf = np.array(integ(x0=x, p=p)["xf"])
+                xf = np.array(integ(x0=x, p=np.append(p, self.bound))["xf"])
             except RuntimeError as exc:
                 budget.record(_nsteps(integ) or steps, clock.elapsed)   # its steps, the rate measured
                 if bound is not None and "TOO_MUCH_WORK" in str(exc):
@@ -331,7 +352,15 @@ class _Plan:
             if not np.all(np.isfinite(xf)):
                 bad = sub[np.argmax(~np.all(np.isfinite(xf), axis=0))]
                 raise _Stop(f"non-finite state at t = {self.t_int[bad]:g}")
+            self.within_bound(xf[: self.nx], self.t_int[sub])
             x, t0, pos = xf[:, -1], self.t_int[sub[-1]], pos + n
+
+    def within_bound(self, x: np.ndarray, times) -> None:
+        """Stop the run where a state (columns of ``x`` at ``times``) passed the bound."""
+        over = np.max(np.abs(x), axis=0) > self.bound
+        if np.any(over):
+            raise _Stop(f"the solution diverged: a state passed |x| = {self.bound:g} "
+                        f"by t = {times[int(np.argmax(over))]:g}")
 
     def step_cost(self, x, u, p, t) -> float:
         """A first guess of the seconds per solver step (before any call has measured it): a
@@ -350,6 +379,7 @@ class _Plan:
         clock = Stopwatch(opts.time_limit)
         budget = _Budget(opts, clock)
         self.opts_max_steps = opts.max_steps
+        self.bound = math.inf if opts.state_bound is None else float(opts.state_bound)
         names = ode.y_names
 
         def fail(reason):
@@ -441,6 +471,7 @@ class _Hybrid:
         self.flag_names = info.get("flags", ["initial", "terminal"])
         self.assert_info = info.get("asserts", [])
         self.assert_fun = getattr(ode, "asserts", None)
+        self.ops = info.get("relation_ops")
         self.count = 0
         self.maps: dict = {}
         self._free = None
@@ -550,36 +581,35 @@ class _Hybrid:
     def advance(self, plan, idx, p, budget, traj):
         """Integrate over the chunk ``idx`` with events: after each call the relations are
         compared point to point; at the first sign change the crossing is located, the event
-        handled and the rest of the chunk integrated again from there."""
+        handled and the rest of the chunk integrated again from there. A crossing of relations
+        on time alone is foreseen (:meth:`foreseen`): the call ends before it."""
         t_int = plan.t_int
         t0, x0 = t_int[idx[0] - 1], traj[:, idx[0] - 1]
         pos = 0
         while pos < len(idx):
             rest = idx[pos:]
-            try:
-                plan.advance(x0, t0, rest, p, budget, traj)
-            except _SolverFailed:
-                crossing = self.probe(plan, x0, t0, rest, p, budget, traj) if self.zero is not None else None
-                if crossing is None or self.count >= MAX_EVENTS:
-                    raise
-            else:
-                crossing = None
+            ahead, crossing = self.foreseen(plan, x0, t0, rest, p), None
+            if ahead == 0 and (not self.state_free().all() or self.count >= MAX_EVENTS):
+                ahead = 1        # other relations may change first: this interval as any other
+            if ahead:                              # up to the interval of a foreseen crossing
+                rest = rest[:ahead]
+            if ahead != 0:
+                try:
+                    plan.advance(x0, t0, rest, p, budget, traj)
+                except _SolverFailed:
+                    crossing = self.probe(plan, x0, t0, rest, p, budget, traj) if self.zero is not None else None
+                    if crossing is None or self.count >= MAX_EVENTS:
+                        raise
+            else:                                  # a foreseen crossing in the first interval
+                rest = rest[:1]
+                crossing = self.crossing_ahead(plan, x0, t0, t_int[rest[0]], p)
             if crossing is None and self.zero is not None:
-                cols = np.r_[rest[0] - 1, rest]
-                G = self.signs(plan, cols, traj, p)
-                G0 = self.g(plan, x0, p, t0)      # at the restart point, not the grid point
-                G = np.column_stack([G0, G[:, 1:]])
-                # a relation changes when its sign does; reaching exactly 0 counts (T < 18 at 18)
-                flip = np.sign(G[:, 1:]) != np.sign(G[:, :-1])
-                hits = np.flatnonzero(flip.any(axis=0))
-                if hits.size and self.count < MAX_EVENTS:
-                    j = hits[0]
-                    ta = t0 if j == 0 else t_int[rest[j - 1]]
-                    xa = x0 if j == 0 else traj[:, rest[j - 1]]
-                    crossing = (j, ta, xa, np.flatnonzero(flip[:, j]), G[:, j], t_int[rest[j]])
+                crossing = self.first_flip(plan, x0, t0, rest, p, traj)
             if crossing is None:
                 self.at_point(plan, rest[-1], p, traj)
-                return
+                pos += len(rest)
+                t0, x0 = t_int[rest[-1]], traj[:, rest[-1]]
+                continue
             j, ta, xa, rels, g_a, tb = crossing
             self.count += 1
             t_star, x_star = self.locate(plan, xa, ta, tb, p, rels, g_a, budget)
@@ -592,6 +622,68 @@ class _Hybrid:
             else:
                 pos += j
                 t0, x0 = t_star, x_star
+
+    def crossing_ahead(self, plan, x0, t0, t1, p):
+        """The crossing in (t0, t1] of relations on time alone, as :meth:`advance` takes it."""
+        g_a, g_b = self.g(plan, x0, p, t0), self.g(plan, x0, p, t1)
+        rels = np.flatnonzero(self.state_free() & (np.sign(g_b) != self.start_signs(g_a, g_b)))
+        return 0, t0, x0, rels, g_a, t1
+
+    def first_flip(self, plan, x0, t0, rest, p, traj):
+        """The first interval of the integrated points ``rest`` (after ``x0`` at ``t0``) where a
+        relation changed, as :meth:`advance` takes it, or None."""
+        t_int = plan.t_int
+        G = self.signs(plan, np.r_[rest[0] - 1, rest], traj, p)
+        G = np.column_stack([self.g(plan, x0, p, t0), G[:, 1:]])   # at the restart point, not the grid point
+        # a relation changes when its sign does; reaching exactly 0 counts (T < 18 at 18)
+        S = np.sign(G)
+        S[:, 0] = self.start_signs(G[:, 0], G[:, 1])
+        flip = S[:, 1:] != S[:, :-1]
+        hits = np.flatnonzero(flip.any(axis=0))
+        if not hits.size or self.count >= MAX_EVENTS:
+            return None
+        j = hits[0]
+        ta, xa = (t0, x0) if j == 0 else (t_int[rest[j - 1]], traj[:, rest[j - 1]])
+        return j, ta, xa, np.flatnonzero(flip[:, j]), G[:, j], t_int[rest[j]]
+
+    def start_signs(self, g0, g1):
+        """The signs of the relations at a restart point (``g0``) as compared with ``g1`` at the
+        next point. A relation exactly 0 there (lhs = rhs: a clock's tick that set pulseStart
+        = time) changes only if its value does: time >= pulseStart stays true, T < 22 at 22
+        becomes... false as it was, T > 18 at 18 becomes true. Where its operator is unknown,
+        leaving 0 counts as a change."""
+        s0, s1 = np.sign(g0), np.sign(g1)
+        ops = self.ops
+        if not ops or len(ops) != len(s0):
+            return s0
+        out = s0.copy()
+        for k in np.flatnonzero(s0 == 0):
+            truth = _TRUTH.get(ops[k])
+            if truth is not None and truth(0.0) == truth(float(g1[k])):
+                out[k] = s1[k]
+        return out
+
+    def foreseen(self, plan, x0, t0, rest, p) -> int | None:
+        """The grid points of ``rest`` to integrate before the next crossing of a relation that
+        reads no continuous state (a pulse's edge: time against a discrete variable, fixed
+        until the next event), found without integrating: the points before its interval (0:
+        it is in the first interval, whose end is then not integrated to), or None where there
+        is none. Integrated past it, the call would be thrown away at the event and the
+        crossing found again by integrating (a switched-capacitor filter: 4x the steps)."""
+        free = self.state_free() if self.zero is not None else None
+        if free is None or not free.any():
+            return None
+        n = len(rest) + 1
+        if n not in self.maps:
+            self.maps[n] = self.zero.map(n)
+        t = np.r_[t0, plan.t_int[rest]]
+        U = np.column_stack([plan.u_at(tc) for tc in t]) if plan.u.names else np.zeros((0, n))
+        X = np.repeat(np.asarray(x0, float)[: plan.nx, None], n, axis=1)
+        G = np.array(self.maps[n](X, U, np.repeat(np.asarray(p)[:, None], n, 1), t[None]))[free]
+        S = np.sign(G)
+        S[:, 0] = self.start_signs(G[:, 0], G[:, 1])
+        flips = np.flatnonzero((S[:, 1:] != S[:, :-1]).any(axis=0))
+        return int(flips[0]) if flips.size else None
 
     def probe(self, plan, x0, t0, rest, p, budget, traj):
         """After the solver gave up on the grid points ``rest``: the same points one at a time,
@@ -649,31 +741,58 @@ class _Hybrid:
         return self._free
 
     def locate(self, plan, xa, ta, tb, p, flips, g_a, budget):
-        """The earliest crossing of the relations ``flips`` in (ta, tb] and the state just past it."""
-        best_t = tb
+        """The earliest crossing of the relations ``flips`` in (ta, tb] and the state just past it
+        (where only relations on time alone cross: the state just before it)."""
         free = self.state_free()
+        on_time = [r for r in flips if free[r]]
+        best_t, before = (self.bisect(plan, xa, ta, tb, p, on_time, g_a) if on_time else (tb, tb))
         for r in flips:
-            # a relation on time and inputs alone (a pulse's edge) is found without integrating
-            at = (lambda t: xa) if free[r] else (lambda t: plan.hop(xa, p, ta, t, budget))
-            lo, hi, g_lo = ta, tb, g_a[r]
-            g_hi = self.g(plan, at(hi), p, hi)[r]
-            side = 0
-            for _ in range(60):
-                if hi - lo <= 1e-12 * max(1.0, abs(hi)):
-                    break
-                t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo) if g_hi != g_lo else 0.5 * (lo + hi)
-                t = min(max(t, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-                g_t = self.g(plan, at(t), p, t)[r]
-                if np.sign(g_t) == np.sign(g_lo):
-                    lo, g_lo = t, g_t
-                    g_hi = g_hi / 2 if side == -1 else g_hi      # Illinois
-                    side = -1
-                else:
-                    hi, g_hi = t, g_t
-                    g_lo = g_lo / 2 if side == 1 else g_lo
-                    side = 1
-            best_t = min(best_t, hi)
+            if not free[r]:
+                best_t = min(best_t, self.falsi(plan, xa, ta, tb, p, r, g_a[r], budget))
+        if all(free[r] for r in flips):
+            # the states reached just before the crossing: the relations read none, and the
+            # model's right-hand side may switch with them (to just past it: 240 steps more)
+            return best_t, plan.hop(xa, p, ta, before, budget)
         return best_t, plan.hop(xa, p, ta, best_t, budget)   # hi: just past the crossing
+
+    def bisect(self, plan, xa, ta, tb, p, rels, g_a):
+        """(just past, just before) the first crossing of the relations ``rels`` on time alone,
+        all bisected at once to the last digit (each trial one evaluation, no integration;
+        safe where a relation jumps: an integer() count)."""
+        lo, hi, s_lo = ta, tb, np.sign(g_a[rels])
+        tol = 4 * np.finfo(float).eps * max(abs(hi), tb - ta)
+        for _ in range(200):
+            if hi - lo <= tol:
+                break
+            t = 0.5 * (lo + hi)
+            if np.array_equal(np.sign(self.g(plan, xa, p, t)[rels]), s_lo):
+                lo = t
+            else:
+                hi = t
+        return hi, lo
+
+    def falsi(self, plan, xa, ta, tb, p, r, g_lo, budget) -> float:
+        """Just past the crossing of relation ``r`` on the states: Illinois regula falsi, each
+        trial a restart from ``xa`` at ``ta``."""
+        at = (lambda t: plan.hop(xa, p, ta, t, budget))
+        lo, hi = ta, tb
+        g_hi = self.g(plan, at(hi), p, hi)[r]
+        side = 0
+        for _ in range(60):
+            if hi - lo <= 1e-12 * max(1.0, abs(hi)):
+                break
+            t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo) if g_hi != g_lo else 0.5 * (lo + hi)
+            t = min(max(t, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
+            g_t = self.g(plan, at(t), p, t)[r]
+            if np.sign(g_t) == np.sign(g_lo):
+                lo, g_lo = t, g_t
+                g_hi = g_hi / 2 if side == -1 else g_hi      # Illinois
+                side = -1
+            else:
+                hi, g_hi = t, g_t
+                g_lo = g_lo / 2 if side == 1 else g_lo
+                side = 1
+        return hi
 
     # -- asserts ---------------------------------------------------------------------------------
     def asserts(self, X, U, P, t) -> str | None:

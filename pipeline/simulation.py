@@ -29,6 +29,7 @@ class SimulationOptions:
     time_limit: float = 60.0        # wall-clock seconds for one simulation, checked during the integration
     max_steps: int = 20000          # solver steps between two output points
     max_work: int | None = None     # solver steps in all (None: no bound); beyond it the run fails
+    state_bound: float | None = None  # max |x| of any state (None: no bound); beyond it the run fails
     residual_tol: float = 1e-6      # algebraic loops: max |g| accepted (relative to scale)
     drift_tol: float = 1e-3         # invariants of index reduction: max |I| accepted
     fmu_substeps: int = 4           # FMU engine: communication steps per output interval
@@ -51,7 +52,8 @@ class SimulationOptions:
 
 #: option -> (lowest, highest), both excluded; whole numbers where the default is an int
 _LIMITS = {"rtol": (0.0, 1.0), "atol": (0.0, math.inf), "time_limit": (0.0, math.inf),
-           "max_steps": (0, math.inf), "max_work": (0, math.inf), "residual_tol": (0.0, math.inf), "drift_tol": (0.0, math.inf),
+           "max_steps": (0, math.inf), "max_work": (0, math.inf), "state_bound": (0.0, math.inf),
+           "residual_tol": (0.0, math.inf), "drift_tol": (0.0, math.inf),
            "fmu_substeps": (0, 10_000)}
 
 
@@ -59,7 +61,7 @@ def _check_options(values: dict, option) -> None:
     """Every option a finite number in its range, else a ConfigError naming ``option(name)``."""
     for name, (lo, hi) in _LIMITS.items():
         value = values.get(name)
-        if value is None and name == "max_work":        # no bound
+        if value is None and name in ("max_work", "state_bound"):        # no bound
             continue
         integer = isinstance(lo, int)
         ok = (isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)

@@ -53,3 +53,27 @@ def test_the_time_limit_stops_a_crawling_integration(crawl):
     res = simulate(crawl, _none(t), options={"time_limit": 1.0, "max_steps": 10**8, "rtol": 1e-10,
                                              "atol": 1e-12})
     assert not res.ok and "time limit of 1 s exceeded" in res.reason
+
+
+GROW = """
+model Grow "unstable: x = exp(2 t)"
+  Real x(start = 1, fixed = true);
+  output Real o;
+equation
+  der(x) = 2*x;
+  o = x;
+end Grow;
+"""
+
+
+def test_a_run_that_passes_its_state_bound_stops_there(tmp_path):
+    (tmp_path / "Grow.mo").write_text(GROW)
+    grow = compile_model([tmp_path / "Grow.mo"], "Grow")
+    t = np.linspace(0, 20, 201)                       # exp(40) at the end: 2e17
+    free = simulate(grow, _none(t))
+    assert free.ok and np.allclose(free.output("o"), np.exp(2 * t), rtol=1e-4)
+    bounded = simulate(grow, _none(t), options={"state_bound": 1e3})
+    assert not bounded.ok and "diverged" in bounded.reason
+    crossed = float(bounded.reason.rsplit("t = ", 1)[1])
+    assert np.log(1e3) / 2 <= crossed <= np.log(1e3) / 2 + 0.1     # stopped where it crossed
+    assert bounded.steps < free.steps

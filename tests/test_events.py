@@ -407,3 +407,37 @@ def test_a_crossing_the_solver_ran_past_is_found_after_it_gives_up(tmp_path):
     before = t < 0.1 * np.log(2) - 1e-3
     assert np.abs(i[before] - (-10 + 20 * np.exp(-10 * t[before]))).max() < 1e-4
     assert np.abs(i[t > 0.08] - 50 / (1 + 1e5)).max() < 1e-8
+
+
+PULSED_RC = """
+model PulsedRC "a capacitor charged while a pulse is on, discharging while it is off"
+  discrete Real start(start = 0, fixed = true);
+  Boolean on;
+  Real v(start = 0, fixed = true);
+  output Real y = v;
+equation
+  when sample(0, 0.2) then
+    start = time;
+  end when;
+  on = time >= start and time < start + 0.07;
+  der(v) = if on then (1 - v)/0.1 else -v;
+end PulsedRC;
+"""
+
+
+def test_a_pulse_edge_on_time_alone_is_foreseen_and_the_solution_is_exact(tmp_path):
+    """The falling edge (time against a discrete value) is found without integrating past it,
+    and the switch of the right-hand side with it is not integrated across; a tick that sets
+    start = time makes time >= start exactly 0, which is no second event."""
+    (tmp_path / "PulsedRC.mo").write_text(PULSED_RC)
+    model = compile_model([tmp_path / "PulsedRC.mo"], "PulsedRC")
+    t = np.linspace(0.0, 1.0, 41)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    v, exact, grid = 0.0, [0.0], np.union1d(t, [k * 0.2 + d for k in range(5) for d in (0.0, 0.07)])
+    for a, b in zip(grid[:-1], grid[1:]):
+        on = (a + 1e-12) % 0.2 < 0.07
+        v = 1 + (v - 1) * np.exp(-(b - a) / 0.1) if on else v * np.exp(-(b - a))
+        if np.any(np.isclose(b, t)):
+            exact.append(v)
+    np.testing.assert_allclose(res.output("y"), exact, atol=1e-4)

@@ -52,6 +52,7 @@ class Dae:
     #: zero-crossing functions: lhs - rhs of each relation on the unknowns in the equations
     #: (outside noEvent); where one changes sign the equations switch: a state event
     relations: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    relation_ops: tuple = ()    # each relation's operator (greater, less_equal, ...; None: unknown)
     # -- the hybrid part (empty for a continuous model) ----------------------------------
     #: discrete variables held between events (discrete Real, Integer, Boolean; then one
     #: memory per condition whose rising edge fires a when-clause), their names and starts

@@ -517,6 +517,7 @@ class _Translator:
         self.event_nodes = {r["relation"]["expression"] for r in storage.get("relations", [])
                             if isinstance(r, dict) and "relation" in r}
         self.relations: list[ca.SX] = []   # lhs - rhs of the event-generating relations met
+        self.relation_ops: list = []       # their operators (None: a quotient's integer crossing)
         self.span = None                   # provenance of what is being translated (for errors)
         self.fn_asserts: list = []         # (violated, level, message) of asserts in functions called
         self.table_records: dict = {}      # the MSL's interpolation tables by their id (rumoca's data)
@@ -681,11 +682,13 @@ class _Translator:
             if op in _RELATIONS and bound is None and lhs.numel() == rhs.numel() == 1 and \
                     (k in self.event_nodes or (self.live and k not in self.quiet)):
                 self.relations.append(lhs - rhs)
+                self.relation_ops.append(op)
             return out
         if kind == "runtime_quotient_owner":          # div, mod, rem: an event where a/b crosses an integer
             a, b = alike(done[body["lhs"]], done[body["rhs"]])
             if bound is None and a.numel() == 1 and k not in self.quiet:
                 self.relations.append(ca.sin(np.pi * a / b))
+                self.relation_ops.append(None)
             return self.call_builtin(body["builtin"], [a, b])
         if kind == "conditional":
             ops = [done[o] for o in self.operands(k)]
@@ -1287,7 +1290,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     # other tools; the MSL's resistors assert on their temperature, a sign change never seen)
     met = len(tr.relations)
     asserts, assert_info = events.asserts()
-    del tr.relations[met:]
+    del tr.relations[met:], tr.relation_ops[met:]
 
     def value_of(i, key_order=("binding", "start")):
         node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)
@@ -1353,6 +1356,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     unknowns = ca.vertcat(x, dx, z, d, d_pre)
     on = set(ca.jacobian_sparsity(ca.vertcat(*tr.relations), unknowns).get_triplet()[0]) if tr.relations else ()
     rel = [r for k, r in enumerate(tr.relations) if k in on]
+    rel_ops = tuple(o for k, o in enumerate(tr.relation_ops) if k in on)
     relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
     d_start = ca.vertcat(starts("d"), ca.SX.zeros(len(memory), 1)) if nd else ca.SX(0, 1)
     # initial equations pre(v) = value: the value v's pre() has at initialisation
@@ -1386,7 +1390,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
-               time_events=_time_events(st), relations=relations,
+               time_events=_time_events(st), relations=relations, relation_ops=rel_ops,
                d=d, d_names=names["d"] + [f"$when{c}" for c in sorted(memory)], d_start=d_start,
                d_pre=d_pre, x_pre=x_pre, flags=flags,
                d_update=bind_event(d_update) if nd else ca.SX(0, 1),

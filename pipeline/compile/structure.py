@@ -432,6 +432,7 @@ def _build(dae: Dae, name: str = "model") -> Ode:
         ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe, checks=checks,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
         time_events=tuple(dae.time_events), zero=crossings, start=start, init_start=init_start,
+        events={"relation_ops": list(dae.relation_ops)} if dae.relation_ops else None,
         loops=loops, given=given,
     )
 
@@ -580,7 +581,8 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         init_start=expanded(init_start) if init_start is not None else None,
         discrete=nd, update=update, init_discrete=expanded(init_discrete), asserts=asserts,
         events={"clocks": [list(c) for c in dae.clocks], "flags": ["initial", "terminal"] +
-                [f"tick{k}" for k in range(len(dae.clocks))], "asserts": [list(a) for a in dae.assert_info]},
+                [f"tick{k}" for k in range(len(dae.clocks))], "asserts": [list(a) for a in dae.assert_info],
+                "relation_ops": list(dae.relation_ops)},
         loops=loops, given=given,
     )
 

@@ -113,7 +113,7 @@ class Context:
     progress_dir: str           # finished fits publish their RSS here ('' = no early stop)
     n_obs: int = 0
     algorithm: str = "levenberg-marquardt"   # the optimiser (mcl.fit.FITTERS)
-    max_work: int | None = None  # solver steps a candidate's simulation may take (50x the nominal's)
+    limits: dict | None = None  # simulation options bounding a candidate's runs by the nominal's (steps, |x|)
     floor: float = 0.0          # the RSS of the noise alone (n_obs sigma^2)
     wave: str = ""              # the wave this context's fits run in (they do not read each other)
 
@@ -159,7 +159,16 @@ class Context:
             if lead > 10.0 or (smaller and set(o.component.split("+")) == mine
                                and reachable > o.rss * (1.0 - np.log(n) / n)):
                 return True
-        return False
+        return self._tied_at_noise(others, mine, dictionary)
+
+    def _tied_at_noise(self, others: list, mine: set, dictionary: int | None) -> bool:
+        """A law at this component chosen from no more terms has reached the noise: this fit can
+        at best tie with it and prune back to it, so it stops wherever it stands (a storage
+        law beside the static one that fits: 62 simulations to end where that one began)."""
+        if self.floor <= 0 or dictionary is None:
+            return False
+        return any(set(o.component.split("+")) == mine and o.dictionary is not None
+                   and o.dictionary <= dictionary and o.rss <= 1.44 * self.floor for o in others)
 
 
 @dataclass
@@ -240,7 +249,7 @@ def fit_task(ctx: Context, item) -> dict:
             prunable += [0 < k < n_terms for k in range(len(law.names))]
         fit = FitOutcome(*fit_and_prune(model, ctx.train, names, w0, 2 * ctx.budget, ctx.criterion, give_up=give_up,
                                         held=held, prunable=prunable, algorithm=ctx.algorithm,
-                                        max_work=ctx.max_work))
+                                        limits=ctx.limits))
     else:
         # the shape stage (a network, then distilled laws with fitted scales) always simulates:
         # it refines the best law and is not stopped for being behind it; a network has many
@@ -250,7 +259,7 @@ def fit_task(ctx: Context, item) -> dict:
         fit = fitter.fit(model, ctx.train, names, w0, template, ctx.criterion,
                          ctx.budget * (3 if item.index == NEURAL_INDEX else 1), give_up=give_up,
                          prune=bool(getattr(template, "terms", None)),
-                         algorithm=ctx.algorithm, max_work=ctx.max_work)
+                         algorithm=ctx.algorithm, limits=ctx.limits)
     res = fit.result if fit.result is not None else simulate(model, ctx.train, dict(zip(names, fit.w)))
     out = {"component": item.component, "template": item.spec, "rss": fit.rss, "score": fit.score,
            "simulations": fit.simulations, "pruning": fit.path, "visited": fit.visited if len(laws) == 1 else [],

@@ -64,12 +64,13 @@ class CandidateFitter:
 
     def fit(self, model, data: TimeSeries, names: list[str], w0, template, criterion, budget: int,
             give_up=None, prune: bool = True, progress=None, algorithm: str = "levenberg-marquardt",
-            max_work: int | None = None) -> FitOutcome:
+            limits: dict | None = None) -> FitOutcome:
         """``give_up(reachable_rss, current_rss, k, dictionary)`` stops a fit that cannot win;
         ``progress(rss, k, dictionary)`` is told the RSS of each better point reached (so that
         other fits can compare), ``k`` being the parameters the fit has free among ``dictionary``;
-        ``algorithm`` names the optimiser (:data:`mcl.fit.FITTERS`), ``max_work`` bounds each
-        simulation's solver steps (a law that makes the model crawl fails instead)."""
+        ``algorithm`` names the optimiser (:data:`mcl.fit.FITTERS`), ``limits`` are simulation
+        options that bound each run (``max_work``, ``state_bound``: a law that makes the model
+        crawl or blow up fails instead)."""
         raise NotImplementedError
 
 
@@ -78,11 +79,11 @@ class SimulationFitter(CandidateFitter):
     description = "Levenberg-Marquardt on simulations with sensitivities, then backward elimination"
 
     def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None,
-            algorithm="levenberg-marquardt", max_work=None):
+            algorithm="levenberg-marquardt", limits=None):
         n_terms = len(getattr(template, "terms", names))
         return FitOutcome(*fit_and_prune(model, data, names, w0, budget, criterion, give_up=give_up,
                                          prune=prune, n_terms=n_terms, progress=progress, algorithm=algorithm,
-                                         max_work=max_work))
+                                         limits=limits))
 
 
 class FullDiscretisationFitter(CandidateFitter):
@@ -90,17 +91,17 @@ class FullDiscretisationFitter(CandidateFitter):
     description = "paper 004: least squares over states and parameters, stage-wise backward elimination"
 
     def fit(self, model, data, names, w0, template, criterion, budget, give_up=None, prune=True, progress=None,
-            algorithm="levenberg-marquardt", max_work=None):
+            algorithm="levenberg-marquardt", limits=None):
         if not getattr(template, "terms", None) or getattr(template, "scales", None):
             # a network, or a law with fitted scales, has no terms to prune stage-wise by degree
             return SimulationFitter().fit(model, data, names, w0, template, criterion, budget, give_up, prune,
-                                          progress, algorithm, max_work)
+                                          progress, algorithm, limits)
         return FitOutcome(*refine_candidate(model, data, names, w0, criterion, template))
 
 
 def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion,
                   give_up=None, prune: bool = True, n_terms: int | None = None, progress=None,
-                  held=None, prunable=None, algorithm: str = "levenberg-marquardt", max_work: int | None = None):
+                  held=None, prunable=None, algorithm: str = "levenberg-marquardt", limits: dict | None = None):
     """LM fit of the law parameters, then backward elimination of terms.
 
     ``held`` marks the parameters kept at their start value (each law's scale: G(w) = 0 and
@@ -128,7 +129,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         free = active_mask & ~held
         params = [nm for nm, on in zip(names, free) if on]
         fixed = {nm: (float(w0[k]) if held[k] else 0.0) for k, nm in enumerate(names) if not free[k]}
-        problem = FitProblem(model, window, params, fixed=fixed, options={**FIT_OPTIONS, "max_work": max_work})
+        problem = FitProblem(model, window, params, fixed=fixed, options={**FIT_OPTIONS, **(limits or {})})
         whole = window is data      # only a fit to all the data compares with other candidates
         # the other fits compare with this one counting its free parameters (a larger law's
         # lower RSS does not stop a smaller one that the criterion may prefer)
