@@ -49,6 +49,9 @@ PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (
 CALL_SHARE = 0.4
 #: output points of a run's first call (whose steps and seconds size the calls after it)
 FIRST_CALL = 8
+#: with a work budget, the time left sizes the calls only where it allows this many times fewer
+#: steps than the budget does
+TIME_MARGIN = 2.5
 
 
 #: a relation's value from lhs - rhs, by its operator
@@ -149,13 +152,15 @@ class _Budget:
         elif not self.points:        # the first call: a fixed few points, its cost then measured
             n_points = min(n_points, FIRST_CALL)
         allowed, bound = math.inf, None
-        # a work budget alone sizes the calls where there is one (it bounds their cost, and the
-        # time is checked between them): sized by the measured rate, a noisy first call made
-        # restarts, and so a fit's path, depend on the machine's load
-        if self.rate is not None and self.opts.max_work is None:
+        if self.rate is not None:
             allowed, bound = share * max(self.opts.time_limit - self.clock.elapsed, 0.0) / self.rate, "time"
-        if self.opts.max_work is not None and self.opts.max_work - self.steps < allowed:
-            allowed, bound = max(self.opts.max_work - self.steps, 1), "work"
+        if self.opts.max_work is not None:
+            # a work budget sizes the calls unless the time left binds by far (the whole budget
+            # at the measured rate would take 2.5x the share): sized by a noisy rate, measured on
+            # a short first call, the restarts, and so a fit's path, followed the machine's load
+            work = max(self.opts.max_work - self.steps, 1)
+            if work <= TIME_MARGIN * allowed:
+                allowed, bound = work, "work"
         if n_points * cap <= allowed:
             return n_points, cap, None
         per_point = max(int(allowed // n_points), 1)

@@ -55,6 +55,15 @@ def test_the_time_limit_stops_a_crawling_integration(crawl):
     assert not res.ok and "time limit of 1 s exceeded" in res.reason
 
 
+def test_the_time_limit_stops_a_crawl_whose_work_budget_is_far_away(crawl):
+    """A work budget sizes the calls (a fit's path does not follow the machine's load), but not
+    where the time left allows far fewer steps: the limit is still enforced inside a call."""
+    t = np.linspace(0, 1000, 3)
+    res = simulate(crawl, _none(t), options={"time_limit": 1.0, "max_steps": 10**8, "max_work": 10**9,
+                                             "rtol": 1e-10, "atol": 1e-12})
+    assert not res.ok and "time limit of 1 s exceeded" in res.reason
+
+
 GROW = """
 model Grow "unstable: x = exp(2 t)"
   Real x(start = 1, fixed = true);
