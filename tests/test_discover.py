@@ -216,6 +216,35 @@ def test_early_stop_weighs_parameters_not_only_rss(tmp_path):
     assert not ctx.give_up(0.0300, 0.0600, Item("R1", 0, {}), k=2, dictionary=3)  # far from its optimum
 
 
+def test_near_its_optimum_a_larger_law_stops_where_its_component_s_smaller_law_reached_the_noise(tmp_path):
+    """Near its own optimum, a storage law that the Gauss-Newton model says could still gain a
+    little more than one parameter's cost stops when the static law at the same component has
+    reached the noise (its pruning could at best come back to it); far from its optimum, beside
+    a smaller law above the noise, or at another component, it runs on."""
+    from mcl.discovery.candidates import Context, Item, publish
+
+    ctx = Context(None, {}, {}, None, None, 10, "bic", "simulation", str(tmp_path), n_obs=400, floor=0.020)
+    static, storage, other = Item("Rx", 0, {}), Item("Rx", 1, {}), Item("C", 1, {})
+    publish(tmp_path, static, 0.0300, k=2, dictionary=3)          # 1.5x the noise's RSS: not there
+    assert not ctx.give_up(0.0290, 0.0295, storage, k=6, dictionary=6)
+    publish(tmp_path, static, 0.0210, k=2, dictionary=3)          # at the noise
+    assert ctx.give_up(0.0205, 0.0210, storage, k=6, dictionary=6)
+    assert not ctx.give_up(0.0205, 0.0600, storage, k=6, dictionary=6)   # far from its optimum
+    assert not ctx.give_up(0.0205, 0.0210, other, k=6, dictionary=6)
+
+
+def test_the_first_fit_is_the_top_component_s_law_of_fewest_terms():
+    from mcl.discovery.candidates import Item
+    from mcl.discovery.search import simplest_first
+    from mcl.templates import PolynomialTemplate
+
+    terms = {0: ["v", "v^3"], 1: ["dv", "v*dv", "v", "v^3"]}
+    todo = [Item("R2", 1, {}), Item("R3", 1, {}), Item("R2", 0, {}), Item("R1", 0, {})]
+    templates = {it.key: PolynomialTemplate(lhs=["i"], rhs=terms[it.index]) for it in todo}
+    order = simplest_first(todo, templates)
+    assert [(it.component, it.index) for it in order] == [("R2", 0), ("R2", 1), ("R3", 1), ("R1", 0)]
+
+
 def test_a_fit_reads_only_the_waves_before_its_own(tmp_path):
     """Fits run in waves of as many as there are workers; a fit of one wave is never stopped by
     another of the same wave (which of them finishes first is a race), only by earlier waves."""

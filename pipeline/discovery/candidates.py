@@ -162,9 +162,10 @@ class Context:
         return self._tied_at_noise(others, mine, dictionary)
 
     def _tied_at_noise(self, others: list, mine: set, dictionary: int | None) -> bool:
-        """A law at this component chosen from no more terms has reached the noise: this fit can
-        at best tie with it and prune back to it, so it stops wherever it stands (a storage
-        law beside the static one that fits: 62 simulations to end where that one began)."""
+        """A law at this component chosen from no more terms has reached the noise: this fit,
+        near its own optimum, stops before its pruning, which could at best come back to that
+        law (checked after the rules above, so only near the optimum: far from it, a larger law
+        that the data prefer is not stopped by a smaller one at 1.2x the noise's RMS)."""
         if self.floor <= 0 or dictionary is None:
             return False
         return any(set(o.component.split("+")) == mine and o.dictionary is not None
