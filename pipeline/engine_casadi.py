@@ -325,7 +325,7 @@ class _Plan:
         finally:
             budget.record(_nsteps(integ), clock.elapsed)
         xf = np.array(xf).ravel()
-        self.within_bound(xf[None, : self.nx].T, [tb])
+        self.within_bound(xf[: self.nx, None], [tb])
         return xf
 
     def advance(self, x, t0, idx, p, budget: _Budget, traj):
@@ -573,15 +573,21 @@ class _Hybrid:
     def g(self, plan, x, p, t):
         return np.array(self.zero(x[: plan.nx], plan.u_at(t), p, t)).ravel()
 
-    def signs(self, plan, cols, traj, p):
-        if self.zero is None:
-            return None
-        n = len(cols)
+    def values(self, plan, X, t, p) -> np.ndarray:
+        """The relations (rows) at the state columns ``X`` and times ``t``, in one mapped call."""
+        n = len(t)
         if n not in self.maps:
             self.maps[n] = self.zero.map(n)
-        t = plan.t_int[cols]
         U = np.column_stack([plan.u_at(tc) for tc in t]) if plan.u.names else np.zeros((0, n))
-        return np.array(self.maps[n](traj[: plan.nx, cols], U, np.repeat(np.asarray(p)[:, None], n, 1), t[None]))
+        return np.array(self.maps[n](X, U, np.repeat(np.asarray(p)[:, None], n, 1), np.asarray(t)[None]))
+
+    def changes(self, G) -> np.ndarray:
+        """(relations, intervals): where a relation changes between the columns of ``G``, the
+        first column a restart point (:meth:`start_signs`). A relation changes when its sign
+        does; reaching exactly 0 counts (T < 18 at 18)."""
+        S = np.sign(G)
+        S[:, 0] = self.start_signs(G[:, 0], G[:, 1])
+        return S[:, 1:] != S[:, :-1]
 
     def advance(self, plan, idx, p, budget, traj):
         """Integrate over the chunk ``idx`` with events: after each call the relations are
@@ -638,12 +644,9 @@ class _Hybrid:
         """The first interval of the integrated points ``rest`` (after ``x0`` at ``t0``) where a
         relation changed, as :meth:`advance` takes it, or None."""
         t_int = plan.t_int
-        G = self.signs(plan, np.r_[rest[0] - 1, rest], traj, p)
-        G = np.column_stack([self.g(plan, x0, p, t0), G[:, 1:]])   # at the restart point, not the grid point
-        # a relation changes when its sign does; reaching exactly 0 counts (T < 18 at 18)
-        S = np.sign(G)
-        S[:, 0] = self.start_signs(G[:, 0], G[:, 1])
-        flip = S[:, 1:] != S[:, :-1]
+        G = self.values(plan, traj[: plan.nx, rest], t_int[rest], p)
+        G = np.column_stack([self.g(plan, x0, p, t0), G])   # at the restart point, not the grid point
+        flip = self.changes(G)
         hits = np.flatnonzero(flip.any(axis=0))
         if not hits.size or self.count >= MAX_EVENTS:
             return None
@@ -655,7 +658,7 @@ class _Hybrid:
         """The signs of the relations at a restart point (``g0``) as compared with ``g1`` at the
         next point. A relation exactly 0 there (lhs = rhs: a clock's tick that set pulseStart
         = time) changes only if its value does: time >= pulseStart stays true, T < 22 at 22
-        becomes... false as it was, T > 18 at 18 becomes true. Where its operator is unknown,
+        stays false as T rises, T > 18 at 18 becomes true. Where its operator is unknown,
         leaving 0 counts as a change."""
         s0, s1 = np.sign(g0), np.sign(g1)
         ops = self.ops
@@ -678,16 +681,9 @@ class _Hybrid:
         free = self.state_free() if self.zero is not None else None
         if free is None or not free.any():
             return None
-        n = len(rest) + 1
-        if n not in self.maps:
-            self.maps[n] = self.zero.map(n)
         t = np.r_[t0, plan.t_int[rest]]
-        U = np.column_stack([plan.u_at(tc) for tc in t]) if plan.u.names else np.zeros((0, n))
-        X = np.repeat(np.asarray(x0, float)[: plan.nx, None], n, axis=1)
-        G = np.array(self.maps[n](X, U, np.repeat(np.asarray(p)[:, None], n, 1), t[None]))[free]
-        S = np.sign(G)
-        S[:, 0] = self.start_signs(G[:, 0], G[:, 1])
-        flips = np.flatnonzero((S[:, 1:] != S[:, :-1]).any(axis=0))
+        X = np.repeat(np.asarray(x0, float)[: plan.nx, None], len(t), axis=1)
+        flips = np.flatnonzero(self.changes(self.values(plan, X, t, p))[free].any(axis=0))
         return int(flips[0]) if flips.size else None
 
     def probe(self, plan, x0, t0, rest, p, budget, traj):

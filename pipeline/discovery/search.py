@@ -327,8 +327,9 @@ class Round:
 
 def simplest_first(todo: list, templates: dict) -> list:
     """The fits in screening order, but the most promising component's law of fewest terms
-    first: it is fitted alone (the first wave), and once it reaches the noise the component's
-    larger laws stop at once, as they could only prune back to it (a storage law ranked first
+    first: it is fitted alone (the first wave), so that the fits after it read how far it got
+    and stop when they cannot win, or, near their optimum, when it has reached the noise and
+    they could only prune back to it (a storage law ranked first
     for the right resistor of a ladder fell into a local minimum with five terms while the
     static law beside it fitted in 18 simulations)."""
     if not todo:
