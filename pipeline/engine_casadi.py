@@ -180,6 +180,15 @@ class _Budget:
         return f"time limit of {self.opts.time_limit:g} s exceeded at t = {t:g}"
 
 
+def _snapped(te: float, t_out: np.ndarray) -> float:
+    """An event instant within rounding of an output time is that time: a tick computed as
+    0.001 + 85 * 0.001 is 0.08600000000000001, and the output at 0.086 would otherwise show
+    the value before the event, where the instant's own value is the one after it."""
+    k = int(np.clip(np.searchsorted(t_out, te), 1, len(t_out) - 1))
+    near = t_out[k - 1] if abs(te - t_out[k - 1]) < abs(te - t_out[k]) else t_out[k]
+    return float(near) if abs(te - near) <= 64 * np.finfo(float).eps * max(abs(te), 1.0) else float(te)
+
+
 def _sens_scale(p):
     """The scale of each sensitivity column (see SENS_SCALE), numeric or symbolic."""
     if isinstance(p, np.ndarray):
@@ -247,8 +256,10 @@ class _Plan:
                                                or getattr(ode, "asserts", None) is not None) else None)
         # the integration grid: output times, time events and clock ticks (a restart at each),
         # and where relations are watched, enough points to see their sign changes
-        events = [te for te in ode.time_events if t_out[0] < te < t_out[-1]]
-        ticks = self.hybrid.ticks(t_out[0], t_out[-1]) if self.hybrid else {}
+        events = sorted({_snapped(te, t_out) for te in ode.time_events if t_out[0] < te < t_out[-1]})
+        ticks = {}
+        for te, clocks in (self.hybrid.ticks(t_out[0], t_out[-1]) if self.hybrid else {}).items():
+            ticks.setdefault(_snapped(te, t_out), []).extend(clocks)
         t_int = np.union1d(np.union1d(t_out, events), sorted(ticks))
         if ode.zero is not None and len(t_int) - 1 < DETECTION_POINTS:
             k = int(math.ceil(DETECTION_POINTS / (len(t_int) - 1)))

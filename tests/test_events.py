@@ -441,3 +441,27 @@ def test_a_pulse_edge_on_time_alone_is_foreseen_and_the_solution_is_exact(tmp_pa
         if np.any(np.isclose(b, t)):
             exact.append(v)
     np.testing.assert_allclose(res.output("y"), exact, atol=1e-4)
+
+
+SAWTOOTH = """
+model Sawtooth "x integrates 1 and is reset every millisecond, as the MSL's Mean block does"
+  Real x(start = 0, fixed = true);
+  output Real y = x;
+equation
+  der(x) = 1;
+  when sample(0.001, 0.001) then
+    reinit(x, 0);
+  end when;
+end Sawtooth;
+"""
+
+
+def test_a_tick_computed_a_rounding_away_from_an_output_time_happens_at_that_time(tmp_path):
+    """0.001 + 85 * 0.001 is 0.08600000000000001: the output at 0.086 is the value after the
+    reset there (0), not the one before it (0.001), as at every other tick."""
+    (tmp_path / "Sawtooth.mo").write_text(SAWTOOTH)
+    model = compile_model([tmp_path / "Sawtooth.mo"], "Sawtooth")
+    t = np.round(np.arange(0, 101) * 0.001, 12)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    np.testing.assert_allclose(res.output("y"), 0.0, atol=1e-9)
