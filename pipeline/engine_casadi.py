@@ -444,9 +444,10 @@ class _Plan:
                                   engine="casadi", states=X.T)
         result.steps = budget.steps
         scale = 1.0 + (np.max(np.abs(X)) if X.size else 0.0)
-        reason = _check(y, res.ravel(), drift.ravel(), t_out, scale, opts)
-        if reason is None and hybrid is not None:
-            reason = hybrid.asserts(X, self.u_out, P, t_out)
+        # a failed assert first: the model's own words for what went wrong (sqrt of a negative
+        # argument asserted >= 0 is also a non-finite output)
+        reason = hybrid.asserts(X, self.u_out, P, t_out) if hybrid is not None else None
+        reason = reason or _check(y, res.ravel(), drift.ravel(), t_out, scale, opts)
         if reason:
             result.ok, result.reason = False, reason
         if self.ns:

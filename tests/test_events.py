@@ -465,3 +465,37 @@ def test_a_tick_computed_a_rounding_away_from_an_output_time_happens_at_that_tim
     res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
     assert res.ok, res.reason
     np.testing.assert_allclose(res.output("y"), 0.0, atol=1e-9)
+
+
+GATED = """
+model Gated "an assert in a function holds only where the branch calling it is taken"
+  function root "a square root that checks its argument"
+    input Real x;
+    output Real y;
+  algorithm
+    assert(x >= 0, "root: negative argument");
+    y := sqrt(x);
+  end root;
+  parameter Real tSwitch = 5;
+  Real x(start = 1, fixed = true);
+  output Real y = if time < tSwitch then root(x) else 0;
+equation
+  der(x) = -1;
+end Gated;
+"""
+
+
+@pytest.mark.parametrize("t_switch, fires", [(0.5, False), (5.0, True)])
+def test_an_assert_in_a_function_counts_only_where_its_branch_is_taken(tmp_path, t_switch, fires):
+    """x = 1 - t turns negative at t = 1: root(x) is only called (and its assert only
+    checked) while time < tSwitch."""
+    (tmp_path / "Gated.mo").write_text(GATED)
+    model = compile_model([tmp_path / "Gated.mo"], "Gated")
+    t = np.linspace(0.0, 2.0, 21)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []),
+                                  params={"tSwitch": t_switch}, options=None)
+    assert res.ok is not fires, res.reason
+    if fires:
+        assert "root: negative argument" in res.reason
+    else:
+        np.testing.assert_allclose(res.output("y"), np.where(t < t_switch, np.sqrt(np.clip(1 - t, 0, None)), 0), atol=1e-6)

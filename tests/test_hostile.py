@@ -83,6 +83,40 @@ def test_unsupported_delay_is_a_clear_error_not_a_crash(tmp_path, capsys):
     assert "D.mo:4: unsupported Modelica construct: delay()" in capsys.readouterr().err
 
 
+UNROLL = """model Unroll "a function whose loops unroll (as a medium's property functions do)"
+  function f
+    input Real x;
+    output Real y;
+  algorithm
+    y := x;
+    for i in 1:20 loop
+      y := y + sin(y * x) / i;
+    end for;
+  end f;
+  Real s(start = 0.1, fixed = true);
+equation
+  der(s) = -f(s);
+end Unroll;
+"""
+
+
+def test_a_function_that_outgrows_the_compile_memory_is_a_clear_error(tmp_path, capsys, monkeypatch):
+    """Water IF97's rho_ph took 19 GB before the machine killed it: past its memory allowance
+    (here each read of it 1 GB more than the last), a compile stops with the function's name."""
+    import itertools
+    from mcl.compile import rumoca_frontend
+
+    (tmp_path / "Unroll.mo").write_text(UNROLL)
+    assert main(["compile", str(tmp_path / "Unroll.mo"), "--model", "Unroll", "-o", str(tmp_path / "a")]) == 0
+    grows = itertools.count()
+    monkeypatch.setattr(rumoca_frontend, "_resident_bytes", lambda: next(grows) * 10**9)
+    monkeypatch.setenv("MCL_COMPILE_MEMORY_GB", "0.5")
+    assert main(["compile", str(tmp_path / "Unroll.mo"), "--model", "Unroll", "-o", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert "Unroll.mo:" in err and "function" in err and "f unrolls" in err and "0.5 GB" in err
+    assert len(err.strip().splitlines()) == 1
+
+
 def test_a_long_sum_compiles(tmp_path):
     terms = " + ".join(f"{k}*x" for k in range(1, 250))
     (tmp_path / "S.mo").write_text(f"model S\n  input Real u;\n  output Real y;\n  Real x(start=0);\n"

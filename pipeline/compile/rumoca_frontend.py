@@ -523,6 +523,7 @@ class _Translator:
         self.table_records: dict = {}      # the MSL's interpolation tables by their id (rumoca's data)
         self.tables: dict[int, tables.Table] = {}   # ... translated when first looked up
         self._compiled: dict = {}          # (function, argument pattern) -> SX Function
+        self._calls: dict = {}             # (its name, its arguments' nodes) -> (arguments, outputs)
         self._function_tags: dict = {}     # its name -> (number of outputs, [(level, message)])
         self._unassigned: dict = {}        # its name -> outputs it never assigns
         # a loop index met outside its loop: rumoca keeps the for-equations of an if-equation's
@@ -537,6 +538,17 @@ class _Translator:
         self._quiet = None
         self._call_groups = None           # (owner, function) -> the call carrying the arguments
         self.projected: set = set()       # domains of the array equation being translated whole
+        self.memory0 = _resident_bytes()
+
+    def check_memory(self, function: str):
+        """Refuse a function whose unrolled loops outgrow the memory allowed to a compile: a
+        medium's property function iterating over another (Water IF97's rho_ph) unrolls into
+        an expression of many GB, which would take the machine's memory and then crash."""
+        limit = float(os.environ.get("MCL_COMPILE_MEMORY_GB") or COMPILE_MEMORY_GB) * 1e9
+        grown = _resident_bytes() - self.memory0
+        if grown > limit:
+            self.refuse(f"function {function} unrolls into an expression larger than the "
+                        f"{limit / 1e9:g} GB of memory a compile may use (MCL_COMPILE_MEMORY_GB)")
 
     def live_sx(self, root: int) -> ca.SX:
         """Node ``root``, a discrete value defined at all times: its relations are events."""
@@ -625,16 +637,46 @@ class _Translator:
         if root in done:
             return done[root]
         stack = [(root, False)]
+        spans: dict = {}     # node -> (first, end) of the function asserts its subtree added
         while stack:
             k, ready = stack.pop()
             if k in done:
                 continue
             if not ready:
+                spans[k] = (len(self.fn_asserts), None)
                 stack.append((k, True))
                 stack.extend((c, False) for c in self.children(k) if c not in done)
                 continue
             done[k] = self.build(k, done, bound)
+            spans[k] = (spans[k][0], len(self.fn_asserts))
+            if self.fn_asserts and self._kind(k) == "conditional":
+                self.gate_asserts(self.operands(k), spans, done)
         return done[root]
+
+    def _kind(self, k: int) -> str:
+        node = self.nodes[k]
+        return node if isinstance(node, str) else next(iter(node))
+
+    def gate_asserts(self, ops: list[int], spans: dict, done: dict):
+        """The asserts of functions called in a branch of ``if c1 then a1 elseif c2 then a2 ...
+        else b`` hold only where that branch is taken: Water IF97 computes its steam region's
+        Gibbs function on every call, and its assert T >= 273.15 there must not fail a run in
+        the liquid region."""
+        taken = ca.SX(1)       # no earlier condition holds
+        for j in range(0, len(ops) - 1, 2):
+            cond = done[ops[j]]
+            if cond.numel() != 1:
+                return
+            self._gate(spans.get(ops[j + 1]), ca.logic_and(taken, cond))
+            taken = ca.logic_and(taken, ca.logic_not(cond))
+        self._gate(spans.get(ops[-1]), taken)
+
+    def _gate(self, span, gate):
+        if span is None or span[1] is None:
+            return
+        for i in range(*span):
+            violated, level, message = self.fn_asserts[i]
+            self.fn_asserts[i] = (ca.logic_and(violated, gate), level, message)
 
     def build(self, k: int, done: dict, bound) -> ca.SX:
         node = self.nodes[k]
@@ -991,7 +1033,14 @@ class _Translator:
         if ext:
             self.refuse(f"external function {f['name']} ({ext.get('language', '?')} code)")
         compiled, symbolic = self.compiled_function(body["function"], args)
-        outs = compiled.call([args[i] for i in symbolic])
+        actual = [args[i] for i in symbolic]
+        # one expansion per call on the same expressions: a record-valued call read field by
+        # field (Water IF97's rho_ph reads waterBaseProp_ph's record 16 times) is otherwise
+        # inlined once per field (14.7 million nodes for rho_ph instead of 0.9)
+        key = (compiled.name(), tuple(tuple(e.element_hash() for e in ca.vertsplit(ca.vec(a))) for a in actual))
+        if key not in self._calls:
+            self._calls[key] = (actual, compiled.call(actual))    # the arguments kept: the key holds their nodes' addresses
+        outs = self._calls[key][1]
         n_out, tags = self._function_tags[compiled.name()]
         for violated, (level, message) in zip(outs[n_out:], tags):
             self.fn_asserts.append((violated, level, message))
@@ -1040,6 +1089,7 @@ class _Translator:
         before = len(self.fn_asserts)
         run = _Run(self, f, bound)
         run.block(f.get("statements", []))
+        self.check_memory(f["name"])
         found, self.fn_asserts = _merged(self.fn_asserts[before:]), self.fn_asserts[:before]
         n_out = len(f.get("outputs", [])) or 1
         outs = [run.latest.get(j, ca.SX(0, 1)) for j in range(n_out)]
@@ -1049,6 +1099,19 @@ class _Translator:
         self._unassigned[name] = {j for j in range(n_out) if j not in run.latest}
         self._compiled[key] = compiled
         return compiled, symbolic
+
+
+#: growth of the process's memory a compile's translation may use (MCL_COMPILE_MEMORY_GB)
+COMPILE_MEMORY_GB = 4.0
+
+
+def _resident_bytes() -> int:
+    """This process's resident memory (0 where /proc is missing: the check is then off)."""
+    try:
+        with open("/proc/self/statm") as f:
+            return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+    except (OSError, ValueError, IndexError):
+        return 0
 
 
 def _merged(asserts: list) -> list:
@@ -1121,6 +1184,7 @@ class _Run:
             self.bound["binders"] = {**outer, **{(d, i): v for (d, i, _), v in zip(binders, values)}}
             self.next = first
             self.block(body["statements"])
+            self.tr.check_memory(self.f["name"])
             for j, v in enumerate(targets):   # carried into the next
                 self.defs[carried + j] = self.latest.get(v)
         self.bound["binders"] = outer

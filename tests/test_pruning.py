@@ -1,0 +1,36 @@
+"""Backward elimination of a law's terms: the joint estimate that lets several be dropped in one
+refit, checked on linear least squares (where it is exact)."""
+import numpy as np
+
+from mcl.discovery.fitters import _group_to_drop, _joint_increase
+from mcl.stats import criterion, gram_inverse
+
+
+def _ls(S, y, cols):
+    w = np.linalg.lstsq(S[:, cols], y, rcond=None)[0]
+    return w, float(np.sum((y - S[:, cols] @ w) ** 2))
+
+
+def test_the_joint_estimate_is_the_refit_s_increase_for_a_linear_law():
+    rng = np.random.default_rng(3)
+    S = rng.normal(size=(400, 6))
+    S[:, 4] += 0.9 * S[:, 3]                          # correlated terms: the single estimates miss it
+    y = S @ np.array([2.0, -1.0, 0.3, 0.2, -0.2, 0.0]) + 0.05 * rng.normal(size=400)
+    w, rss = _ls(S, y, list(range(6)))
+    H_inv = gram_inverse(S.T @ S)
+    for group in ([3, 4], [2, 5], [1, 3, 4]):
+        keep = [j for j in range(6) if j not in group]
+        assert np.isclose(rss + _joint_increase(w, H_inv, group), _ls(S, y, keep)[1], rtol=1e-8)
+
+
+def test_the_terms_the_data_do_not_need_are_dropped_together_and_no_others():
+    rng = np.random.default_rng(4)
+    S = rng.normal(size=(500, 6))
+    y = S @ np.array([1.5, 0.0, -0.8, 0.0, 0.0, 0.6]) + 0.1 * rng.normal(size=500)
+    w, rss = _ls(S, y, list(range(6)))
+    H_inv = gram_inverse(S.T @ S)
+    est = w ** 2 / np.diag(H_inv)
+    bic = criterion("bic")
+    group = _group_to_drop(w, H_inv, est, rss, bic.score(rss, 500, 6, 6),
+                           lambda r, m: bic.score(r, 500, 6 - m, 6))
+    assert sorted(group) == [1, 3, 4]
