@@ -144,3 +144,50 @@ def test_an_initial_system_holding_loop_solves_compiles_and_simulates(msl_path):
     res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []))
     assert res.ok, res.reason
     assert np.all(np.isfinite(res.states))
+
+
+CART = """
+model Cart "a cart pulling a trailer, both rolling on wheels whose drive trains have no inertia (J = 0)"
+  import Modelica.Mechanics.Rotational;
+  import Modelica.Mechanics.Translational;
+  parameter Real J = 0 "inertia of each drive train";
+  parameter Real R = 0.25 "wheel radius";
+  parameter Real m = 100 "mass of the cart and of the trailer";
+  Modelica.Blocks.Interfaces.RealInput tau "drive torque of the cart";
+  Rotational.Sources.Torque torque;
+  Rotational.Components.Inertia inertia(J = J);
+  Rotational.Components.IdealRollingWheel wheel(radius = R);
+  Translational.Components.Mass mass(m = m, s(start = 0, fixed = true), v(start = 0, fixed = true));
+  Translational.Sensors.ForceSensor hitch;
+  Rotational.Components.Inertia trailerInertia(J = J);
+  Rotational.Components.IdealRollingWheel trailerWheel(radius = R);
+  Translational.Components.Mass trailer(m = m);
+  Modelica.Blocks.Interfaces.RealOutput v = mass.v;
+  Modelica.Blocks.Interfaces.RealOutput f = hitch.f;
+equation
+  connect(tau, torque.tau);
+  connect(torque.flange, inertia.flange_a);
+  connect(inertia.flange_b, wheel.flangeR);
+  connect(wheel.flangeT, mass.flange_a);
+  connect(mass.flange_b, hitch.flange_a);
+  connect(hitch.flange_b, trailer.flange_a);
+  connect(trailer.flange_b, trailerWheel.flangeT);
+  connect(trailerWheel.flangeR, trailerInertia.flange_a);
+end Cart;
+"""
+
+
+def test_a_drive_train_without_inertia_is_no_division_by_zero(msl_path, tmp_path):
+    """J*a = tau with J = 0 (the MSL's Vehicle example sets it): solved for a, it was inf; the
+    pair accelerates at tau / (2 R m) and the hitch pulls the trailer with m a, by hand."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    (tmp_path / "Cart.mo").write_text(CART)
+    model = mcl.compile_model([tmp_path / "Cart.mo"], "Cart")
+    t = np.linspace(0.0, 2.0, 21)
+    res = mcl.simulate(model, TimeSeries(t, np.full((len(t), 1), 5.0), ["tau"]))
+    assert res.ok, res.reason
+    a = 5.0 / (0.25 * 2 * 100)
+    np.testing.assert_allclose(res.output("v"), a * t, atol=1e-6)
+    np.testing.assert_allclose(res.output("f"), 100 * a, atol=1e-6)

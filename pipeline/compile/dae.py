@@ -8,6 +8,7 @@ user or a fitting loop sets), constants are substituted, and every name the user
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -469,6 +470,9 @@ class _Aliases:
         # or a condition (a clutch's ``if locked then sa else ...``, a flow's semiLinear:
         # dividing by it is 0/0 in the other branch)
         alg = [q for q in live if q >= self.nx and not self._switched(coef[q])]
+        # nor one that is 0 at the parameters' values (an inertia's J*a = tau with J = 0, as the
+        # MSL's Vehicle example sets: a = tau/J is inf, the other unknown, tau = J*a, is fine)
+        alg = [q for q in alg if not self._vanishes(coef[q])]
         if not 1 <= len(live) <= 2 or not alg:
             return None
         e = alg[-1]
@@ -490,6 +494,16 @@ class _Aliases:
             return True
         f = ca.Function("k", ca.symvar(k), [k])
         return any(f.instruction_id(i) == ca.OP_IF_ELSE_ZERO for i in range(f.n_instructions()))
+
+    def _vanishes(self, k) -> bool:
+        """A coefficient in parameters that is 0 (or not finite) at their values."""
+        if not isinstance(k, ca.SX) or k.is_constant() or self.dae.p_values is None:
+            return False
+        at = ca.substitute(k, self.dae.p, ca.DM(np.asarray(self.dae.p_values, float)))
+        if not at.is_constant():
+            return False
+        v = float(at)
+        return v == 0.0 or not math.isfinite(v)
 
     def expr(self, e: int) -> ca.SX:
         """w[e] in the unknowns that stay."""
