@@ -539,16 +539,15 @@ class _Translator:
         self._call_groups = None           # (owner, function) -> the call carrying the arguments
         self.projected: set = set()       # domains of the array equation being translated whole
         self.memory0 = _resident_bytes()
+        self.memory_limit = float(os.environ.get("MCL_COMPILE_MEMORY_GB") or COMPILE_MEMORY_GB) * 1e9
 
     def check_memory(self, function: str):
         """Refuse a function whose unrolled loops outgrow the memory allowed to a compile: a
         medium's property function iterating over another (Water IF97's rho_ph) unrolls into
         an expression of many GB, which would take the machine's memory and then crash."""
-        limit = float(os.environ.get("MCL_COMPILE_MEMORY_GB") or COMPILE_MEMORY_GB) * 1e9
-        grown = _resident_bytes() - self.memory0
-        if grown > limit:
+        if _resident_bytes() - self.memory0 > self.memory_limit:
             self.refuse(f"function {function} unrolls into an expression larger than the "
-                        f"{limit / 1e9:g} GB of memory a compile may use (MCL_COMPILE_MEMORY_GB)")
+                        f"{self.memory_limit / 1e9:g} GB of memory a compile may use (MCL_COMPILE_MEMORY_GB)")
 
     def live_sx(self, root: int) -> ca.SX:
         """Node ``root``, a discrete value defined at all times: its relations are events."""
@@ -680,7 +679,7 @@ class _Translator:
 
     def build(self, k: int, done: dict, bound) -> ca.SX:
         node = self.nodes[k]
-        kind = node if isinstance(node, str) else next(iter(node))
+        kind = self._kind(k)
         body = None if isinstance(node, str) else node[kind]
         if kind == "literal":
             (lk, value), = body.items()
@@ -969,7 +968,7 @@ class _Translator:
         output, a constructor, a function's parameter or variable, a field of one, either
         branch of a conditional."""
         node = self.nodes[k]
-        kind = next(iter(node)) if isinstance(node, dict) else node
+        kind = self._kind(k)
         body = node[kind] if isinstance(node, dict) else None
         if kind == "call":
             return self.functions[body["function"]]["outputs"][body.get("output", 0)]["value_type"]

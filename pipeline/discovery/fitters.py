@@ -179,6 +179,20 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
     last = {}      # the previous estimates, by parameter: for a point whose sensitivities fail
     grouping = True
+
+    def judged(trial, refit, removed: str, estimate: float):
+        """A removal's refit scored against the current law and put on the path: (accepted,
+        the state it would give: active, w, rss, score, problem)."""
+        nonlocal sims
+        w_t, rss_t, problem_t, res_t = refit
+        record(problem_t, trial)
+        sims += res_t.simulations
+        score_t = score_for(rss_t, trial)
+        ok = score_t < score
+        path.append({"removed": removed, "estimate": float(estimate), "rss": rss_t,
+                     "score": score_t, "accepted": bool(ok)})
+        return ok, (trial, w_t, rss_t, score_t, problem_t)
+
     while prune and (active & prunable).sum() > 1 and not res.message.startswith("stopped"):
         sim = problem.simulate(w[active & ~held], gradient=True)
         sims += 1
@@ -205,19 +219,14 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
                 trial = active.copy()
                 trial[free[group]] = False
                 try:
-                    w_t, rss_t, problem_t, res_t = fit(trial, w, restore=1)
+                    refit = fit(trial, w, restore=1)
                 except MclError:
-                    w_t = None
-                if w_t is not None:
-                    record(problem_t, trial)
-                    sims += res_t.simulations
-                    score_t = score_for(rss_t, trial)
-                    ok = score_t < score
-                    path.append({"removed": ", ".join(names[free[j]] for j in group),
-                                 "estimate": float(rss + _joint_increase(w[free], H_inv, group)),
-                                 "rss": rss_t, "score": score_t, "accepted": bool(ok)})
+                    refit = None
+                if refit is not None:
+                    ok, state = judged(trial, refit, ", ".join(names[free[j]] for j in group),
+                                       rss + _joint_increase(w[free], H_inv, group))
                     if ok:
-                        active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
+                        active, w, rss, score, problem = state
                         continue
                 grouping = False
         refit = None
@@ -237,16 +246,10 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
             break
         if refit is None:
             break
-        w_t, rss_t, problem_t, res_t = refit
-        record(problem_t, trial)
-        sims += res_t.simulations
-        score_t = score_for(rss_t, trial)
-        ok = score_t < score
-        path.append({"removed": names[k], "estimate": float(rss + e_k), "rss": rss_t,
-                     "score": score_t, "accepted": bool(ok)})
+        ok, state = judged(trial, refit, names[k], rss + e_k)
         if not ok:
             break
-        active, w, rss, score, problem = trial, w_t, rss_t, score_t, problem_t
+        active, w, rss, score, problem = state
     from ..services import simulate
 
     final = simulate(model, data, dict(zip(names, w)))    # the score at the default tolerances
