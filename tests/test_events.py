@@ -9,6 +9,7 @@ from mcl import compile_model
 from mcl.data import TimeSeries
 from mcl.engine_casadi import CasadiEngine
 from mcl.simulation import SimulationOptions
+from helpers import msl_path, needs_msl
 
 KINK = """
 model Kink "x falls at rate 1 while positive, at rate 3 once negative; y integrates x"
@@ -374,6 +375,45 @@ end Saw;
 
 
 
+
+def test_mod_of_a_variable_is_not_taken_for_the_variable(tmp_path):
+    """``a = x - floor(x)`` has the Jacobian of ``a = x`` (floor's derivative is 0): alias
+    elimination solved it as ``a = x + 0``. And a div/mod in a function's body makes no event,
+    so rumoca leaves no gap in its numbering after it (the MSL's wrapAngle: every later node
+    was read as another). A model an engineer writes with both, read at times between events."""
+    (tmp_path / "Angles.mo").write_text("""
+model Angles
+  function wrap "an angle in [0, period)"
+    input Real u;
+    input Real period = 2;
+    output Real y;
+  algorithm
+    y := mod(u, period);
+  end wrap;
+  Real x(start = 0, fixed = true);
+  output Real a = mod(x, 1) "a sawtooth";
+  output Real b = wrap(x);
+  output Real c = div(x, 0.5);
+  output Real d "in a loop with e, through a step";
+  output Real e;
+equation
+  der(x) = 1;
+  d + e = 3*x;
+  d - e = floor(d);
+end Angles;
+""")
+    model = compile_model([tmp_path / "Angles.mo"], "Angles")
+    t = np.array([0.0, 0.25, 0.75, 1.25, 1.6, 2.3, 2.9])
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    x = t
+    assert res.output("a") == pytest.approx(x % 1, abs=1e-9)
+    assert res.output("b") == pytest.approx(x % 2, abs=1e-9)
+    assert res.output("c") == pytest.approx(np.trunc(x / 0.5), abs=1e-9)
+    d, e = res.output("d"), res.output("e")
+    assert d + e == pytest.approx(3 * x, abs=1e-9)
+    assert d - e == pytest.approx(np.floor(d), abs=1e-9)
+
 ARC = """
 model Arc "an inductive current driven down by an arc voltage until the arc quenches"
   parameter Real L = 0.1, R = 1, Vs = 50, Varc = 60, Goff = 1e-5;
@@ -499,3 +539,79 @@ def test_an_assert_in_a_function_counts_only_where_its_branch_is_taken(tmp_path,
         assert "root: negative argument" in res.reason
     else:
         np.testing.assert_allclose(res.output("y"), np.where(t < t_switch, np.sqrt(np.clip(1 - t, 0, None)), 0), atol=1e-6)
+
+
+def test_a_when_statement_runs_its_assignments_in_order(tmp_path):
+    """An algorithm's when-statement (a sampled PI controller with an anti-windup clamp):
+    each assignment reads the ones before it, a later one overrides an earlier one. The plant
+    is integrated exactly between samples, so the samples are known in closed form."""
+    (tmp_path / "SampledPI.mo").write_text("""
+model SampledPI
+  parameter Real T = 0.1 "sample period";
+  parameter Real k = 2, Ti = 0.5, umax = 1;
+  Real x(start = 0, fixed = true) "first-order plant";
+  discrete Real e(start = 0, fixed = true);
+  discrete Real I(start = 0, fixed = true);
+  discrete Real u(start = 0, fixed = true);
+  output Real y = x;
+  output Real command = u;
+equation
+  der(x) = -x + u;
+algorithm
+  when sample(0, T) then
+    e := 1 - x;
+    I := I + T*e/Ti;
+    u := k*(e + I);
+    if u > umax then
+      u := umax;
+      I := I - T*e/Ti;
+    end if;
+  end when;
+end SampledPI;
+""")
+    model = compile_model([tmp_path / "SampledPI.mo"], "SampledPI")
+    t = np.round(np.arange(0, 2.0001, 0.05), 10)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    x, integral, u, xs, us = 0.0, 0.0, 0.0, [], []
+    for _ in range(20):                       # the samples at 0, 0.1, ..., 1.9
+        e = 1 - x
+        integral += 0.1 * e / 0.5
+        u = 2 * (e + integral)
+        if u > 1:
+            u, integral = 1.0, integral - 0.1 * e / 0.5
+        us.append(u)
+        x = u + (x - u) * np.exp(-0.1)
+        xs.append(x)
+    halfway = t[1::2][:20]                    # 0.05, 0.15, ...: between samples
+    assert res.output("command")[1::2][:20] == pytest.approx(us, abs=1e-4)   # x sampled at rtol 1e-6
+    assert min(us) < 1 and max(us) == 1       # the clamp acts, then releases
+    exact = [ui + (xi_prev - ui) * np.exp(-0.05) for ui, xi_prev in zip(us, [0.0, *xs[:-1]])]
+    assert res.output("y")[1::2][:20] == pytest.approx(exact, abs=1e-5)
+    assert halfway[-1] == pytest.approx(1.95)
+
+
+@needs_msl()
+def test_pre_of_a_continuous_output_is_its_value_before_the_event(tmp_path, monkeypatch):
+    """The MSL's TriggeredTrapezoid reads pre(y) of its continuous output to start a ramp from
+    where the last one stopped: switched off mid-ramp, it falls from there, not from the top."""
+    monkeypatch.setenv("MODELICAPATH", str(msl_path()))
+    (tmp_path / "Valve.mo").write_text("""
+model Valve "a valve command ramped by a triggered trapezoid, switched off mid-ramp"
+  import Modelica.Blocks.Logical.TriggeredTrapezoid;
+  import Modelica.Blocks.Sources.BooleanPulse;
+  TriggeredTrapezoid ramp(amplitude = 2, rising = 1, falling = 1);
+  BooleanPulse on(width = 25, period = 2, startTime = 0.5) "on from t = 0.5 to 1";
+  Modelica.Blocks.Interfaces.RealOutput command;
+equation
+  connect(on.y, ramp.u);
+  connect(ramp.y, command);
+end Valve;
+""")
+    model = compile_model([tmp_path / "Valve.mo"], "Valve")
+    t = np.round(np.arange(0, 3.0001, 0.125), 6)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    # up at 2/s from 0.5 until switched off at 1 (y = 1), down at 2/s from there; again at 2.5
+    expected = np.interp(t, [0, 0.5, 1.0, 1.5, 2.5, 3.0], [0, 0, 1, 0, 0, 1])
+    assert res.output("command") == pytest.approx(expected, abs=1e-9)

@@ -64,6 +64,9 @@ class Dae:
     d_pre: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
     x_pre: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
     flags: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
+    #: pre() of algebraic variables the update reads: the values of ``exprs["$pre[k]"]`` just
+    #: before the event (computed with the discrete variables' pre() values)
+    z_pre: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
     #: at an event: the new d (in x, z, u, p, t, d, d_pre, x_pre, flags) and the states after
     #: reinit(); the continuous equations read d as held values (pre(d) = d between events)
     d_update: ca.SX = field(default_factory=lambda: ca.SX(0, 1))
@@ -284,7 +287,7 @@ def fold_initial_parameters(dae: Dae) -> Dae:
     if not still:
         return dae
     init = ca.vertsplit(dae.init_residual)
-    others = ca.vertcat(dae.dx, dae.z, dae.u, dae.t, dae.d, dae.d_pre, dae.x_pre, dae.flags)
+    others = ca.vertcat(dae.dx, dae.z, dae.u, dae.t, dae.d, dae.d_pre, dae.x_pre, dae.z_pre, dae.flags)
     bad = set(ca.jacobian_sparsity(dae.init_residual, others).get_triplet()[0]) if others.numel() else set()
     rows, cols = ca.jacobian_sparsity(dae.init_residual, dae.x).get_triplet()
     reads: dict[int, set] = {}
@@ -375,6 +378,7 @@ class _Aliases:
         # a row reading an unknown only in a condition (a derivative that is a structural 0:
         # if x < 1 then a else b) is no alias: the rest would hold that unknown
         nonlinear = {rows[k] for k in nz} | {rows[k] for k, c in enumerate(coefs) if _is_zero(c)}
+        nonlinear |= read_through_steps(dae.residual, w)
         terms: dict[int, list] = {}
         for k, (r, c) in enumerate(zip(rows, cols)):
             terms.setdefault(r, []).append((c, coefs[k]))
@@ -489,7 +493,7 @@ class _Aliases:
             return False
         if self.modes is None:
             d = self.dae
-            self.modes = ca.vertcat(d.d, d.d_pre, d.x_pre, d.flags)
+            self.modes = ca.vertcat(d.d, d.d_pre, d.x_pre, d.z_pre, d.flags)
         if self.modes.numel() > 0 and ca.depends_on(k, self.modes):
             return True
         f = ca.Function("k", ca.symvar(k), [k])
@@ -509,6 +513,38 @@ class _Aliases:
         """w[e] in the unknowns that stay."""
         alpha, root, beta = self.find(e)
         return ca.SX(beta) if root is None else ca.SX(_add(_mul(alpha, self.w[root]), beta))
+
+
+#: operations whose derivative is 0 (or undefined) where their value steps: a row reading an
+#: unknown through one of them has a constant Jacobian and still is not linear in it
+_STEPS = {getattr(ca, f"OP_{n}") for n in ("FLOOR", "CEIL", "SIGN", "FMOD", "REMAINDER", "COPYSIGN",
+                                           "LT", "LE", "EQ", "NE", "NOT", "AND", "OR")}
+
+
+def read_through_steps(rows: ca.SX, v: ca.SX) -> set[int]:
+    """The rows of ``rows`` that read ``v`` through a step (floor(x), x > 1, mod's quotient):
+    ``x - floor(x)`` has the Jacobian of ``x`` and must not be solved as if it were ``x``."""
+    if rows.numel() == 0 or v.numel() == 0:
+        return set()
+    f = ca.Function("steps", [v], [ca.vec(rows)], {"allow_free": True})
+    row_of = f.sparsity_out(0).row()
+    dep, step = {}, {}                       # per work slot: reads v; reads v through a step
+    found = set()
+    for k in range(f.n_instructions()):
+        op, ins, outs = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
+        if op == ca.OP_INPUT:
+            dep[outs[0]], step[outs[0]] = True, False
+        elif op == ca.OP_OUTPUT:
+            if step.get(ins[0]):
+                found.add(row_of[outs[1]])
+        elif op == ca.OP_IF_ELSE_ZERO:       # the condition is a step; the value is not
+            c, v_ = ins
+            dep[outs[0]], step[outs[0]] = (dep.get(c, False) or dep.get(v_, False),
+                                           dep.get(c, False) or step.get(c, False) or step.get(v_, False))
+        else:                                # (the output slot may be an input's: read them first)
+            d = any(dep.get(i, False) for i in ins)
+            dep[outs[0]], step[outs[0]] = d, (d and op in _STEPS) or any(step.get(i, False) for i in ins)
+    return found
 
 
 # Coefficients are mostly plain numbers (1, -1, 0): kept as floats, CasADi only when symbolic

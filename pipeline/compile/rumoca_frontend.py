@@ -1211,7 +1211,8 @@ def to_dae(ir: dict, located: Located, model: str) -> Dae:
                                    where=located.find(rf"\b(model|block|class)\s+{model.split('.')[-1]}\b")) from None
 
 
-#: arena slots rumoca 0.10.2 keeps after a div/mod/rem node (its event quotient) but does not serialise
+#: arena slots rumoca 0.10.2 keeps after a model's div/mod/rem node (its event quotient) but does
+#: not serialise; one in a function's body has none (it makes no event)
 _QUOTIENT_SLOTS = 6
 
 
@@ -1220,14 +1221,19 @@ def _whole_arena(st: dict):
     owns, while every reference counts them: each later node would be read as another.
     Placeholders restore the numbering (once, where the IR comes in; nothing references them)."""
     ex = st["expressions"]
-    if ex.get("whole") or not any(isinstance(n, dict) and "runtime_quotient_owner" in n for n in ex["nodes"]):
+
+    def gapped(n):
+        return isinstance(n, dict) and "runtime_quotient_owner" in n and \
+            "function" not in (n["runtime_quotient_owner"].get("kind") or {})
+
+    if ex.get("whole") or not any(gapped(n) for n in ex["nodes"]):
         ex["whole"] = True
         return
     nodes, prov = [], []
     for n, p in zip(ex["nodes"], ex["provenance"]):
         nodes.append(n)
         prov.append(p)
-        if isinstance(n, dict) and "runtime_quotient_owner" in n:
+        if gapped(n):
             nodes += [{"quotient_slot": {}}] * _QUOTIENT_SLOTS
             prov += [p] * _QUOTIENT_SLOTS
     ex["nodes"], ex["provenance"], ex["whole"] = nodes, prov, True
@@ -1292,10 +1298,11 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     nd = len(names["d"]) + len(memory)
     d, d_pre = ca.SX.sym("d", nd), ca.SX.sym("d_pre", nd)
     x_pre = ca.SX.sym("x_pre", x.numel())
+    z_pre = ca.SX.sym("z_pre", z.numel())      # pre() of an algebraic variable: its value before the event
     clocks = _clocks(st, located, model)
     flags = ca.SX.sym("flags", 2 + len(clocks))      # initial(), terminal(), a tick of each clock
     slot, der, pre_slot = {}, {}, {}
-    for k, vec, pre in (("x", x, x_pre), ("z", z, None), ("u", u, None), ("p", p_all, None), ("d", d, d_pre)):
+    for k, vec, pre in (("x", x, x_pre), ("z", z, z_pre), ("u", u, u), ("p", p_all, None), ("d", d, d_pre)):
         pos = 0
         for i in index[k]:
             slot[i] = vec[pos:pos + size[i]]
@@ -1375,12 +1382,12 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
 
     # between events pre(v) is v, initial() and terminal() are false (initial() true in the
     # initial equations) and no clock ticks
-    held = ca.vertcat(d_pre, x_pre, flags)
+    held = ca.vertcat(d_pre, x_pre, z_pre, flags)
 
     def bind(e, initial=0.0):
         e = ca.substitute(e, p_all, resolved)
-        if nd or x.numel():
-            e = ca.substitute(e, held, ca.vertcat(d, x, ca.SX([initial] + [0.0] * (flags.numel() - 1))))
+        if held.numel() > flags.numel():
+            e = ca.substitute(e, held, ca.vertcat(d, x, z, ca.SX([initial] + [0.0] * (flags.numel() - 1))))
         return e
 
     def starts(k):
@@ -1444,10 +1451,17 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         return ca.substitute(e, p_all, resolved)
 
     # asserts in the functions the model calls, where they read the model's values (not der())
-    fn = [a for a in tr.fn_asserts if not ca.depends_on(a[0], ca.vertcat(dx, d_pre, x_pre, flags))]
+    fn = [a for a in tr.fn_asserts if not ca.depends_on(a[0], ca.vertcat(dx, held))]
     if fn:
         asserts = ca.vertcat(asserts, *[a[0] for a in fn])
         assert_info = [*assert_info, *[(level, message) for _, level, message in fn]]
+
+    # pre() of algebraic variables read at events: each from the variable's value before it
+    d_update = bind_event(d_update) if nd else ca.SX(0, 1)
+    x_reinit = bind_event(x_reinit) if x.numel() else ca.SX(0, 1)
+    read = sorted(set(ca.jacobian_sparsity(ca.vertcat(d_update, x_reinit), z_pre).get_triplet()[1]))
+    z_pre = z_pre[read] if read else ca.SX(0, 1)
+    exprs.update({f"$pre[{k}]": z[j] for k, j in enumerate(read)})
 
     return fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
@@ -1455,9 +1469,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
                time_events=_time_events(st), relations=relations, relation_ops=rel_ops,
                d=d, d_names=names["d"] + [f"$when{c}" for c in sorted(memory)], d_start=d_start,
-               d_pre=d_pre, x_pre=x_pre, flags=flags,
-               d_update=bind_event(d_update) if nd else ca.SX(0, 1),
-               x_reinit=bind_event(x_reinit) if x.numel() else ca.SX(0, 1),
+               d_pre=d_pre, x_pre=x_pre, z_pre=z_pre, flags=flags, d_update=d_update, x_reinit=x_reinit,
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
                assert_info=assert_info))
 
@@ -1639,7 +1651,8 @@ class _Events:
 
     def discrete_update(self, held: list[int], slot, pre_slot, size, variables) -> ca.SX:
         """The new value of every held discrete variable, then of every condition memory."""
-        branches: dict[int, list] = {i: [] for i in held}
+        sequenced = self._transactions(held, slot, pre_slot, size, variables)
+        branches: dict[int, list] = {i: [] for i in held if i not in sequenced}
         for owner in self.st.get("discrete_value_owners", []):
             for b in owner.get("branches", []):
                 for target, v in zip(owner["targets"], b["values"]):
@@ -1650,15 +1663,44 @@ class _Events:
         for eq in self.st.get("discrete_real_equations", []):
             self.tr.span = (eq.get("provenance") or {}).get("span")
             target, value = self._solved(eq["residual"], slot, held, variables)
-            branches[target].append((self.active(eq["activation"]), value))
+            if target in branches:
+                branches[target].append((self.active(eq["activation"]), value))
         out = []
         for i in held:
+            if i in sequenced:
+                out.append(sequenced[i])
+                continue
             new = pre_slot[i]
             for act, val in reversed(branches[i]):
                 new = ca.if_else(act, flat(val) if val.numel() == size[i] else ca.repmat(val, size[i], 1), new)
             out.append(flat(new))
         out += [flat(self.value(c)) for c in sorted(self.memory)]
         return ca.vertcat(*out) if out else ca.SX(0, 1)
+
+    def _transactions(self, held, slot, pre_slot, size, variables) -> dict[int, ca.SX]:
+        """The variables an algorithm's when-statements assign (rumoca's event transactions):
+        the steps run in order, a later assignment over an earlier one, each reading the
+        values assigned before it; a variable no step assigns at this event keeps pre()."""
+        new: dict[int, ca.SX] = {}
+        for tx in self.st.get("model_event_transactions", []):
+            for step in tx.get("steps", []):
+                self.tr.span = (step.get("provenance") or {}).get("span")
+                before = list(new)
+                syms = ca.vertcat(*[flat(slot[j]) for j in before]) if before else None
+
+                def now(e):          # read the values this algorithm assigned so far
+                    return ca.substitute(e, syms, ca.vertcat(*[new[j] for j in before])) if before else e
+
+                act = now(self.active({"when": {"trigger": step["trigger"], "guard": step["guard"]}}))
+                for d in step.get("definitions", []):
+                    target = d.get("target") or {}
+                    i = target.get("variable")
+                    if set(target) - {"kind", "variable"} or i not in held:
+                        self.tr.refuse("a when-statement assigning part of a variable")
+                    value = flat(now(self.tr.sx(d["value"])))
+                    value = value if value.numel() == size[i] else ca.repmat(value, size[i], 1)
+                    new[i] = ca.if_else(act, value, new.get(i, flat(pre_slot[i])))
+        return new
 
     def _solved(self, residual: int, slot, held, variables):
         """(target, value) of a discrete equation ``target = value`` given as a residual."""
@@ -1767,10 +1809,8 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
 
 
 def _refuse_events(st: dict, located: Located, model: str) -> None:
-    """What the event handling does not cover: delays, clocked partitions' previous(), event
-    transactions."""
+    """What the event handling does not cover: delays, clocked partitions' previous()."""
     for key, what, pattern in (
-            ("model_event_transactions", "a when-statement this front end does not translate", r"\bwhen\b"),
             ("delays", "delay()", r"\bdelay\s*\("), ("previous_values", "previous() of a clocked variable",
                                                      r"\bprevious\s*\(")):
         if st.get(key):

@@ -18,7 +18,7 @@ import numpy as np
 
 from .dae import Dae
 
-SYMBOLS = ("x", "dx", "z", "u", "p", "t", "d", "d_pre", "x_pre", "flags")   # d...flags: a hybrid model's (compiler agent)
+SYMBOLS = ("x", "dx", "z", "u", "p", "t", "d", "d_pre", "x_pre", "flags", "z_pre")   # d...flags: a hybrid model's (compiler agent)
 
 
 def save_dae(dae: Dae, directory) -> None:
@@ -53,8 +53,9 @@ def load_dae(directory) -> Dae | None:
         return None
     meta = json.loads((d / "dae.json").read_text())
     fun = ca.Function.load(str(d / "dae.casadi"))
-    sym = {s: (ca.SX.sym(s, meta[s]["symbol"]) if s != "t" else ca.SX.sym("t")) for s in SYMBOLS}
-    values = fun.call({s: sym[s] for s in SYMBOLS})
+    # a symbol added to Dae after the file was saved is empty in it
+    sym = {s: (ca.SX.sym(s, meta.get(s, {"symbol": 0})["symbol"]) if s != "t" else ca.SX.sym("t")) for s in SYMBOLS}
+    values = fun.call({s: sym[s] for s in fun.name_in()})
     fields = dict(sym)
     for name, m in meta.items():
         if name in SYMBOLS:

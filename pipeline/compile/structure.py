@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from .dae import Dae
+from .dae import Dae, read_through_steps
 from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
@@ -166,6 +166,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     zl_syms, zl_sols = [], []
     n_nonlinear = 0
     running = ca.vertcat(args[0], args[2])     # states and time (blocks that read a mode are not symbolic)
+    stepped = read_through_steps(g, z)        # rows that may hide a step in z (their block's own, to check)
     for k, (rows, cols) in enumerate(blocks):
         gk, zk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[zs[c] for c in cols])
         prev = sorted(set().union(*[reads.get(r, set()) for r in rows]) - set(cols))
@@ -177,7 +178,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         # coefficient is 0 or 1) is solved at run time: eliminated symbolically, its pivots
         # would be chosen for one mode and divide by zero in another
         small = len(cols) <= SYMBOLIC_SOLVE_MAX and not (modes is not None and ca.depends_on(A, modes))
-        if not ca.depends_on(A, zk):
+        linear = not ca.depends_on(A, zk) and (stepped.isdisjoint(rows) or not read_through_steps(gk, zk))
+        torn, residual, whole = ([], None, None) if linear else _tear([gs[r] for r in rows], [zs[c] for c in cols])
+        if linear:
             b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
             if small:
                 sol_sx = -ca.solve(A, b) if len(cols) > 1 else -b / A
@@ -191,11 +194,14 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 A_mx, b_mx = fa(prev_mx, *mx_args)
                 sol = -ca.solve(A_mx, b_mx, "qr")
                 newton = None
+        elif not torn:      # explicit in order (a step read an unknown known by then): no loop
+            f = ca.Function(f"blk{k}", [zprev, *args], [whole])
+            sol = f(prev_mx, *mx_args)
+            sol_newton = f(prev_sx, *args) if newton is not None else None
         else:
+            tears = ca.vertcat(*[zs[cols[i]] for i in torn])
             n_nonlinear += 1
             par = ca.vertcat(zprev, *args)
-            torn, residual, whole = _tear([gs[r] for r in rows], [zs[c] for c in cols])
-            tears = ca.vertcat(*[zs[cols[i]] for i in torn])
             resid = ca.Function(f"loop{k}", [tears, par], [residual])
             t_sol = _loop_solve(f"loop{k}", resid, z_guess[[cols[i] for i in torn]], ca.vertcat(prev_mx, *mx_args))
             spread = ca.Function(f"torn{k}", [tears, zprev, *args], [whole])
@@ -244,7 +250,7 @@ def _tear(rows: list, unknowns: list):
     def pivot(r, j):                            # (asked again each pass: kept)
         if (r, j) not in pivots:
             coef = ca.jacobian(rows[r], unknowns[j])
-            pivots[r, j] = coef.is_constant() and float(coef) != 0
+            pivots[r, j] = coef.is_constant() and float(coef) != 0 and not read_through_steps(rows[r], unknowns[j])
         return pivots[r, j]
 
     order, tears, residual, decided = [], [], [], set()
@@ -393,10 +399,18 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     # every named variable of the original model, as a function of the ODE's arguments
     probe_names = list(dae.exprs)
     exprs = ca.vertcat(*[dae.exprs[n] for n in probe_names])
-    probe_sx = ca.Function("probe_sx", [dae.x, dae.z, dae.u, dae.p, dae.t], [exprs])
+    # der() of the original states: read by initial equations such as der(x) = 0 (steady
+    # state) and by variables such as the MSL hysteresis' ascending = der(H) > 0
+    dxi_fun = ca.Function("dxi", [xs, zs, up, t], [ca.jtimes(x_impl, xs, semi["ode"])])
+    probe_sx = ca.Function("probe_sx", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [exprs])
     orig_fun = ca.Function("orig", [xs, zs], [x_impl, z_orig])
+
+    def probe_at(X, Z, U, P, T):
+        return probe_sx(*orig_fun(X, Z), U, P, T, dxi_fun(X, Z, ca.vertcat(U, P), T))
+
     XI, ZI = orig_fun(X, Z)
-    probe_all = probe_sx(XI, ZI, U, P, T)
+    dXI = dxi_fun(X, Z, UP, T)
+    probe_all = probe_at(X, Z, U, P, T)
     y_idx = [probe_names.index(o) for o in dae.outputs]
 
     args, names = [X, U, P, T], ["x", "u", "p", "t"]
@@ -408,17 +422,15 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     probe = mk("probe", [probe_all])
     crossings = None
     if dae.relations.numel():
-        rel_sx = ca.Function("rel", [dae.x, dae.z, dae.u, dae.p, dae.t], [dae.relations])
-        crossings = expanded(mk("zero", [rel_sx(XI, ZI, U, P, T)]))
+        rel_sx = ca.Function("rel", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [dae.relations])
+        crossings = expanded(mk("zero", [rel_sx(XI, ZI, U, P, T, dXI)]))
     y_all = probe_all[y_idx] if y_idx else ca.MX(0, 1)
     checks = ca.Function("checks", args, [y_all, absmax(g), absmax(inv)], names, ["y", "res", "drift"])
 
     x_names = semi_state_names(xs, dae)
-    # der() of the original states, for initial equations such as der(x) = 0 (steady state)
-    dXI = ca.mtimes(ca.Function("dxi", [xs, zs, up, t], [ca.jacobian(x_impl, xs)])(X, Z, UP, T), xdot)
     start, init_start = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI)
     init = ca.Function("init", [U, P, T], [init_start(U, P, T, start(P))], ["u", "p", "t"], ["x0"])
-    loops, given = _newton_functions(newton, args, names, sx_fun, orig_fun, probe_sx, U, P)
+    loops, given = _newton_functions(newton, args, names, sx_fun, probe_at, U, P)
     # SX evaluates faster than the MX call graph where there is no Newton or QR solve in it; a
     # loop's Newton solve expands too (a torn loop of one unknown), but as every iteration and
     # the fallback unrolled, all evaluated at each call, and its Jacobian through them all: the
@@ -461,7 +473,7 @@ def differentiable(ode: Ode, which: str = "ode") -> ca.Function:
                        {"custom_jacobian": custom, "jac_penalty": 0})
 
 
-def _newton_functions(newton, args, names, sx_fun, orig_fun, probe_sx, U, P):
+def _newton_functions(newton, args, names, sx_fun, probe_at, U, P):
     """(loops: (x, u, p, t) -> zl, given: (x, u, p, t, zl) -> (x', every probe)) from
     :func:`causalise`'s Newton form, or (None, None): ``given`` at the loops' solution is the
     model, with the loops' implicit derivatives and none in zl (an SX function)."""
@@ -473,9 +485,8 @@ def _newton_functions(newton, args, names, sx_fun, orig_fun, probe_sx, U, P):
     ZL = ca.MX.sym("zl", z_newton.size1_in(3))
     Zg = z_newton(X, UP, T, ZL)
     xdot = sx_fun(X, Zg, UP, T)[0]
-    XI, ZI = orig_fun(X, Zg)
     loops = ca.Function("loops", args, [loops_fun(X, UP, T)], names, ["zl"])
-    given = ca.Function("given", [*args, ZL], [xdot, probe_sx(XI, ZI, U, P, T)], [*names, "zl"], ["xdot", "probe"])
+    given = ca.Function("given", [*args, ZL], [xdot, probe_at(X, Zg, U, P, T)], [*names, "zl"], ["xdot", "probe"])
     return loops, expanded(given)
 
 
@@ -486,10 +497,11 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     algebraic equations as every other variable (hidden entries of ``exprs``)."""
     import dataclasses
 
-    nd, nx0, nf = dae.d.numel(), dae.x.numel(), dae.flags.numel()
-    extra = ca.vertcat(dae.d, dae.d_pre, dae.x_pre, dae.flags)
+    nd, nx0, nf, nzp = dae.d.numel(), dae.x.numel(), dae.flags.numel(), dae.z_pre.numel()
+    extra = ca.vertcat(dae.d, dae.d_pre, dae.x_pre, dae.flags, dae.z_pre)
     exprs = dict(dae.exprs)
-    hidden = {"update": [f"$update[{k}]" for k in range(dae.d_update.numel())],
+    hidden = {"pre": [f"$pre[{k}]" for k in range(nzp)],
+              "update": [f"$update[{k}]" for k in range(dae.d_update.numel())],
               "reinit": [f"$reinit[{k}]" for k in range(dae.x_reinit.numel())],
               "assert": [f"$assert[{k}]" for k in range(dae.asserts.numel())]}
     for key, e in (("update", dae.d_update), ("reinit", dae.x_reinit), ("assert", dae.asserts)):
@@ -500,8 +512,8 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     d0 = np.array(d0_fun(dae.p_values, dae.u_start, 0.0)).ravel() if nd else np.zeros(0)
     aug = dataclasses.replace(
         dae, p=ca.vertcat(dae.p, extra), p_names=[*dae.p_names, *[f"${k}" for k in range(extra.numel())]],
-        p_values=np.concatenate([dae.p_values, d0, d0, np.zeros(nx0 + nf)]), exprs=exprs,
-        d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1),
+        p_values=np.concatenate([dae.p_values, d0, d0, np.zeros(nx0 + nf + nzp)]), exprs=exprs,
+        d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1), z_pre=ca.SX(0, 1),
         flags=ca.SX(0, 1), d_update=ca.SX(0, 1), x_reinit=ca.SX(0, 1), asserts=ca.SX(0, 1))
     inner = _build(aug, name)
     nx = len(inner.x_names)
@@ -520,7 +532,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     def orig(v):        # values of the original states from the semi-explicit ones
         return ca.vertcat(*[v[j] if j is not None else ca.MX(0) for j in where]) if nx0 else ca.MX(0, 1)
 
-    PA = ca.vertcat(P, D, D, orig(X), ca.MX.zeros(nf))
+    PA = ca.vertcat(P, D, D, orig(X), ca.MX.zeros(nf + nzp))
     names = inner.probe_names
     where_is = {n: j for j, n in enumerate(names)}
     idx = {key: [where_is[n] for n in hidden[key]] for key in hidden}
@@ -536,7 +548,12 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     update = None
     reinits = [k for k in range(nx0) if not ca.is_equal(dae.x_reinit[k], dae.x[k])]
     if nd or reinits:
-        PU = ca.vertcat(P, D, PRE[nx:] if nd else ca.MX(0, 1), orig(PRE[:nx]), FL)
+        D_PRE = PRE[nx:] if nd else ca.MX(0, 1)
+        z_pre = ca.MX(0, 1)
+        if nzp:     # pre(z): z where the discrete variables had their pre() values
+            before = inner.probe(PRE[:nx], U, ca.vertcat(P, D_PRE, D_PRE, orig(PRE[:nx]), FL, ca.MX.zeros(nzp)), T)
+            z_pre = before[idx["pre"]]
+        PU = ca.vertcat(P, D, D_PRE, orig(PRE[:nx]), FL, z_pre)
         after = inner.probe(X, U, PU, T)
         x_new = [X[j] for j in range(nx)]
         for k in reinits:
@@ -545,20 +562,20 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         update = expanded(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
                                       ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
     D0 = d0_fun(P, U, T) if nd else ca.MX(0, 1)
-    PA0 = ca.vertcat(P, D0, D0, ca.MX.zeros(nx0 + nf))
+    PA0 = ca.vertcat(P, D0, D0, ca.MX.zeros(nx0 + nf + nzp))
     UPT = [U, P, T]
     init = ca.Function("init", UPT, [ca.vertcat(inner.init(U, PA0, T), D0)], ["u", "p", "t"], ["x0"])
     DI = ca.MX.sym("d", nd)
     init_discrete = ca.Function("init_discrete", [U, P, T, DI],
-                                [inner.init(U, ca.vertcat(P, DI, DI, ca.MX.zeros(nx0 + nf)), T)],
+                                [inner.init(U, ca.vertcat(P, DI, DI, ca.MX.zeros(nx0 + nf + nzp)), T)],
                                 ["u", "p", "t", "d"], ["x0"])
     S = ca.MX.sym("s", nx + nd)
     SD = S[nx:] if nd else ca.MX(0, 1)       # (an empty slice of MX is 1x0)
     D0s = d0_fun(P, dae.u_start, 0.0) if nd else ca.MX(0, 1)     # guesses: at t = 0, the inputs' starts
-    PA0s = ca.vertcat(P, D0s, D0s, ca.MX.zeros(nx0 + nf))
+    PA0s = ca.vertcat(P, D0s, D0s, ca.MX.zeros(nx0 + nf + nzp))
     start = ca.Function("start", [P], [ca.vertcat(inner.start(PA0s), D0s)], ["p"], ["s"]) if inner.start else None
     init_start = (ca.Function("init_start", [U, P, T, S], [ca.vertcat(inner.init_start(
-        U, ca.vertcat(P, SD, SD, ca.MX.zeros(nx0 + nf)), T, S[:nx]), SD)],
+        U, ca.vertcat(P, SD, SD, ca.MX.zeros(nx0 + nf + nzp)), T, S[:nx]), SD)],
         ["u", "p", "t", "s"], ["x0"]) if inner.init_start else None)
     zero = mk("zero", [inner.zero(X, U, PA, T)]) if inner.zero is not None else None
     asserts = mk("asserts", [probe_all[idx["assert"]]]) if hidden["assert"] else None
@@ -632,8 +649,11 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     # numeric Jacobian at the nominal start point, to choose a square nonsingular system
     xs0 = np.array(ca.Function("s0", [P], [semi_start])(dae.p_values)).ravel()
     jac = ca.Function("J", [Xs, Us, Ps, Ts], [ca.jacobian(hard_s, Xs)])
-    J = _finite_jacobian(lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0)), xs0, x_names)
+    at = lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0))    # noqa: E731
+    J = _finite_jacobian(at, xs0, x_names)
     rows = _independent_rows(J)
+    if len(rows) < J.shape[0]:
+        J, rows = _generic(at, xs0, J, rows)
     J = J[rows]
     fixed = set(n for n, f in zip(dae.x_names, dae.x_fixed) if f)
     order = ([i for i, n in enumerate(x_names) if n in fixed]
@@ -732,6 +752,21 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
     raise ModelicaError("the initial equations have no finite derivative at the start values of "
                         f"{', '.join(bad[:5]) or 'the states'}: start {'them' if len(bad) > 1 else 'it'} "
                         "away from the singularity")
+
+
+def _generic(at, x0: np.ndarray, J: np.ndarray, rows: list[int]):
+    """(J, its independent rows) where J loses rank at the start values only: a rotation
+    matrix started at angle 0, where d cos/d angle = 0 makes its invariant look redundant.
+    Near the start (a perturbation no model is special at) the equations' structure shows."""
+    pattern = np.sin(1.0 + 2.0 * np.arange(x0.size))       # deterministic, of both signs
+    try:
+        Jn = at(x0 + 1e-3 * pattern * (1.0 + np.abs(x0)))
+    except RuntimeError:
+        return J, rows
+    if not np.all(np.isfinite(Jn)):
+        return J, rows
+    more = _independent_rows(Jn)
+    return (Jn, more) if len(more) > len(rows) else (J, rows)
 
 
 def _independent_rows(J: np.ndarray) -> list[int]:
