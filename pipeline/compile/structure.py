@@ -649,11 +649,8 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     # numeric Jacobian at the nominal start point, to choose a square nonsingular system
     xs0 = np.array(ca.Function("s0", [P], [semi_start])(dae.p_values)).ravel()
     jac = ca.Function("J", [Xs, Us, Ps, Ts], [ca.jacobian(hard_s, Xs)])
-    at = lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0))    # noqa: E731
-    J = _finite_jacobian(at, xs0, x_names)
+    J = _finite_jacobian(lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0)), xs0, x_names)
     rows = _independent_rows(J)
-    if len(rows) < J.shape[0]:
-        J, rows = _generic(at, xs0, J, rows)
     J = J[rows]
     fixed = set(n for n, f in zip(dae.x_names, dae.x_fixed) if f)
     order = ([i for i, n in enumerate(x_names) if n in fixed]
@@ -752,21 +749,6 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
     raise ModelicaError("the initial equations have no finite derivative at the start values of "
                         f"{', '.join(bad[:5]) or 'the states'}: start {'them' if len(bad) > 1 else 'it'} "
                         "away from the singularity")
-
-
-def _generic(at, x0: np.ndarray, J: np.ndarray, rows: list[int]):
-    """(J, its independent rows) where J loses rank at the start values only: a rotation
-    matrix started at angle 0, where d cos/d angle = 0 makes its invariant look redundant.
-    Near the start (a perturbation no model is special at) the equations' structure shows."""
-    pattern = np.sin(1.0 + 2.0 * np.arange(x0.size))       # deterministic, of both signs
-    try:
-        Jn = at(x0 + 1e-3 * pattern * (1.0 + np.abs(x0)))
-    except RuntimeError:
-        return J, rows
-    if not np.all(np.isfinite(Jn)):
-        return J, rows
-    more = _independent_rows(Jn)
-    return (Jn, more) if len(more) > len(rows) else (J, rows)
 
 
 def _independent_rows(J: np.ndarray) -> list[int]:
