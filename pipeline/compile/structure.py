@@ -304,8 +304,9 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     as an amplifier's output limit, or meets a singular Jacobian), Newton's method with a
     backtracking line search from the start values, then polished by Newton. The fallback is
     evaluated only when needed (a short-circuit conditional); everything stays C-generable.
-    ``strict``: NaN where even the fallback leaves a residual above INIT_TOL (Newton's method
-    can stop on a zero step at a singularity, sqrt(x) at x = 0, and return a wrong answer)."""
+    NaN where even the fallback leaves a residual above INIT_TOL (Newton's method can stop on
+    a zero step at a singularity, sqrt(x) at x = 0, and return a wrong answer). ``strict`` (an
+    initial system): the fallback always starts off the start values."""
     quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
     z1 = quick(z0, par)
@@ -324,11 +325,11 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), z0, off)
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
-    polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid,
-                           {**NEWTON_OPTS, "error_on_fail": False} if strict else NEWTON_OPTS)
+    polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z2 = polish(z, par)
-    if strict:
-        z2 = ca.if_else(_within(resid(z2, par), INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
+    # NaN, not an exception, where no solution is found: in a run the integrator then retries
+    # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
+    z2 = ca.if_else(_within(resid(z2, par), INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
     return ca.if_else(ok, z1, z2, True)
 
 
@@ -512,7 +513,8 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     d0 = np.array(d0_fun(dae.p_values, dae.u_start, 0.0)).ravel() if nd else np.zeros(0)
     aug = dataclasses.replace(
         dae, p=ca.vertcat(dae.p, extra), p_names=[*dae.p_names, *[f"${k}" for k in range(extra.numel())]],
-        p_values=np.concatenate([dae.p_values, d0, d0, np.zeros(nx0 + nf + nzp)]), exprs=exprs,
+        p_values=np.concatenate([dae.p_values, d0, d0, np.zeros(nx0), np.eye(1, nf).ravel(), np.zeros(nzp)]),
+        exprs=exprs,     # (the values at the start: initial() true)
         d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1), z_pre=ca.SX(0, 1),
         flags=ca.SX(0, 1), d_update=ca.SX(0, 1), x_reinit=ca.SX(0, 1), asserts=ca.SX(0, 1))
     inner = _build(aug, name)
@@ -562,20 +564,27 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         update = expanded(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
                                       ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
     D0 = d0_fun(P, U, T) if nd else ca.MX(0, 1)
-    PA0 = ca.vertcat(P, D0, D0, ca.MX.zeros(nx0 + nf + nzp))
+    # the initial system's parameters: the discrete starts, and initial() true (an equation
+    # if initial() then ... holds there: the MSL's hysteresis starts with its slope at 0)
+    initial_flags = ca.MX(ca.DM([1.0] + [0.0] * (nf - 1))) if nf else ca.MX(0, 1)
+
+    def at_start(D):
+        return ca.vertcat(P, D, D, ca.MX.zeros(nx0), initial_flags, ca.MX.zeros(nzp))
+
+    PA0 = at_start(D0)
     UPT = [U, P, T]
     init = ca.Function("init", UPT, [ca.vertcat(inner.init(U, PA0, T), D0)], ["u", "p", "t"], ["x0"])
     DI = ca.MX.sym("d", nd)
     init_discrete = ca.Function("init_discrete", [U, P, T, DI],
-                                [inner.init(U, ca.vertcat(P, DI, DI, ca.MX.zeros(nx0 + nf + nzp)), T)],
+                                [inner.init(U, at_start(DI), T)],
                                 ["u", "p", "t", "d"], ["x0"])
     S = ca.MX.sym("s", nx + nd)
     SD = S[nx:] if nd else ca.MX(0, 1)       # (an empty slice of MX is 1x0)
     D0s = d0_fun(P, dae.u_start, 0.0) if nd else ca.MX(0, 1)     # guesses: at t = 0, the inputs' starts
-    PA0s = ca.vertcat(P, D0s, D0s, ca.MX.zeros(nx0 + nf + nzp))
+    PA0s = at_start(D0s)
     start = ca.Function("start", [P], [ca.vertcat(inner.start(PA0s), D0s)], ["p"], ["s"]) if inner.start else None
     init_start = (ca.Function("init_start", [U, P, T, S], [ca.vertcat(inner.init_start(
-        U, ca.vertcat(P, SD, SD, ca.MX.zeros(nx0 + nf + nzp)), T, S[:nx]), SD)],
+        U, at_start(SD), T, S[:nx]), SD)],
         ["u", "p", "t", "s"], ["x0"]) if inner.init_start else None)
     zero = mk("zero", [inner.zero(X, U, PA, T)]) if inner.zero is not None else None
     asserts = mk("asserts", [probe_all[idx["assert"]]]) if hidden["assert"] else None
@@ -648,8 +657,22 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     hard_s = H(Xs, Us, Ps, Ts)
     # numeric Jacobian at the nominal start point, to choose a square nonsingular system
     xs0 = np.array(ca.Function("s0", [P], [semi_start])(dae.p_values)).ravel()
-    jac = ca.Function("J", [Xs, Us, Ps, Ts], [ca.jacobian(hard_s, Xs)])
-    J = _finite_jacobian(lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0)), xs0, x_names)
+    jac_s = ca.jacobian(hard_s, Xs)
+    jac = ca.Function("J", [Xs, Us, Ps, Ts], [jac_s])
+    at = lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0))     # noqa: E731
+    try:
+        J = _finite_jacobian(at, xs0, x_names)
+    except ModelicaError:
+        # states without a start value of their own (index reduction's, a hysteresis branch
+        # h = f(H) started at 0 where the law divides by h_F - h_R): taken from the equations
+        # that give them explicitly, at the other states' starts
+        moved = _relaxed(xs0, H, jac_s, dae, x_names, lambda x: _finite_at(at, x))
+        if moved is None:
+            raise
+        changed = np.flatnonzero(moved != xs0)
+        semi_start = ca.vertcat(*[ca.MX(moved[j]) if j in changed else semi_start[j] for j in range(nx)])
+        xs0 = moved
+        J = _finite_jacobian(at, xs0, x_names)
     rows = _independent_rows(J)
     J = J[rows]
     fixed = set(n for n, f in zip(dae.x_names, dae.x_fixed) if f)
@@ -685,6 +708,47 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     G = ca.Function("G", [X, Q], [R(X, *ca.vertsplit(Q, cut))])
     x0 = _loop_solve("init", G, S, ca.vertcat(U, P, T, S), strict=True)
     return start, ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
+
+
+def _finite_at(at, x) -> bool:
+    try:
+        return bool(np.all(np.isfinite(at(x))))
+    except RuntimeError:
+        return False
+
+
+def _relaxed(start, H, jac_s, dae, x_names, ok, sweeps: int = 8):
+    """Start values moved by Jacobi sweeps over the initial equations that give a state
+    explicitly (coefficient +-1; the states the user fixed left alone): each such state takes
+    the value its equation gives at the others, until the initial system has a finite
+    Jacobian (``ok``). Numbers at the model's parameter values; None if no sweep helps."""
+    fixed = {n for n, f in zip(dae.x_names, dae.x_fixed) if f}
+    pairs, rows_taken, cols_taken = [], set(), set()
+    rows, cols = jac_s.sparsity().get_triplet()
+    for k, (r, c) in enumerate(zip(rows, cols)):
+        coef = jac_s.nz[k]
+        if r in rows_taken or c in cols_taken or x_names[c] in fixed or not coef.is_constant():
+            continue
+        if abs(float(coef)) == 1.0:
+            pairs.append((r, c, float(coef)))
+            rows_taken.add(r)
+            cols_taken.add(c)
+    if not pairs:
+        return None
+    r_idx, c_idx, coef = (np.array(v) for v in zip(*pairs))
+    x = np.array(start, float)
+    for _ in range(sweeps):
+        try:
+            res = np.array(H(x, dae.u_start, dae.p_values, 0.0)).ravel()
+        except RuntimeError:          # a loop inside cannot be solved there
+            return None
+        x = x.copy()
+        x[c_idx] = x[c_idx] - res[r_idx] / coef
+        if not np.all(np.isfinite(x)):
+            return None
+        if ok(x):
+            return x
+    return None
 
 
 def _starts_of(syms: ca.SX, dae: Dae) -> ca.SX:
