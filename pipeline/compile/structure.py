@@ -29,6 +29,10 @@ log = logging.getLogger(__name__)
 #: Largest linear block solved symbolically (an SX model evaluates and differentiates ~10x faster
 #: than one holding a run-time solver); larger ones go through a sparse QR at run time.
 SYMBOLIC_SOLVE_MAX = 40
+#: Largest linear block solved at run time by dense QR, which gives NaN where the block is
+#: singular (a rotation matrix started at 0): sparse QR raises there and takes the whole
+#: evaluation down, so the initial system cannot even look next to that start
+DENSE_SOLVE_MAX = 400
 NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
 #: an algebraic loop's residual accepted from Newton's method without the fallback
 LOOP_TOL = 1e-9
@@ -192,7 +196,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             else:
                 fa = ca.Function(f"blk{k}", [zprev, *args], [A, b])
                 A_mx, b_mx = fa(prev_mx, *mx_args)
-                sol = -ca.solve(A_mx, b_mx, "qr")
+                sol = -ca.solve(A_mx, b_mx, "lapackqr" if len(cols) <= DENSE_SOLVE_MAX else "qr")
                 newton = None
         elif not torn:      # explicit in order (a step read an unknown known by then): no loop
             f = ca.Function(f"blk{k}", [zprev, *args], [whole])
@@ -666,10 +670,10 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
         # states without a start value of their own (index reduction's, a hysteresis branch
         # h = f(H) started at 0 where the law divides by h_F - h_R): taken from the equations
         # that give them explicitly, at the other states' starts
-        moved = _relaxed(xs0, H, jac_s, dae, x_names, lambda x: _finite_at(at, x))
+        moved = _relaxed(xs0, H, jac_s, at, dae, x_names, lambda x: _finite_at(at, x))
         if moved is None:
             raise
-        changed = np.flatnonzero(moved != xs0)
+        changed = set(np.flatnonzero(moved != xs0).tolist())
         semi_start = ca.vertcat(*[ca.MX(moved[j]) if j in changed else semi_start[j] for j in range(nx)])
         xs0 = moved
         J = _finite_jacobian(at, xs0, x_names)
@@ -707,7 +711,17 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     cut = np.cumsum([0, U.numel(), P.numel(), 1, nx]).tolist()
     G = ca.Function("G", [X, Q], [R(X, *ca.vertsplit(Q, cut))])
     x0 = _loop_solve("init", G, S, ca.vertcat(U, P, T, S), strict=True)
-    return start, ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
+    init_start = ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
+    solves = lambda x: _finite_at(lambda s: init_start(dae.u_start, dae.p_values, 0.0, s), x)  # noqa: E731
+    if not solves(xs0):
+        # no solution from the start values (rotation matrices started at 0 where the joints
+        # give them explicitly): the starts the explicit equations give, where those solve
+        moved = _relaxed(xs0, H, jac_s, at, dae, x_names, solves)
+        if moved is not None:
+            changed = set(np.flatnonzero(moved != xs0).tolist())
+            start = ca.Function("start", [P], [ca.vertcat(*[ca.MX(moved[j]) if j in changed else semi_start[j]
+                                                              for j in range(nx)])], ["p"], ["s"])
+    return start, init_start
 
 
 def _finite_at(at, x) -> bool:
@@ -717,20 +731,38 @@ def _finite_at(at, x) -> bool:
         return False
 
 
-def _relaxed(start, H, jac_s, dae, x_names, ok, sweeps: int = 8):
+def _unit_entries(jac_s, at, start):
+    """(row, column, +-1) where the initial system's Jacobian is +-1: read from its
+    expression where that is SX, else where two evaluations (at points no model is special
+    at) agree on it (an MX one holds loop solves)."""
+    if isinstance(jac_s, ca.SX):
+        rows, cols = jac_s.sparsity().get_triplet()
+        for k, (r, c) in enumerate(zip(rows, cols)):
+            coef = jac_s.nz[k]
+            if coef.is_constant() and abs(float(coef)) == 1.0:
+                yield r, c, float(coef)
+        return
+    pattern = np.sin(1.0 + 2.0 * np.arange(start.size))
+    try:
+        looks = [at(start + scale * pattern * (1.0 + np.abs(start))) for scale in (1e-3, 1e-2)]
+    except RuntimeError:
+        return
+    unit = np.isclose(np.abs(looks[0]), 1.0, rtol=0, atol=1e-12) & (looks[0] == looks[1])
+    for c, r in zip(*np.nonzero(unit.T)):          # state by state, as the SX triplets
+        yield r, c, float(looks[0][r, c])
+
+
+def _relaxed(start, H, jac_s, at, dae, x_names, ok, sweeps: int = 8):
     """Start values moved by Jacobi sweeps over the initial equations that give a state
-    explicitly (coefficient +-1; the states the user fixed left alone): each such state takes
-    the value its equation gives at the others, until the initial system has a finite
-    Jacobian (``ok``). Numbers at the model's parameter values; None if no sweep helps."""
+    explicitly (coefficient +-1 wherever the equations are looked at; the states the user
+    fixed left alone): each such state takes the value its equation gives at the others
+    (where that is finite), until ``ok``. Numbers at the model's parameter values; None if
+    no sweep helps."""
     fixed = {n for n, f in zip(dae.x_names, dae.x_fixed) if f}
     pairs, rows_taken, cols_taken = [], set(), set()
-    rows, cols = jac_s.sparsity().get_triplet()
-    for k, (r, c) in enumerate(zip(rows, cols)):
-        coef = jac_s.nz[k]
-        if r in rows_taken or c in cols_taken or x_names[c] in fixed or not coef.is_constant():
-            continue
-        if abs(float(coef)) == 1.0:
-            pairs.append((r, c, float(coef)))
+    for r, c, coef in _unit_entries(jac_s, at, start):
+        if r not in rows_taken and c not in cols_taken and x_names[c] not in fixed:
+            pairs.append((r, c, coef))
             rows_taken.add(r)
             cols_taken.add(c)
     if not pairs:
@@ -742,10 +774,10 @@ def _relaxed(start, H, jac_s, dae, x_names, ok, sweeps: int = 8):
             res = np.array(H(x, dae.u_start, dae.p_values, 0.0)).ravel()
         except RuntimeError:          # a loop inside cannot be solved there
             return None
+        step = res[r_idx] / coef
+        finite = np.isfinite(step)
         x = x.copy()
-        x[c_idx] = x[c_idx] - res[r_idx] / coef
-        if not np.all(np.isfinite(x)):
-            return None
+        x[c_idx[finite]] -= step[finite]
         if ok(x):
             return x
     return None
