@@ -211,3 +211,28 @@ def test_a_hysteresis_core_starts_between_its_branches_and_stays_there(msl_path)
     assert np.all(high - low > 0)
     assert np.all((B >= low - 1e-6) & (B <= high + 1e-6))
     assert np.ptp(res.states[:, names.index("core.Hstat")]) > 10      # the field moves
+
+
+def test_a_loop_without_a_solution_at_a_trial_step_shortens_the_step(msl_path):
+    """A Schmitt trigger: an op amp's limited output in a loop with positive feedback. Where
+    Newton's method finds no solution at a point the integrator tries, the loop gives NaN and
+    the integrator retries with a shorter step (an exception used to stop the run). Against
+    rumoca's simulation, as the MSL sweep compares."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    name = "Modelica.Electrical.Analog.Examples.OpAmps.SchmittTrigger"
+    model = mcl.compile_model([], name)
+    ref = _rumoca_states(name, 1.0, model.ode.x_names)
+    t = np.unique(np.round(ref[0], 12)) if ref else np.linspace(0.0, 1.0, 2001)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    if ref is None:
+        return
+    for k, n in enumerate(model.ode.x_names):
+        if n in ref[1]:
+            theirs, ours = np.interp(t, ref[0], ref[1][n]), res.states[:, k]
+            err = np.abs(ours - theirs)      # an event instant may fall one sample either side
+            err[1:] = np.minimum(err[1:], np.abs(ours[1:] - theirs[:-1]))
+            err[:-1] = np.minimum(err[:-1], np.abs(ours[:-1] - theirs[1:]))
+            assert np.max(err) <= 2e-3 * max(np.ptp(theirs), 1e-12), n
