@@ -252,11 +252,13 @@ def _tear(rows: list, unknowns: list):
         reads[r].add(j)
 
     pivots: dict[tuple[int, int], bool] = {}
+    stepped = read_through_steps(g, z)          # rows reading the loop through a step: checked per unknown
 
     def pivot(r, j):                            # (asked again each pass: kept)
         if (r, j) not in pivots:
             coef = ca.jacobian(rows[r], unknowns[j])
-            pivots[r, j] = coef.is_constant() and float(coef) != 0 and not read_through_steps(rows[r], unknowns[j])
+            pivots[r, j] = coef.is_constant() and float(coef) != 0 and \
+                (r not in stepped or not read_through_steps(rows[r], unknowns[j]))
         return pivots[r, j]
 
     order, tears, residual, decided = [], [], [], set()
@@ -540,7 +542,10 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     def orig(v):        # values of the original states from the semi-explicit ones
         return ca.vertcat(*[v[j] if j is not None else ca.MX(0) for j in where]) if nx0 else ca.MX(0, 1)
 
-    PA = ca.vertcat(P, D, D, orig(X), ca.MX.zeros(nf + nzp))
+    def inner_p(D, D_pre, x_pre, flags, z_pre=None):     # the order of ``extra``
+        return ca.vertcat(P, D, D_pre, x_pre, flags, ca.MX.zeros(nzp) if z_pre is None else z_pre)
+
+    PA = inner_p(D, D, orig(X), ca.MX.zeros(nf))
     names = inner.probe_names
     where_is = {n: j for j, n in enumerate(names)}
     idx = {key: [where_is[n] for n in hidden[key]] for key in hidden}
@@ -559,9 +564,8 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         D_PRE = PRE[nx:] if nd else ca.MX(0, 1)
         z_pre = ca.MX(0, 1)
         if nzp:     # pre(z): z where the discrete variables had their pre() values
-            before = inner.probe(PRE[:nx], U, ca.vertcat(P, D_PRE, D_PRE, orig(PRE[:nx]), FL, ca.MX.zeros(nzp)), T)
-            z_pre = before[idx["pre"]]
-        PU = ca.vertcat(P, D, D_PRE, orig(PRE[:nx]), FL, z_pre)
+            z_pre = inner.probe(PRE[:nx], U, inner_p(D_PRE, D_PRE, orig(PRE[:nx]), FL), T)[idx["pre"]]
+        PU = inner_p(D, D_PRE, orig(PRE[:nx]), FL, z_pre)
         after = inner.probe(X, U, PU, T)
         x_new = [X[j] for j in range(nx)]
         for k in reinits:
@@ -575,7 +579,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     initial_flags = ca.MX(ca.DM([1.0] + [0.0] * (nf - 1))) if nf else ca.MX(0, 1)
 
     def at_start(D):
-        return ca.vertcat(P, D, D, ca.MX.zeros(nx0), initial_flags, ca.MX.zeros(nzp))
+        return inner_p(D, D, ca.MX.zeros(nx0), initial_flags)
 
     PA0 = at_start(D0)
     UPT = [U, P, T]
@@ -665,6 +669,7 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     xs0 = np.array(ca.Function("s0", [P], [semi_start])(dae.p_values)).ravel()
     jac_s = ca.jacobian(hard_s, Xs)
     jac = ca.Function("J", [Xs, Us, Ps, Ts], [jac_s])
+    fixed = set(n for n, f in zip(dae.x_names, dae.x_fixed) if f)
     at = lambda x: np.array(jac(x, dae.u_start, dae.p_values, 0.0))     # noqa: E731
     try:
         J = _finite_jacobian(at, xs0, x_names)
@@ -672,16 +677,13 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
         # states without a start value of their own (index reduction's, a hysteresis branch
         # h = f(H) started at 0 where the law divides by h_F - h_R): taken from the equations
         # that give them explicitly, at the other states' starts
-        moved = _relaxed(xs0, H, jac_s, at, dae, x_names, lambda x: _finite_at(at, x))
+        moved = _relaxed(xs0, H, jac_s, at, fixed, dae, x_names, lambda x: _finite_at(at, x))
         if moved is None:
             raise
-        changed = set(np.flatnonzero(moved != xs0).tolist())
-        semi_start = ca.vertcat(*[ca.MX(moved[j]) if j in changed else semi_start[j] for j in range(nx)])
-        xs0 = moved
+        semi_start, xs0 = _moved_starts(semi_start, xs0, moved), moved
         J = _finite_jacobian(at, xs0, x_names)
     rows = _independent_rows(J)
     J = J[rows]
-    fixed = set(n for n, f in zip(dae.x_names, dae.x_fixed) if f)
     order = ([i for i, n in enumerate(x_names) if n in fixed]
              + [i for i, n in enumerate(x_names) if n in dae.x_names and n not in fixed]
              + [i for i, n in enumerate(x_names) if n not in dae.x_names])
@@ -718,12 +720,15 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     if not solves(xs0):
         # no solution from the start values (rotation matrices started at 0 where the joints
         # give them explicitly): the starts the explicit equations give, where those solve
-        moved = _relaxed(xs0, H, jac_s, at, dae, x_names, solves)
+        moved = _relaxed(xs0, H, jac_s, at, fixed, dae, x_names, solves)
         if moved is not None:
-            changed = set(np.flatnonzero(moved != xs0).tolist())
-            start = ca.Function("start", [P], [ca.vertcat(*[ca.MX(moved[j]) if j in changed else semi_start[j]
-                                                              for j in range(nx)])], ["p"], ["s"])
+            start = ca.Function("start", [P], [_moved_starts(semi_start, xs0, moved)], ["p"], ["s"])
     return start, init_start
+
+
+def _moved_starts(semi_start, xs0: np.ndarray, moved: np.ndarray):
+    """The start values' expressions with those the relaxation moved replaced by its numbers."""
+    return ca.vertcat(*[ca.MX(m) if m != s0 else e for e, s0, m in zip(ca.vertsplit(semi_start), xs0, moved)])
 
 
 def _finite_at(at, x) -> bool:
@@ -754,13 +759,12 @@ def _unit_entries(jac_s, at, start):
         yield r, c, float(looks[0][r, c])
 
 
-def _relaxed(start, H, jac_s, at, dae, x_names, ok, sweeps: int = 8):
+def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8):
     """Start values moved by Jacobi sweeps over the initial equations that give a state
     explicitly (coefficient +-1 wherever the equations are looked at; the states the user
     fixed left alone): each such state takes the value its equation gives at the others
     (where that is finite), until ``ok``. Numbers at the model's parameter values; None if
     no sweep helps."""
-    fixed = {n for n, f in zip(dae.x_names, dae.x_fixed) if f}
     pairs, rows_taken, cols_taken = [], set(), set()
     for r, c, coef in _unit_entries(jac_s, at, start):
         if r not in rows_taken and c not in cols_taken and x_names[c] not in fixed:
