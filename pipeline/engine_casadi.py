@@ -44,6 +44,7 @@ SENS_SCALE = 1e-6
 DETECTION_POINTS = 400    # at least this many points over the horizon where relations are checked
 MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
+ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
 #: a call of the solver may use this share of the wall time still left
 CALL_SHARE = 0.4
@@ -216,7 +217,7 @@ class _Plan:
         else:
             Ut = ca.MX(0, 1)
             self.u_out = np.zeros((0, len(t_out)))
-        f = differentiable(ode)(X, Ut, P, T)
+        f = differentiable(ode, p_cols=sel)(X, Ut, P, T)
         xa, fa = X, f
         if ns:
             S = ca.MX.sym("S", nx, ns)
@@ -296,7 +297,7 @@ class _Plan:
         self.checks = ode.checks.map(N)   # outputs and checks with one solve of the loops per point
         if ns:
             Ss = ca.MX.sym("S", nx, ns)
-            y = differentiable(ode, "out")(Xs, Us, Ps, Ts)
+            y = differentiable(ode, "out", p_cols=sel)(Xs, Us, Ps, Ts)
             dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel]
             self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts], [dy]).map(N)
             x0 = ode.init(Us, Ps, Ts)
@@ -320,14 +321,17 @@ class _Plan:
     def tau(self, t):
         return (np.asarray(t, float) - self.t_origin) / self.t_scale
 
-    def hop(self, x, p, ta, tb, budget: _Budget, steps: int | None = None):
-        """The state at ``tb`` from ``x`` at ``ta``: one fresh integration (a restart)."""
+    def hop(self, x, p, ta, tb, budget: _Budget, steps: int | None = None, points: int = 1):
+        """The state at ``tb`` from ``x`` at ``ta``: one fresh integration (a restart). With
+        ``points`` > 1: the states at that many equally spaced times up to ``tb`` (columns),
+        from the same solver steps (interpolated between them)."""
         if tb <= ta:
-            return np.asarray(x, float)
+            return np.asarray(x, float) if points == 1 else np.repeat(np.asarray(x, float)[:, None], points, 1)
         steps = steps or budget.call_size(1, 1.0)[1]
-        key = ("hop", steps)
+        key = ("hop", steps, points)
         if key not in self._integrators:
-            self._integrators[key] = ca.integrator("hop", "cvodes", self.hop_oracle, 0.0, [1.0],
+            grid = (np.arange(1, points + 1) / points).tolist()
+            self._integrators[key] = ca.integrator("hop", "cvodes", self.hop_oracle, 0.0, grid,
                                                    {**self.iopts, "max_num_steps": steps})
         integ = self._integrators[key]
         clock = Stopwatch(0)
@@ -335,9 +339,9 @@ class _Plan:
             xf = integ(x0=x, p=np.concatenate([p, [self.bound, ta, tb - ta]]))["xf"]
         finally:
             budget.record(_nsteps(integ), clock.elapsed)
-        xf = np.array(xf).ravel()
-        self.within_bound(xf[: self.nx, None], [tb])
-        return xf
+        xf = np.array(xf)
+        self.within_bound(xf[: self.nx], ta + (tb - ta) * np.arange(1, points + 1) / points)
+        return xf.ravel() if points == 1 else xf
 
     def advance(self, x, t0, idx, p, budget: _Budget, traj):
         """Integrate from ``x`` at ``t0`` over the grid points ``idx``, filling ``traj``; each
@@ -471,9 +475,9 @@ class _Hybrid:
     """Events of one plan: relations watched between grid points, time events and clock ticks,
     and the event iteration of a hybrid model's discrete variables.
 
-    A relation that changes sign between two points is located by Illinois regula falsi on the
-    relation along the solution (each trial a restart from the left point), the state taken just
-    past it, and the discrete variables iterated to a fixed point; a relation that switches and
+    A relation that changes sign between two points is located on the solution by narrowing its
+    interval (:meth:`zoom`: each call one integration, read at many points), one on time alone
+    by a safeguarded secant (:meth:`bisect`: no integration), the state taken just past it, and the discrete variables iterated to a fixed point; a relation that switches and
     switches back between two points is not seen. Sensitivities are carried through unchanged
     across an event (their jump is left out: a Gauss-Newton step only needs them roughly).
     """
@@ -758,54 +762,77 @@ class _Hybrid:
         (where only relations on time alone cross: the state just before it)."""
         free = self.state_free()
         on_time = [r for r in flips if free[r]]
+        on_states = [r for r in flips if not free[r]]
         best_t, before = (self.bisect(plan, xa, ta, tb, p, on_time, g_a) if on_time else (tb, tb))
-        for r in flips:
-            if not free[r]:
-                best_t = min(best_t, self.falsi(plan, xa, ta, tb, p, r, g_a[r], budget))
-        if all(free[r] for r in flips):
+        if not on_states:
             # the states reached just before the crossing: the relations read none, and the
             # model's right-hand side may switch with them (to just past it: 240 steps more)
             return best_t, plan.hop(xa, p, ta, before, budget)
-        return best_t, plan.hop(xa, p, ta, best_t, budget)   # hi: just past the crossing
+        t_s, x_s = self.zoom(plan, xa, ta, tb, p, on_states, g_a, budget)
+        if t_s <= best_t:
+            return t_s, x_s
+        return best_t, plan.hop(xa, p, ta, best_t, budget)   # just past the crossing on time
 
     def bisect(self, plan, xa, ta, tb, p, rels, g_a):
         """(just past, just before) the first crossing of the relations ``rels`` on time alone,
-        all bisected at once to the last digit (each trial one evaluation, no integration;
-        safe where a relation jumps: an integer() count)."""
-        lo, hi, s_lo = ta, tb, np.sign(g_a[rels])
+        to the last digit (each trial one evaluation, no integration). The trial is the
+        earliest secant root of the relations that change across the bracket and stay as steep
+        as over the whole interval (a relation linear in time: its crossing at the second
+        trial), else the bracket's middle (also after two trials that moved the same end, as a
+        secant does on a curved relation): safe where a relation jumps (a sampled pulse's
+        sawtooth, an integer() count), whose secant root would sit at the bracket's end."""
+        lo, hi = ta, tb
+        g_lo, g_hi = g_a[rels], self.g(plan, xa, p, tb)[rels]
+        s_lo = np.sign(g_lo)
         tol = 4 * np.finfo(float).eps * max(abs(hi), tb - ta)
+        steep = 4 * np.abs(g_hi - g_lo) / (hi - lo)
+        moved = []              # the ends the trials moved: a secant that moves one end twice is slow
         for _ in range(200):
             if hi - lo <= tol:
                 break
             t = 0.5 * (lo + hi)
-            if np.array_equal(np.sign(self.g(plan, xa, p, t)[rels]), s_lo):
-                lo = t
-            else:
-                hi = t
-        return hi, lo
-
-    def falsi(self, plan, xa, ta, tb, p, r, g_lo, budget) -> float:
-        """Just past the crossing of relation ``r`` on the states: Illinois regula falsi, each
-        trial a restart from ``xa`` at ``ta``."""
-        at = (lambda t: plan.hop(xa, p, ta, t, budget))
-        lo, hi = ta, tb
-        g_hi = self.g(plan, at(hi), p, hi)[r]
-        side = 0
-        for _ in range(60):
-            if hi - lo <= 1e-12 * max(1.0, abs(hi)):
-                break
-            t = (lo * g_hi - hi * g_lo) / (g_hi - g_lo) if g_hi != g_lo else 0.5 * (lo + hi)
-            t = min(max(t, lo + 1e-3 * (hi - lo)), hi - 1e-3 * (hi - lo))
-            g_t = self.g(plan, at(t), p, t)[r]
-            if np.sign(g_t) == np.sign(g_lo):
+            smooth = (np.sign(g_hi) != s_lo) & (np.abs(g_hi - g_lo) <= steep * (hi - lo))
+            if smooth.any() and moved[-2:] not in (["lo", "lo"], ["hi", "hi"]):
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    roots = lo + (hi - lo) * g_lo[smooth] / (g_lo[smooth] - g_hi[smooth])
+                roots = roots[np.isfinite(roots)]
+                if roots.size:
+                    t = min(max(roots.min(), lo + 0.5 * tol), hi - 0.5 * tol)
+            g_t = self.g(plan, xa, p, t)[rels]
+            if np.array_equal(np.sign(g_t), s_lo):
                 lo, g_lo = t, g_t
-                g_hi = g_hi / 2 if side == -1 else g_hi      # Illinois
-                side = -1
+                moved.append("lo")
             else:
                 hi, g_hi = t, g_t
-                g_lo = g_lo / 2 if side == 1 else g_lo
-                side = 1
-        return hi
+                moved.append("hi")
+        return hi, lo
+
+    def zoom(self, plan, xa, ta, tb, p, rels, g_a, budget):
+        """(time, state) just past the first crossing of any of the relations ``rels`` on the
+        states: the interval integrated once at ``ZOOM_POINTS`` times, the first of them where
+        one has changed taken as the new end, until it is narrow. The points of one call share
+        the solver's steps, so the relations read along them are smooth; restarts of different
+        lengths would each carry their own error, which stalls a secant search near the root
+        (a thyristor's current: 17 restarts an event)."""
+        rels = np.asarray(rels)
+        lo, x_lo, hi, x_hi = ta, np.asarray(xa, float), tb, None
+        s_lo = None
+        while True:
+            X = plan.hop(x_lo, p, lo, hi, budget, points=ZOOM_POINTS)
+            ts = lo + (hi - lo) * np.arange(1, ZOOM_POINTS + 1) / ZOOM_POINTS
+            G = self.values(plan, X[: plan.nx], ts, p)
+            if s_lo is None:
+                s_lo = self.start_signs(g_a, G[:, -1])[rels]
+            G = G[rels]
+            changed = np.flatnonzero((np.sign(G) != s_lo[:, None]).any(axis=0))
+            if not changed.size:       # not seen again (the crossing was at the solver's error level)
+                return (hi, x_hi) if x_hi is not None else (hi, X[:, -1])
+            j = changed[0]
+            if j > 0:
+                lo, x_lo = ts[j - 1], X[:, j - 1]
+            hi, x_hi = ts[j], X[:, j]
+            if hi - lo <= 1e-12 * max(1.0, abs(hi)):
+                return hi, x_hi
 
     # -- asserts ---------------------------------------------------------------------------------
     def asserts(self, X, U, P, t) -> str | None:
