@@ -615,3 +615,33 @@ end Valve;
     # up at 2/s from 0.5 until switched off at 1 (y = 1), down at 2/s from there; again at 2.5
     expected = np.interp(t, [0, 0.5, 1.0, 1.5, 2.5, 3.0], [0, 0, 1, 0, 0, 1])
     assert res.output("command") == pytest.approx(expected, abs=1e-9)
+
+
+STAIRS = """
+model Stairs "y's slope steps up where x passes 0.3 and again at 0.6; x and the steps meet in one output interval"
+  Real x(start = 0, fixed = true);
+  Real y(start = 0, fixed = true);
+  Real z(start = 0, fixed = true);
+equation
+  der(x) = 1;
+  der(y) = (if x > 0.3 then 1 else 0) + (if x > 0.6 then 1 else 0);
+  der(z) = if y > 0.1 then 1 else 0;     // y reaches 0.1 at t = 0.4
+end Stairs;
+"""
+
+
+def test_crossings_on_the_states_are_located_in_their_order_to_the_last_digits(tmp_path):
+    """Three relations on the states cross between two output points (and their detection
+    points): each is located on the solution by narrowing its interval, the earliest first."""
+    (tmp_path / "Stairs.mo").write_text(STAIRS)
+    model = compile_model([tmp_path / "Stairs.mo"], "Stairs")
+    t = np.linspace(0, 1.0, 3)
+    engine = CasadiEngine()      # (tight tolerances: the error left is the events' location)
+    res = engine.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []),
+                          options=SimulationOptions(rtol=1e-10, atol=1e-12))
+    assert res.ok, res.reason
+    assert next(iter(engine._plans.values())).hybrid.count == 3
+    names = model.ode.x_names
+    y = np.maximum(t - 0.3, 0) + np.maximum(t - 0.6, 0)
+    assert np.max(np.abs(res.states[:, names.index("y")] - y)) < 1e-8
+    assert np.max(np.abs(res.states[:, names.index("z")] - np.maximum(t - 0.4, 0))) < 1e-8
