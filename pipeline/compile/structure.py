@@ -477,16 +477,8 @@ def differentiable(ode: Ode, which: str = "ode", p_cols=None) -> ca.Function:
     ZL = sym.sym("zl", ode.given.size1_in(4))
     xdot, probe = ode.given(*a_sym, ZL)
     value = xdot if which == "ode" else (probe[[where[n] for n in ode.y_names]] if ode.y_names else sym(0, 1))
-    blocks = [ca.jacobian(value, a) if k != 2 or p_cols is None else None for k, a in enumerate(a_sym)]
-    if p_cols is not None:
-        cols = sorted(int(c) for c in p_cols)
-        pick = ca.DM(ca.Sparsity.triplet(len(cols), a_sym[2].numel(), list(range(len(cols))), cols), 1.0)
-        if not cols:
-            blocks[2] = sym(value.numel(), a_sym[2].numel())
-        elif sym is ca.SX:
-            blocks[2] = ca.mtimes(ca.jacobian(value, a_sym[2][cols]), pick)
-        else:
-            blocks[2] = ca.mtimes(ca.mtimes(ca.jacobian(value, a_sym[2]), pick.T), pick)
+    x, u, p, t = a_sym
+    blocks = [ca.jacobian(value, x), ca.jacobian(value, u), _jacobian_in(value, p, p_cols), ca.jacobian(value, t)]
     jac = ca.Function("given_jac", [*a_sym, ZL], blocks)
     oname = fun.name_out(0)
     out = ca.MX.sym(oname, fun.sparsity_out(0))
@@ -495,6 +487,19 @@ def differentiable(ode: Ode, which: str = "ode", p_cols=None) -> ca.Function:
     # (call it on symbols of your own: on its own inputs CasADi inlines it, custom Jacobian lost)
     return ca.Function(f"{which}_newton", args, fun.call(args), names, [oname],
                        {"custom_jacobian": custom, "jac_penalty": 0})
+
+
+def _jacobian_in(value, p, cols=None):
+    """d value / d p in the columns ``cols`` (None: all), zero in the others."""
+    if cols is None:
+        return ca.jacobian(value, p)
+    cols = sorted(int(c) for c in cols)
+    if not cols:
+        return type(value)(value.numel(), p.numel())
+    pick = ca.DM(ca.Sparsity.triplet(len(cols), p.numel(), list(range(len(cols))), cols), 1.0)
+    if isinstance(value, ca.SX):           # SX: differentiated in those entries alone
+        return ca.mtimes(ca.jacobian(value, p[cols]), pick)
+    return ca.mtimes(ca.mtimes(ca.jacobian(value, p), pick.T), pick)
 
 
 def _newton_functions(newton, args, names, sx_fun, probe_at, U, P):
@@ -692,18 +697,20 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
         # states without a start value of their own (index reduction's, a hysteresis branch
         # h = f(H) started at 0 where the law divides by h_F - h_R): taken from the equations
         # that give them explicitly, at the other states' starts
-        moved = _relaxed(xs0, H, jac_s, at, fixed, dae, x_names, lambda x: _finite_at(at, x))
+        moved = _relaxed(xs0, H, jac_s, at, fixed, dae, x_names, lambda x: _finite(at, x) is not None)
         if moved is None:
             raise
         semi_start, xs0 = _moved_starts(semi_start, xs0, moved), moved
         J = _finite_jacobian(at, xs0, x_names)
+    order = ([i for i, n in enumerate(x_names) if n in fixed]
+             + [i for i, n in enumerate(x_names) if n in dae.x_names and n not in fixed]
+             + [i for i, n in enumerate(x_names) if n not in dae.x_names])
+
     def square(J):
-        """(start, init_start) solving the equations independent at J with the other states pinned."""
+        """(start, init_start, the initial state at the model's values or None) solving the
+        equations independent at J, the other states pinned to their start values."""
         rows = _independent_rows(J)
         J = J[rows]
-        order = ([i for i, n in enumerate(x_names) if n in fixed]
-                 + [i for i, n in enumerate(x_names) if n in dae.x_names and n not in fixed]
-                 + [i for i, n in enumerate(x_names) if n not in dae.x_names])
         # the states the equations determine: a basis of J's columns taken from the end of ``order``
         # (the rest, pinned to their start values, are then the first ``order`` can give: the
         # greedy choice on the dual matroid)
@@ -753,11 +760,11 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     if worst > INIT_TOL:
         pattern = np.sin(1.0 + 2.0 * np.arange(nx))
         for scale in (1e-3, 1e-2):
-            near = xs0 + scale * pattern * (1.0 + np.abs(xs0))
-            if not _finite_at(at, near):
+            Jn = _finite(at, xs0 + scale * pattern * (1.0 + np.abs(xs0)))
+            if Jn is None:
                 continue
             try:
-                other = square(at(near))
+                other = square(Jn)
             except ModelicaError:
                 continue
             better = _unmet(H, other[2], dae)
@@ -768,14 +775,21 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     return start, init_start
 
 
+def _finite(f, x):
+    """``f(x)`` as an array where it is finite, None where it is not or fails (a loop's solve
+    inside)."""
+    try:
+        v = np.array(f(x))
+    except RuntimeError:
+        return None
+    return v if np.all(np.isfinite(v)) else None
+
+
 def _nominal(init_start, s, dae):
     """The initial state from start values ``s`` at the model's parameter values, None where
     the solve finds none."""
-    try:
-        x0 = np.array(init_start(dae.u_start, dae.p_values, 0.0, s)).ravel()
-    except RuntimeError:
-        return None
-    return x0 if np.all(np.isfinite(x0)) else None
+    x0 = _finite(lambda v: init_start(dae.u_start, dae.p_values, 0.0, v), s)
+    return None if x0 is None else x0.ravel()
 
 
 def _unmet(H, x0, dae) -> float:
@@ -795,13 +809,6 @@ def _unmet(H, x0, dae) -> float:
 def _moved_starts(semi_start, xs0: np.ndarray, moved: np.ndarray):
     """The start values' expressions with those the relaxation moved replaced by its numbers."""
     return ca.vertcat(*[ca.MX(m) if m != s0 else e for e, s0, m in zip(ca.vertsplit(semi_start), xs0, moved)])
-
-
-def _finite_at(at, x) -> bool:
-    try:
-        return bool(np.all(np.isfinite(at(x))))
-    except RuntimeError:
-        return False
 
 
 def _unit_entries(jac_s, at, start):
