@@ -645,3 +645,38 @@ def test_crossings_on_the_states_are_located_in_their_order_to_the_last_digits(t
     y = np.maximum(t - 0.3, 0) + np.maximum(t - 0.6, 0)
     assert np.max(np.abs(res.states[:, names.index("y")] - y)) < 1e-8
     assert np.max(np.abs(res.states[:, names.index("z")] - np.maximum(t - 0.4, 0))) < 1e-8
+
+
+def test_a_function_reading_a_variable_its_path_left_unset_only_warns(tmp_path, caplog):
+    """rumoca checks that a function never reads a variable its executed path left unassigned.
+    Other tools do not, and the MSL's water properties copy records with such fields (cv), so
+    the check is a warning: the run goes on."""
+    (tmp_path / "U.mo").write_text("""
+model Unset
+  function f
+    input Real x;
+    output Real y;
+  protected
+    Real a;
+    Real b;
+  algorithm
+    if x > 0 then
+      a := x;
+    end if;
+    b := a;
+    y := 2*x + 0*b;
+  end f;
+  Real x(start = -1, fixed = true);
+  output Real y;
+equation
+  der(x) = 1;
+  y = f(x);
+end Unset;
+""")
+    model = compile_model([tmp_path / "U.mo"], "Unset")
+    t = np.linspace(0, 2, 21)
+    with caplog.at_level("WARNING", logger="mcl"):
+        res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    assert np.allclose(res.output("y"), 2 * (t - 1), atol=1e-8)
+    assert any("used without a value" in r.getMessage() for r in caplog.records)

@@ -252,3 +252,69 @@ def test_an_equation_that_looks_dependent_at_the_start_values_is_still_met(msl_p
     assert res.ok, res.reason          # (the invariants are checked at every output point)
     drift = np.array(model.ode.drift(res.states[0], np.zeros(0), model.ode.p_values, 0.0)).item()
     assert drift < 1e-6
+
+
+VESSEL = """
+model Vessel "a heated gas vessel: the balances integrate mass and energy; pressure and
+  temperature, declared preferred, carry the start values"
+  import Modelica.Units.SI;
+  parameter SI.Volume V = 0.5;
+  parameter Real b(unit = "1/Pa2") = 1e-12 "compressibility correction";
+  parameter SI.SpecificHeatCapacity cv = 718;
+  parameter SI.SpecificHeatCapacity R = 287;
+  parameter Real k = 1e-7 "outflow conductance";
+  parameter SI.Pressure p_amb = 1e5;
+  parameter SI.HeatFlowRate Q = 500;
+  SI.Pressure p(start = 3e5, stateSelect = StateSelect.prefer);
+  SI.Temperature T(start = 320, stateSelect = StateSelect.prefer);
+  SI.Density rho;
+  SI.Mass m;
+  SI.InternalEnergy U;
+  SI.MassFlowRate m_out;
+  Modelica.Blocks.Interfaces.RealOutput p_out;
+equation
+  p = rho*R*T*(1 + b*p^2) "equation of state, implicit in p";
+  m = rho*V;
+  U = m*cv*T;
+  m_out = k*(p - p_amb);
+  der(m) = -m_out;
+  der(U) = Q - m_out*(cv + R)*T;
+  p_out = p;
+end Vessel;
+"""
+
+
+def test_a_vessel_starts_from_its_preferred_pressure_and_temperature(msl_path, tmp_path):
+    """Mass and energy are the states and have no start values; pressure and temperature,
+    declared ``stateSelect = prefer``, have. The run starts where p and T take their start
+    values (at m = 0, U = 0 the temperature U/(m cv) is 0/0 and the loop for p has no
+    solution), and follows the balances as a hand-written integration of them does."""
+    from scipy.integrate import solve_ivp
+    from scipy.optimize import brentq
+
+    import mcl
+    from mcl.data import TimeSeries
+
+    (tmp_path / "Vessel.mo").write_text(VESSEL)
+    model = mcl.compile_model([tmp_path / "Vessel.mo"], "Vessel")
+    t = np.linspace(0.0, 200.0, 201)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    V, b, cv, R, k, p_amb, Q = 0.5, 1e-12, 718.0, 287.0, 1e-7, 1e5, 500.0
+
+    def pressure(m, U):          # the equation of state solved for p at rho = m/V, T = U/(m cv)
+        rho, T = m / V, U / (m * cv)
+        # (the smaller of its two roots: the other, near 1/(b rho R T), is not a gas)
+        return brentq(lambda p: p - rho * R * T * (1 + b * p * p), 1.0, 2 * rho * R * T, xtol=1e-9), T
+
+    def rhs(_, y):
+        p, T = pressure(*y)
+        m_out = k * (p - p_amb)
+        return [-m_out, Q - m_out * (cv + R) * T]
+
+    rho0 = 3e5 / (R * 320.0 * (1 + b * 9e10))
+    m0 = rho0 * V
+    ref = solve_ivp(rhs, (0.0, 200.0), [m0, m0 * cv * 320.0], t_eval=t, rtol=1e-10, atol=1e-8)
+    p_ref = np.array([pressure(m, U)[0] for m, U in ref.y.T])
+    assert abs(res.output("p_out")[0] - 3e5) < 1e-3
+    assert np.max(np.abs(res.output("p_out") - p_ref)) < 1e-4 * 3e5

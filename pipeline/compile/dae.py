@@ -74,6 +74,10 @@ class Dae:
     clocks: list = field(default_factory=list)          # (start, period) of each sample() clock
     asserts: ca.SX = field(default_factory=lambda: ca.SX(0, 1))   # 1 where an assert is violated
     assert_info: list = field(default_factory=list)     # (level "error"|"warning", message) of each
+    #: the start values (in p) of the continuous variables declared ``stateSelect = prefer`` or
+    #: ``always``: where the initial equations leave states free, these are pinned first (a
+    #: drum's pressure and level, not the mass and energy the balances differentiate)
+    preferred: dict[str, ca.SX] = field(default_factory=dict)
 
     @property
     def hybrid(self) -> bool:

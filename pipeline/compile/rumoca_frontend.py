@@ -1455,6 +1455,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     if fn:
         asserts = ca.vertcat(asserts, *[a[0] for a in fn])
         assert_info = [*assert_info, *[(level, message) for _, level, message in fn]]
+    # rumoca's own check that a function read a variable its path never assigned: a record
+    # copied whole with a field left unset (the MSL's water properties' cv), a value nothing
+    # then reads. Other tools do not check it: a warning, not a stop
+    assert_info = [("warning" if _UNASSIGNED.search(m) else lv, m) for lv, m in assert_info]
 
     # pre() of algebraic variables read at events: each from the variable's value before it
     d_update = bind_event(d_update) if nd else ca.SX(0, 1)
@@ -1462,6 +1466,13 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     read = sorted(set(ca.jacobian_sparsity(ca.vertcat(d_update, x_reinit), z_pre).get_triplet()[1]))
     z_pre = z_pre[read] if read else ca.SX(0, 1)
     exprs.update({f"$pre[{k}]": z[j] for k, j in enumerate(read)})
+
+    preferred = {}
+    for i in index["x"] + index["z"]:
+        if attrs[i].get("state_select") in ("Prefer", "Always") and attrs[i]["start"] is not None:
+            value = bind(value_of(i, ("start",)))
+            preferred.update(zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(value)))
+    preferred = {n: e for n, e in preferred.items() if not ca.depends_on(e, ca.vertcat(x, z, u, t, d))}
 
     return fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
@@ -1471,7 +1482,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                d=d, d_names=names["d"] + [f"$when{c}" for c in sorted(memory)], d_start=d_start,
                d_pre=d_pre, x_pre=x_pre, z_pre=z_pre, flags=flags, d_update=d_update, x_reinit=x_reinit,
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
-               assert_info=assert_info))
+               assert_info=assert_info, preferred=preferred))
 
 
 def _external_objects(ir: dict) -> set[str]:
@@ -1770,6 +1781,9 @@ class _Events:
         where = self.where(action.get("provenance"))
         text = text or "assert"
         return f"{text} ({where})" if where else text
+
+
+_UNASSIGNED = re.compile(r"is used without a value: the executed path never assigned it")
 
 
 def _time_events(st: dict) -> list[float]:

@@ -15,6 +15,7 @@ DAE -> ODE in three steps (../shared/DESIGN.md, sections 2-3):
 from __future__ import annotations
 
 import logging
+import warnings
 from dataclasses import dataclass
 
 import casadi as ca
@@ -315,8 +316,9 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     NaN where even the fallback leaves a residual above INIT_TOL (Newton's method can stop on
     a zero step at a singularity, sqrt(x) at x = 0, and return a wrong answer). ``strict`` (an
     initial system): the fallback always starts off the start values."""
-    quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
+    resid, par = _scaled(name, resid, z0, par)
+    quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z1 = quick(z0, par)
     ok = _within(resid(z1, par), LOOP_TOL)
     step, jac = _damped_step(name, resid)
@@ -339,6 +341,37 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
     z2 = ca.if_else(_within(resid(z2, par), INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
     return ca.if_else(ok, z1, z2, True)
+
+
+def _scaled(name: str, resid: ca.Function, z0, par):
+    """(the residual divided row by row by its size at the guess ``z0``, its parameters): an
+    equation's tolerances relative to its terms, 1 + the sum of their magnitudes (a drum's
+    energy balance, U = m h - p V with U near 1e11 J, is met to 1e-5 at best, never to an
+    absolute 1e-9). Unscaled where the residual holds solves of its own (MX)."""
+    try:
+        zs, ps = ca.SX.sym("z", resid.size1_in(0)), ca.SX.sym("p", resid.size1_in(1))
+        r = resid(zs, ps)
+    except RuntimeError:
+        return resid, par
+    size = ca.Function(f"{name}_size", [zs, ps], [ca.vertcat(*[1 + sum(ca.fabs(a) for a in _terms(e))
+                                                               for e in ca.vertsplit(r)])])
+    w = ca.SX.sym("w", r.numel())
+    scaled = ca.Function(f"{name}_scaled", [zs, ca.vertcat(ps, w)], [r / w])
+    return scaled, ca.vertcat(par, size(z0, par))
+
+
+def _terms(e: ca.SX) -> list:
+    """The terms of a sum (of differences and negations), as a list."""
+    out, todo = [], [e]
+    while todo:
+        a = todo.pop()
+        if a.is_op(ca.OP_ADD) or a.is_op(ca.OP_SUB):
+            todo += [a.dep(0), a.dep(1)]
+        elif a.is_op(ca.OP_NEG):
+            todo.append(a.dep(0))
+        else:
+            out.append(a)
+    return out
 
 
 def _within(r, tol: float):
@@ -437,7 +470,16 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     checks = ca.Function("checks", args, [y_all, absmax(g), absmax(inv)], names, ["y", "res", "drift"])
 
     x_names = semi_state_names(xs, dae)
-    start, init_start = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI)
+    # the initial system in all the unknowns, where the algebraic ones are not solved for
+    dxi_sx = ca.jtimes(x_impl, xs, semi["ode"])
+    init_sx = ca.substitute(dae.init_residual, ca.vertcat(dae.x, dae.dx, dae.z),
+                            ca.vertcat(x_impl, dxi_sx, z_orig))
+    wish = _preferred(dae)
+    wish_sx = wish(x_impl, z_orig, dae.u, dae.p, t, dxi_sx)
+    joint = (zs, semi["alg"], ca.vertcat(invariants_in(invariants, dae, x_impl, z_orig), init_sx, wish_sx),
+             ca.vertcat(xs, up, t))
+    start, init_start = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint,
+                                     wish(XI, ZI, U, P, T, dXI))
     init = ca.Function("init", [U, P, T], [init_start(U, P, T, start(P))], ["u", "p", "t"], ["x0"])
     loops, given = _newton_functions(newton, args, names, sx_fun, probe_at, U, P)
     # SX evaluates faster than the MX call graph where there is no Newton or QR solve in it; a
@@ -669,13 +711,27 @@ def semi_state_names(xs: ca.SX, dae: Dae) -> list[str]:
     return [lookup.get(str(s), str(s)) for s in ca.vertsplit(xs)]
 
 
-def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
+def _preferred(dae) -> ca.Function:
+    """(x, z, u, p, t, x') -> each variable declared ``stateSelect = prefer`` (or ``always``)
+    less its start value: the pins the initial system takes first where its equations leave
+    states free."""
+    names = [n for n in dae.preferred if n in dae.exprs]
+    value = ca.vertcat(*[dae.exprs[n] - dae.preferred[n] for n in names]) if names else ca.SX(0, 1)
+    return ca.Function("preferred", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [value])
+
+
+def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint, wish):
     """(p -> start values s, (u, p, t, s) -> consistent x0): invariants + initial equations
     (der() of a state is its right-hand side) + chosen start values (s is an argument, so an FMU
-    can take a state's start value from its user)."""
+    can take a state's start value from its user), those of the variables declared ``stateSelect
+    = prefer`` first (``wish``: each less its start value). ``joint``: (z, g, the same equations
+    and wishes, their other arguments (x, u, p, t)) in SX, with the algebraic unknowns z not
+    solved for."""
     nx = xs.numel()
     init_res = ca.Function("ires", [dae.x, dae.dx, dae.z, dae.u, dae.p, dae.t], [dae.init_residual])
     hard = ca.vertcat(inv, init_res(XI, dXI, ZI, U, P, T)) if dae.init_residual.numel() else inv
+    nh = hard.numel()       # the equations; the wishes follow them in H
+    hard = ca.vertcat(hard, wish)
     semi_start = ca.Function("sst", [dae.p], [_starts_of(xs, dae)])(P)
 
     # the system in SX where it expands (its Jacobian is then sparse and cheap: 10 s in MX for
@@ -698,10 +754,20 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
         # h = f(H) started at 0 where the law divides by h_F - h_R): taken from the equations
         # that give them explicitly, at the other states' starts
         moved = _relaxed(xs0, H, jac_s, at, fixed, dae, x_names, lambda x: _finite(at, x) is not None)
-        if moved is None:
-            raise
-        semi_start, xs0 = _moved_starts(semi_start, xs0, moved), moved
-        J = _finite_jacobian(at, xs0, x_names)
+        if moved is not None:
+            semi_start, xs0 = _moved_starts(semi_start, xs0, moved), moved
+            J = _finite_jacobian(at, xs0, x_names)
+        else:
+            J = _joint_jacobian(joint, xs0, dae)
+            if J is None:
+                raise
+    if _idle(J):
+        # an equation that moves with no state: the algebraic loops have no solution at the
+        # states' starts (a drum's pressure at zero mass); which states the equations determine
+        # is read from all the unknowns' start values instead
+        Jj = _joint_jacobian(joint, xs0, dae)
+        if Jj is not None and _idle(Jj) < _idle(J):
+            J = Jj
     order = ([i for i, n in enumerate(x_names) if n in fixed]
              + [i for i, n in enumerate(x_names) if n in dae.x_names and n not in fixed]
              + [i for i, n in enumerate(x_names) if n not in dae.x_names])
@@ -709,7 +775,13 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
     def square(J):
         """(start, init_start, the initial state at the model's values or None) solving the
         equations independent at J, the other states pinned to their start values."""
-        rows = _independent_rows(J)
+        # each state's column scaled to its largest entry: which rows are independent is then
+        # the same whatever the states' units (a pipe's energy in J next to its mass in kg,
+        # rows 1e11 against 1e-2, pass for parallel unscaled)
+        J = J / np.maximum(np.max(np.abs(J), axis=0, initial=0.0), 1e-300)
+        rows = _independent_rows(J[:nh])
+        wishes = _granted(J[rows], J[nh:], [i for i in order if x_names[i] in fixed], nx)
+        rows += [nh + k for k in wishes]
         J = J[rows]
         # the states the equations determine: a basis of J's columns taken from the end of ``order``
         # (the rest, pinned to their start values, are then the first ``order`` can give: the
@@ -750,13 +822,23 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
             if moved is not None:
                 start = ca.Function("start", [P], [_moved_starts(semi_start, xs0, moved)], ["p"], ["s"])
                 x0 = _nominal(init_start, moved, dae)
+        if x0 is None:
+            # still none: the states' starts leave an algebraic unknown where its equations have
+            # no solution or no derivative (a drum's mass and energy without a start value, its
+            # pressure and level from the water's properties): the starts of the states the
+            # equations determine taken from a solve in every unknown, from the algebraic
+            # unknowns' start values, which the modeller gives
+            together = _joint(joint, rows, pins, S, ca.vertcat(U, P, T), dae)
+            x0 = _nominal(together, xs0, dae)
+            if x0 is not None:
+                init_start = together
         return start, init_start, x0
 
     start, init_start, x0 = square(J)
     # equations independent elsewhere may look dependent at the start values (a rotation's
     # invariant at angle 0): where the solve leaves one of them unmet, the equations are
     # chosen again next to the start, and that choice kept if it meets them all better
-    worst = _unmet(H, x0, dae)
+    worst = _unmet(H, x0, dae, nh)
     if worst > INIT_TOL:
         pattern = np.sin(1.0 + 2.0 * np.arange(nx))
         for scale in (1e-3, 1e-2):
@@ -767,12 +849,34 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI):
                 other = square(Jn)
             except ModelicaError:
                 continue
-            better = _unmet(H, other[2], dae)
+            better = _unmet(H, other[2], dae, nh)
             if better <= INIT_TOL or better < 1e-3 * worst:     # (not rounding traded for rounding)
                 (start, init_start, _), worst = other, better
             if worst <= INIT_TOL:
                 break
     return start, init_start
+
+
+def _joint(joint, rows: list, pins: list, S: ca.MX, upt: ca.MX, dae) -> ca.Function:
+    """(u, p, t, s) -> x0 from the initial system's ``rows`` and ``pins`` solved with the
+    algebraic equations, every unknown at once, in block-triangular order: with a drum's
+    pressure and level pinned, the water's properties follow explicitly and then its mass and
+    energy, where solving for the pressure from a mass started at 0 fails. The algebraic
+    unknowns' start values, which the modeller gives, are the guesses of its loops."""
+    zs, g, hard, other = joint
+    nx = S.numel()
+    xs, rest = other[:nx], other[nx:]
+    s = ca.SX.sym("s", nx)
+    w = ca.vertcat(xs, zs)
+    empty = ca.SX(0, 1)
+    residual = ca.vertcat(g, hard[rows] if rows else empty, xs[pins] - s[pins] if pins else empty)
+    guess = np.concatenate([np.array(ca.Function("s0", [dae.p], [_starts_of(v, dae)])(dae.p_values)).ravel()
+                            for v in (xs, zs)])
+    up, t = rest[:-1], rest[-1]
+    solve, _, _ = causalise(residual, w, [s, up, t], guess)
+    U, P, T = ca.vertsplit(upt, np.cumsum([0, dae.u.numel(), dae.p.numel(), 1]).tolist())
+    return ca.Function("init_start", [U, P, T, S], [solve(S, ca.vertcat(U, P), T)[:nx]],
+                       ["u", "p", "t", "s"], ["x0"])
 
 
 def _finite(f, x):
@@ -792,13 +896,35 @@ def _nominal(init_start, s, dae):
     return None if x0 is None else x0.ravel()
 
 
-def _unmet(H, x0, dae) -> float:
+def _granted(J: np.ndarray, wishes: np.ndarray, fixed: list[int], n: int) -> list[int]:
+    """The rows of ``wishes`` (pins of preferred variables) kept, in order, each where it is
+    independent of the equations ``J``, the pins of the states the user fixed and the wishes
+    kept before it (Gram-Schmidt, twice, against an orthonormal basis of those rows)."""
+    if not len(wishes):
+        return []
+    base = np.vstack([J, np.eye(n)[fixed]]) if fixed else J
+    Q = scipy.linalg.orth(base.T) if base.size else np.zeros((n, 0))
+    kept = []
+    for k, w in enumerate(wishes):
+        if Q.shape[1] >= n:
+            break
+        v = w.astype(float)
+        for _ in range(2):
+            v = v - Q @ (Q.T @ v)
+        if np.linalg.norm(v) > 1e-8 * max(np.linalg.norm(w), 1e-300):
+            Q = np.hstack([Q, (v / np.linalg.norm(v))[:, None]])
+            kept.append(k)
+    return kept
+
+
+def _unmet(H, x0, dae, nh: int) -> float:
     """The largest residual of the whole initial system (every equation, those left out of the
-    square one included) at ``x0``, at the model's parameter values."""
+    square one included, but not the preferred variables' pins: the first ``nh`` rows of H) at
+    ``x0``, at the model's parameter values."""
     if x0 is None:
         return np.inf
     try:
-        r = np.abs(np.array(H(x0, dae.u_start, dae.p_values, 0.0)).ravel())
+        r = np.abs(np.array(H(x0, dae.u_start, dae.p_values, 0.0)).ravel())[:nh]
     except RuntimeError:
         return np.inf
     if not r.size:
@@ -906,16 +1032,15 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
             return None
 
     ok = lambda M: M is not None and bool(np.all(np.isfinite(M)))
-    idle = lambda M: int(np.sum(~np.any(M != 0, axis=1)))    # equations that move with no state
     J = at(x0)
-    if ok(J) and not idle(J):
+    if ok(J) and not _idle(J):
         return J
     # which equations determine which states is the same next to the singularity (a tank's
     # T = H/(m*c) at a mass started at 0, where T is NaN, or held at its start value by a
     # singular linear block's fallback so that it moves with no state): read it there
     for scale in (1e-8, 1e-6, 1e-4):
         Jn = at(x0 + scale * (1.0 + np.abs(x0)))
-        if ok(Jn) and (not ok(J) or idle(Jn) < idle(J)):
+        if ok(Jn) and (not ok(J) or _idle(Jn) < _idle(J)):
             return Jn
     if ok(J):
         return J
@@ -924,6 +1049,36 @@ def _finite_jacobian(jac, x0: np.ndarray, names) -> np.ndarray:
     raise ModelicaError("the initial equations have no finite derivative at the start values of "
                         f"{', '.join(bad[:5]) or 'the states'}: start {'them' if len(bad) > 1 else 'it'} "
                         "away from the singularity")
+
+
+def _idle(J: np.ndarray) -> int:
+    """How many equations move with no state (a zero row of the initial system's Jacobian)."""
+    return int(np.sum(~np.any(J != 0, axis=1)))
+
+
+def _joint_jacobian(joint, x0: np.ndarray, dae) -> np.ndarray | None:
+    """The initial system's Jacobian in the states, with the algebraic unknowns eliminated
+    at their start values (dH/dx - dH/dz (dg/dz)^-1 dg/dx) rather than solved for at the
+    states' starts; None where that is not finite."""
+    import scipy.sparse
+    import scipy.sparse.linalg
+
+    zs, g, hard, other = joint
+    nx = x0.size
+    xs, rest = other[:nx], other[nx:]
+    parts = ca.Function("jj", [xs, zs, rest], [ca.jacobian(g, xs), ca.jacobian(g, zs),
+                                             ca.jacobian(hard, xs), ca.jacobian(hard, zs)])
+    z0 = ca.Function("zst", [dae.p], [_starts_of(zs, dae)])(dae.p_values)
+    at = ca.vertcat(dae.u_start, dae.p_values, 0.0)
+    gx, gz, hx, hz = (scipy.sparse.csc_matrix(m.sparse()) for m in parts(x0, z0, at))
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", scipy.sparse.linalg.MatrixRankWarning)
+            dz = scipy.sparse.linalg.spsolve(gz, gx.toarray()) if zs.numel() else np.zeros((0, nx))
+        J = hx.toarray() - hz @ np.asarray(dz).reshape(zs.numel(), nx)
+    except (RuntimeError, ValueError):
+        return None
+    return J if np.all(np.isfinite(J)) else None
 
 
 def _independent_rows(J: np.ndarray) -> list[int]:
