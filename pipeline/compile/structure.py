@@ -477,7 +477,7 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     wish = _preferred(dae)
     wish_sx = wish(x_impl, z_orig, dae.u, dae.p, t, dxi_sx)
     joint = (zs, semi["alg"], ca.vertcat(invariants_in(invariants, dae, x_impl, z_orig), init_sx, wish_sx),
-             ca.vertcat(xs, up, t))
+             xs, up, t)
     start, init_start = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint,
                                      wish(XI, ZI, U, P, T, dXI))
     init = ca.Function("init", [U, P, T], [init_start(U, P, T, start(P))], ["u", "p", "t"], ["x0"])
@@ -725,8 +725,7 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint, wish):
     (der() of a state is its right-hand side) + chosen start values (s is an argument, so an FMU
     can take a state's start value from its user), those of the variables declared ``stateSelect
     = prefer`` first (``wish``: each less its start value). ``joint``: (z, g, the same equations
-    and wishes, their other arguments (x, u, p, t)) in SX, with the algebraic unknowns z not
-    solved for."""
+    and wishes, x, (u, p), t) in SX, with the algebraic unknowns z not solved for."""
     nx = xs.numel()
     init_res = ca.Function("ires", [dae.x, dae.dx, dae.z, dae.u, dae.p, dae.t], [dae.init_residual])
     hard = ca.vertcat(inv, init_res(XI, dXI, ZI, U, P, T)) if dae.init_residual.numel() else inv
@@ -828,7 +827,7 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint, wish):
             # pressure and level from the water's properties): the starts of the states the
             # equations determine taken from a solve in every unknown, from the algebraic
             # unknowns' start values, which the modeller gives
-            together = _joint(joint, rows, pins, S, ca.vertcat(U, P, T), dae)
+            together = _joint(joint, rows, pins, S, U, P, T, dae)
             x0 = _nominal(together, xs0, dae)
             if x0 is not None:
                 init_start = together
@@ -857,24 +856,21 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint, wish):
     return start, init_start
 
 
-def _joint(joint, rows: list, pins: list, S: ca.MX, upt: ca.MX, dae) -> ca.Function:
+def _joint(joint, rows: list, pins: list, S: ca.MX, U: ca.MX, P: ca.MX, T: ca.MX, dae) -> ca.Function:
     """(u, p, t, s) -> x0 from the initial system's ``rows`` and ``pins`` solved with the
     algebraic equations, every unknown at once, in block-triangular order: with a drum's
     pressure and level pinned, the water's properties follow explicitly and then its mass and
     energy, where solving for the pressure from a mass started at 0 fails. The algebraic
     unknowns' start values, which the modeller gives, are the guesses of its loops."""
-    zs, g, hard, other = joint
+    zs, g, hard, xs, up, t = joint
     nx = S.numel()
-    xs, rest = other[:nx], other[nx:]
     s = ca.SX.sym("s", nx)
     w = ca.vertcat(xs, zs)
     empty = ca.SX(0, 1)
     residual = ca.vertcat(g, hard[rows] if rows else empty, xs[pins] - s[pins] if pins else empty)
     guess = np.concatenate([np.array(ca.Function("s0", [dae.p], [_starts_of(v, dae)])(dae.p_values)).ravel()
                             for v in (xs, zs)])
-    up, t = rest[:-1], rest[-1]
     solve, _, _ = causalise(residual, w, [s, up, t], guess)
-    U, P, T = ca.vertsplit(upt, np.cumsum([0, dae.u.numel(), dae.p.numel(), 1]).tolist())
     return ca.Function("init_start", [U, P, T, S], [solve(S, ca.vertcat(U, P), T)[:nx]],
                        ["u", "p", "t", "s"], ["x0"])
 
@@ -1063,14 +1059,13 @@ def _joint_jacobian(joint, x0: np.ndarray, dae) -> np.ndarray | None:
     import scipy.sparse
     import scipy.sparse.linalg
 
-    zs, g, hard, other = joint
+    zs, g, hard, xs, up, t = joint
     nx = x0.size
-    xs, rest = other[:nx], other[nx:]
-    parts = ca.Function("jj", [xs, zs, rest], [ca.jacobian(g, xs), ca.jacobian(g, zs),
+    parts = ca.Function("jj", [xs, zs, up, t], [ca.jacobian(g, xs), ca.jacobian(g, zs),
                                              ca.jacobian(hard, xs), ca.jacobian(hard, zs)])
     z0 = ca.Function("zst", [dae.p], [_starts_of(zs, dae)])(dae.p_values)
-    at = ca.vertcat(dae.u_start, dae.p_values, 0.0)
-    gx, gz, hx, hz = (scipy.sparse.csc_matrix(m.sparse()) for m in parts(x0, z0, at))
+    at = ca.vertcat(dae.u_start, dae.p_values)
+    gx, gz, hx, hz = (scipy.sparse.csc_matrix(m.sparse()) for m in parts(x0, z0, at, 0.0))
     try:
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", scipy.sparse.linalg.MatrixRankWarning)
