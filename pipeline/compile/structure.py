@@ -39,6 +39,9 @@ NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
 LOOP_TOL = 1e-9
 #: an initial system's residual above this after every fallback: no consistent start (NaN)
 INIT_TOL = 1e-6
+#: a loop's row is met to LOOP_TOL or to a thousand rounding errors of its terms' sum, the
+#: larger (see _met)
+ROUNDING = 1e3 * np.finfo(float).eps / LOOP_TOL
 DAMPED_ITERATIONS = 30       # Newton steps with a line search (the fallback)
 LINE_SEARCH_STEPS = 12       # step lengths tried: 1, 1/2, ..., 1/2^11
 
@@ -316,11 +319,10 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     NaN where even the fallback leaves a residual above INIT_TOL (Newton's method can stop on
     a zero step at a singularity, sqrt(x) at x = 0, and return a wrong answer). ``strict`` (an
     initial system): the fallback always starts off the start values."""
-    z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
-    resid, par = _scaled(name, resid, z0, par)
     quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
+    z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
     z1 = quick(z0, par)
-    ok = _within(resid(z1, par), LOOP_TOL)
+    ok = _met(name, resid, LOOP_TOL)(z1, par)
     step, jac = _damped_step(name, resid)
     # the initial system's fallback starts a hair off the start values: a start at a
     # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
@@ -339,25 +341,29 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     z2 = polish(z, par)
     # NaN, not an exception, where no solution is found: in a run the integrator then retries
     # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
-    z2 = ca.if_else(_within(resid(z2, par), INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
+    z2 = ca.if_else(_met(name, resid, INIT_TOL)(z2, par), z2, np.nan * ca.DM.ones(z2.shape), True)
     return ca.if_else(ok, z1, z2, True)
 
 
-def _scaled(name: str, resid: ca.Function, z0, par):
-    """(the residual divided row by row by its size at the guess ``z0``, its parameters): an
-    equation's tolerances relative to its terms, 1 + the sum of their magnitudes (a drum's
-    energy balance, U = m h - p V with U near 1e11 J, is met to 1e-5 at best, never to an
-    absolute 1e-9). Unscaled where the residual holds solves of its own (MX)."""
+def _met(name: str, resid: ca.Function, tol: float):
+    """(z, par) -> whether the loop's residual is within ``tol``, or, row by row, within ``tol``
+    times 1 + ROUNDING x (the sum of the row's terms' magnitudes): a thousand rounding errors
+    of its largest terms where that is more (a drum's energy balance, U = m h - p V with U near
+    1e11 J, is met to 1e-5 at best, never to an absolute 1e-9). Newton's method still iterates
+    on the residual itself: scaled, it stops early on a diode's exp() terms, and the run's
+    right-hand side turns noisy."""
     try:
         zs, ps = ca.SX.sym("z", resid.size1_in(0)), ca.SX.sym("p", resid.size1_in(1))
         r = resid(zs, ps)
-    except RuntimeError:
-        return resid, par
-    size = ca.Function(f"{name}_size", [zs, ps], [ca.vertcat(*[1 + sum(ca.fabs(a) for a in _terms(e))
-                                                               for e in ca.vertsplit(r)])])
-    w = ca.SX.sym("w", r.numel())
-    scaled = ca.Function(f"{name}_scaled", [zs, ca.vertcat(ps, w)], [r / w])
-    return scaled, ca.vertcat(par, size(z0, par))
+    except RuntimeError:          # the residual holds solves of its own (MX): absolute only
+        return lambda z, par: _within(resid(z, par), tol)
+    size = ca.vertcat(*[1 + ROUNDING * sum(ca.fabs(a) for a in _terms(e)) for e in ca.vertsplit(r)])
+    scaled = ca.Function(f"{name}_scaled", [zs, ps], [r, r / size])
+
+    def met(z, par):
+        r, rs = scaled(z, par)
+        return ca.logic_or(_within(r, tol), _within(rs, tol))
+    return met
 
 
 def _terms(e: ca.SX) -> list:
