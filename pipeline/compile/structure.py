@@ -833,8 +833,11 @@ def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint, wish):
             # pressure and level from the water's properties): the starts of the states the
             # equations determine taken from a solve in every unknown, from the algebraic
             # unknowns' start values, which the modeller gives
-            together = _joint(joint, rows, pins, S, U, P, T, dae)
-            x0 = _nominal(together, xs0, dae)
+            try:
+                together = _joint(joint, rows, pins, S, U, P, T, dae)
+            except (ModelicaError, RuntimeError):      # (singular in all the unknowns)
+                together = None
+            x0 = _nominal(together, xs0, dae) if together is not None else None
             if x0 is not None:
                 init_start = together
         return start, init_start, x0
