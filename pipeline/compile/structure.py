@@ -904,11 +904,14 @@ def _nominal(init_start, s, dae):
 def _granted(J: np.ndarray, wishes: np.ndarray, fixed: list[int], n: int) -> list[int]:
     """The rows of ``wishes`` (pins of preferred variables) kept, in order, each where it is
     independent of the equations ``J``, the pins of the states the user fixed and the wishes
-    kept before it (Gram-Schmidt, twice, against an orthonormal basis of those rows)."""
+    kept before it (Gram-Schmidt, twice, against an orthonormal basis of those rows; the
+    states' columns scaled to their largest entries)."""
     if not len(wishes):
         return []
     base = np.vstack([J, np.eye(n)[fixed]]) if fixed else J
-    Q = scipy.linalg.orth(base.T) if base.size else np.zeros((n, 0))
+    # (every row of ``base`` counted, as _independent_rows chose them: orth() would drop the
+    # numerically weakest one and grant a wish that depends on it)
+    Q = np.linalg.qr(base.T)[0] if base.size else np.zeros((n, 0))
     kept = []
     for k, w in enumerate(wishes):
         if Q.shape[1] >= n:
@@ -916,7 +919,8 @@ def _granted(J: np.ndarray, wishes: np.ndarray, fixed: list[int], n: int) -> lis
         v = w.astype(float)
         for _ in range(2):
             v = v - Q @ (Q.T @ v)
-        if np.linalg.norm(v) > 1e-8 * max(np.linalg.norm(w), 1e-300):
+        # (the columns are scaled to 1: a wish whose row is 1e-114 there moves no state)
+        if np.linalg.norm(v) > 1e-8 * max(np.linalg.norm(w), 1.0):
             Q = np.hstack([Q, (v / np.linalg.norm(v))[:, None]])
             kept.append(k)
     return kept
