@@ -322,7 +322,8 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
     z1 = quick(z0, par)
-    ok = _met(name, resid, LOOP_TOL)(z1, par)
+    met = _met(name, resid)
+    ok = met(z1, par, LOOP_TOL)
     step, jac = _damped_step(name, resid)
     # the initial system's fallback starts a hair off the start values: a start at a
     # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
@@ -341,12 +342,12 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     z2 = polish(z, par)
     # NaN, not an exception, where no solution is found: in a run the integrator then retries
     # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
-    z2 = ca.if_else(_met(name, resid, INIT_TOL)(z2, par), z2, np.nan * ca.DM.ones(z2.shape), True)
+    z2 = ca.if_else(met(z2, par, INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
     return ca.if_else(ok, z1, z2, True)
 
 
-def _met(name: str, resid: ca.Function, tol: float):
-    """(z, par) -> whether the loop's residual is within ``tol``, or, row by row, within ``tol``
+def _met(name: str, resid: ca.Function):
+    """(z, par, tol) -> whether the loop's residual is within ``tol``, or, row by row, within ``tol``
     times 1 + ROUNDING x (the sum of the row's terms' magnitudes): a thousand rounding errors
     of its largest terms where that is more (a drum's energy balance, U = m h - p V with U near
     1e11 J, is met to 1e-5 at best, never to an absolute 1e-9). Newton's method still iterates
@@ -356,11 +357,11 @@ def _met(name: str, resid: ca.Function, tol: float):
         zs, ps = ca.SX.sym("z", resid.size1_in(0)), ca.SX.sym("p", resid.size1_in(1))
         r = resid(zs, ps)
     except RuntimeError:          # the residual holds solves of its own (MX): absolute only
-        return lambda z, par: _within(resid(z, par), tol)
+        return lambda z, par, tol: _within(resid(z, par), tol)
     size = ca.vertcat(*[1 + ROUNDING * sum(ca.fabs(a) for a in _terms(e)) for e in ca.vertsplit(r)])
     scaled = ca.Function(f"{name}_scaled", [zs, ps], [r, r / size])
 
-    def met(z, par):
+    def met(z, par, tol):
         r, rs = scaled(z, par)
         return ca.logic_or(_within(r, tol), _within(rs, tol))
     return met
@@ -877,8 +878,7 @@ def _joint(joint, rows: list, pins: list, S: ca.MX, U: ca.MX, P: ca.MX, T: ca.MX
     w = ca.vertcat(xs, zs)
     empty = ca.SX(0, 1)
     residual = ca.vertcat(g, hard[rows] if rows else empty, xs[pins] - s[pins] if pins else empty)
-    guess = np.concatenate([np.array(ca.Function("s0", [dae.p], [_starts_of(v, dae)])(dae.p_values)).ravel()
-                            for v in (xs, zs)])
+    guess = np.concatenate([_start_values(xs, dae), _start_values(zs, dae)])
     solve, _, _ = causalise(residual, w, [s, up, t], guess)
     return ca.Function("init_start", [U, P, T, S], [solve(S, ca.vertcat(U, P), T)[:nx]],
                        ["u", "p", "t", "s"], ["x0"])
@@ -1005,6 +1005,11 @@ def _starts_of(syms: ca.SX, dae: Dae) -> ca.SX:
     return ca.vertcat(*[start.get(s.element_hash(), ca.SX(0)) for s in ca.vertsplit(syms)])
 
 
+def _start_values(syms: ca.SX, dae: Dae) -> np.ndarray:
+    """The start values of ``syms`` (:func:`_starts_of`) at the model's parameter values."""
+    return np.array(ca.Function("starts", [dae.p], [_starts_of(syms, dae)])(dae.p_values)).ravel()
+
+
 def _column_basis(J: np.ndarray, order: list[int]) -> list[int]:
     """Columns of J, tried in ``order``, each kept when it is independent of those kept before
     (Gram-Schmidt, twice, against an orthonormal basis of the kept ones)."""
@@ -1076,7 +1081,7 @@ def _joint_jacobian(joint, x0: np.ndarray, dae) -> np.ndarray | None:
     nx = x0.size
     parts = ca.Function("jj", [xs, zs, up, t], [ca.jacobian(g, xs), ca.jacobian(g, zs),
                                              ca.jacobian(hard, xs), ca.jacobian(hard, zs)])
-    z0 = ca.Function("zst", [dae.p], [_starts_of(zs, dae)])(dae.p_values)
+    z0 = _start_values(zs, dae)
     at = ca.vertcat(dae.u_start, dae.p_values)
     gx, gz, hx, hz = (scipy.sparse.csc_matrix(m.sparse()) for m in parts(x0, z0, at, 0.0))
     try:
