@@ -34,6 +34,9 @@ _BINARY = {
     "not_equal": ca.ne, "and": ca.logic_and, "or": ca.logic_or,
 }
 _RELATIONS = ("greater", "greater_equal", "less", "less_equal")
+#: a held relation changes at an event only once lhs - rhs is past 0 by this times
+#: 1 + |lhs| + |rhs| (see _hysteresis)
+HYSTERESIS = 1e-10
 #: coordinates that index the model's variables (the roles rumoca gives them)
 _VARIABLE_KINDS = {"state", "algebraic", "output", "input", "parameter", "constant", "discrete_value",
                    "discrete_real", "variable"}
@@ -518,6 +521,7 @@ class _Translator:
                             if isinstance(r, dict) and "relation" in r}
         self.relations: list[ca.SX] = []   # lhs - rhs of the event-generating relations met
         self.relation_ops: list = []       # their operators (None: a quotient's integer crossing)
+        self.held: list = []     # (its index in relations, symbol, relation, value at an event, crossing)
         self.span = None                   # provenance of what is being translated (for errors)
         self.fn_asserts: list = []         # (violated, level, message) of asserts in functions called
         self.table_records: dict = {}      # the MSL's interpolation tables by their id (rumoca's data)
@@ -724,6 +728,10 @@ class _Translator:
                     (k in self.event_nodes or (self.live and k not in self.quiet)):
                 self.relations.append(lhs - rhs)
                 self.relation_ops.append(op)
+                # held between events, as Modelica has it: a symbol, its value set at events
+                held = ca.SX.sym(f"$rel{len(self.relations) - 1}")
+                self.held.append((len(self.relations) - 1, held, out, *_hysteresis(op, lhs, rhs, held)))
+                return held
             return out
         if kind == "runtime_quotient_owner":          # div, mod, rem: an event where a/b crosses an integer
             a, b = alike(done[body["lhs"]], done[body["rhs"]])
@@ -1361,11 +1369,26 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     met = len(tr.relations)
     asserts, assert_info = events.asserts()
     del tr.relations[met:], tr.relation_ops[met:]
+    # the relations of state events are held between events: discrete variables, each set to
+    # its relation at an event (the solver then integrates a smooth right-hand side, and a
+    # diode's switching costs it a restart, not a fight with a jump it cannot step over); the
+    # others (on time alone, in asserts or parameters) are evaluated where they are read
+    keep = _held(tr, met, ca.vertcat(x, dx, z, d, d_pre), residual)
+    live = _Live(tr, keep)
+    residual, init_residual, d_update, x_reinit, asserts = map(
+        live, (residual, init_residual, d_update, x_reinit, asserts))
+    if keep:
+        d = ca.vertcat(d, *[h for _, h, _, _ in keep])
+        d_pre = ca.vertcat(d_pre, ca.SX.sym("rel_pre", len(keep)))
+        d_update = ca.vertcat(d_update, *[live(e) for _, _, e, _ in keep])
+        nd = d.numel()
+        for k, _, _, cross in keep:
+            tr.relations[k] = live(cross)
 
     def value_of(i, key_order=("binding", "start")):
         node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)
         e = tr.sx(node) if node is not None else ca.SX.zeros(size[i], 1)
-        e = flat(e)
+        e = live(flat(e))
         return ca.repmat(e, size[i], 1) if e.numel() == 1 and size[i] > 1 else e
 
     # parameters: an element whose binding depends on other parameters is a dependent one;
@@ -1385,7 +1408,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     held = ca.vertcat(d_pre, x_pre, z_pre, flags)
 
     def bind(e, initial=0.0):
-        e = ca.substitute(e, p_all, resolved)
+        e = ca.substitute(live(e), p_all, resolved)
         if held.numel() > flags.numel():
             e = ca.substitute(e, held, ca.vertcat(d, x, z, ca.SX([initial] + [0.0] * (flags.numel() - 1))))
         return e
@@ -1428,7 +1451,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     rel = [r for k, r in enumerate(tr.relations) if k in on]
     rel_ops = tuple(o for k, o in enumerate(tr.relation_ops) if k in on)
     relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
-    d_start = ca.vertcat(starts("d"), ca.SX.zeros(len(memory), 1)) if nd else ca.SX(0, 1)
+    d_start = ca.vertcat(starts("d"), ca.SX.zeros(len(memory) + len(keep), 1)) if nd else ca.SX(0, 1)
     # initial equations pre(v) = value: the value v's pre() has at initialisation
     offsets, pos = {}, 0
     for i in index["d"]:
@@ -1479,10 +1502,56 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
                time_events=_time_events(st), relations=relations, relation_ops=rel_ops,
-               d=d, d_names=names["d"] + [f"$when{c}" for c in sorted(memory)], d_start=d_start,
+               d=d, d_names=names["d"] + [f"$when{c}" for c in sorted(memory)] + [str(h) for _, h, _, _ in keep],
+               d_start=d_start,
                d_pre=d_pre, x_pre=x_pre, z_pre=z_pre, flags=flags, d_update=d_update, x_reinit=x_reinit,
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
                assert_info=assert_info, preferred=preferred))
+
+
+def _hysteresis(op: str, lhs: ca.SX, rhs: ca.SX, held: ca.SX) -> tuple[ca.SX, ca.SX]:
+    """A held relation's (value at an event, crossing function): it changes only once lhs - rhs
+    is past 0 by HYSTERESIS x (1 + |lhs| + |rhs|), the way it is going, and its crossing is
+    located there. At a diode that stops conducting, current and voltage both vanish: off,
+    rounding leaves its voltage at +2e-14 V and on, its current at -7e-10 A, and without the
+    band the event iteration flips it on and off for ever."""
+    g = lhs - rhs
+    band = HYSTERESIS * (1 + ca.fabs(lhs) + ca.fabs(rhs)) * (1 - 2 * held)    # +: false now
+    if op in ("less", "less_equal"):
+        return g < -band, g + band
+    return g > band, g - band
+
+
+def _held(tr, met: int, unknowns: ca.SX, residual: ca.SX) -> list:
+    """(index, symbol, value at an event, crossing) of the relations held between events: those the continuous
+    equations read (not asserts, nor when-conditions alone: an event's iteration reads them
+    there anyway) that read an unknown."""
+    if not tr.held or not residual.numel():
+        return []
+    syms = ca.vertcat(*[h[1] for h in tr.held])
+    read = set(ca.jacobian_sparsity(residual, syms).get_triplet()[1])
+    return [(k, h, e, cross) for j, (k, h, _, e, cross) in enumerate(tr.held)
+            if j in read and k < met and ca.depends_on(tr.relations[k], unknowns)]
+
+
+class _Live:
+    """An expression with every relation that is not held read where it is evaluated (nested
+    relations too)."""
+
+    def __init__(self, tr, keep: list):
+        self.tr, self.kept = tr, {str(h) for _, h, _, _ in keep}
+        self.seen, self.drop = -1, None      # (translating more nodes may meet more relations)
+
+    def __call__(self, e):
+        if self.seen != len(self.tr.held):
+            drop = [(h, c) for _, h, c, _, _ in self.tr.held if str(h) not in self.kept]
+            self.seen = len(self.tr.held)
+            self.drop = (ca.vertcat(*[h for h, _ in drop]), ca.vertcat(*[c for _, c in drop])) if drop else None
+        for _ in range(self.seen + 1):
+            if self.drop is None or not e.numel() or not ca.depends_on(e, self.drop[0]):
+                return e
+            e = ca.substitute(e, *self.drop)
+        return e
 
 
 def _external_objects(ir: dict) -> set[str]:

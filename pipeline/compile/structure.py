@@ -34,6 +34,9 @@ SYMBOLIC_SOLVE_MAX = 40
 #: NaN where it is singular (a rotation matrix started at 0): sparse QR raises there and takes
 #: the whole evaluation down, so the initial system cannot even look next to that start
 DENSE_SOLVE_MAX = 400
+#: a block whose coefficients change with the model's mode is solved symbolically only this
+#: small (by minors; see causalise)
+MODED_SYMBOLIC_MAX = 3
 NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
 #: an algebraic loop's residual accepted from Newton's method without the fallback
 LOOP_TOL = 1e-9
@@ -184,8 +187,11 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         A = ca.jacobian(gk, zk)
         # a block whose coefficients change with the model's mode (a clutch's locked: sa's
         # coefficient is 0 or 1) is solved at run time: eliminated symbolically, its pivots
-        # would be chosen for one mode and divide by zero in another
-        small = len(cols) <= SYMBOLIC_SOLVE_MAX and not (modes is not None and ca.depends_on(A, modes))
+        # would be chosen for one mode and divide by zero in another. Up to 3 unknowns
+        # CasADi solves by minors, which divide by the determinant alone: such a block (a
+        # diode pair's, its relations held) is solved symbolically in every mode
+        moded = modes is not None and modes.numel() > 0 and ca.depends_on(A, modes)
+        small = len(cols) <= (MODED_SYMBOLIC_MAX if moded else SYMBOLIC_SOLVE_MAX)
         linear = not ca.depends_on(A, zk) and (stepped.isdisjoint(rows) or not read_through_steps(gk, zk))
         torn, residual, whole = ([], None, None) if linear else _tear([gs[r] for r in rows], [zs[c] for c in cols])
         if linear:
@@ -518,20 +524,30 @@ def differentiable(ode: Ode, which: str = "ode", p_cols=None) -> ca.Function:
     fed by a diode bridge) where a run without sensitivities reads none of it."""
     fun = getattr(ode, which)
     where = {n: k for k, n in enumerate(ode.probe_names)}
-    if ode.loops is None or (which == "out" and not all(n in where for n in ode.y_names)):
-        return fun
     args, names = fun.mx_in(), fun.name_in()
-    sym = ca.SX if ode.given.is_a("SXFunction") else ca.MX    # (MX: it holds a run-time solve)
-    a_sym = [sym.sym(n, a.sparsity()) for n, a in zip(names, args)]
-    ZL = sym.sym("zl", ode.given.size1_in(4))
-    xdot, probe = ode.given(*a_sym, ZL)
-    value = xdot if which == "ode" else (probe[[where[n] for n in ode.y_names]] if ode.y_names else sym(0, 1))
+    if ode.loops is None:
+        # an SX function's Jacobian as one SX expression: CVODES otherwise differentiates the
+        # call in forward sweeps, 6x the cost (a machine fed by a diode bridge: 4.5 ms a
+        # Jacobian against 0.7)
+        if not fun.is_a("SXFunction"):
+            return fun
+        a_sym = [ca.SX.sym(n, a.sparsity()) for n, a in zip(names, args)]
+        value, ZL, zl = fun.call(a_sym)[0], [], []
+    elif which == "out" and not all(n in where for n in ode.y_names):
+        return fun
+    else:
+        sym = ca.SX if ode.given.is_a("SXFunction") else ca.MX    # (MX: it holds a run-time solve)
+        a_sym = [sym.sym(n, a.sparsity()) for n, a in zip(names, args)]
+        ZL = [sym.sym("zl", ode.given.size1_in(4))]
+        xdot, probe = ode.given(*a_sym, *ZL)
+        value = xdot if which == "ode" else (probe[[where[n] for n in ode.y_names]] if ode.y_names else sym(0, 1))
+        zl = [ode.loops(*args)]
     x, u, p, t = a_sym
     blocks = [ca.jacobian(value, x), ca.jacobian(value, u), _jacobian_in(value, p, p_cols), ca.jacobian(value, t)]
-    jac = ca.Function("given_jac", [*a_sym, ZL], blocks)
+    jac = ca.Function("given_jac", [*a_sym, *ZL], blocks)
     oname = fun.name_out(0)
     out = ca.MX.sym(oname, fun.sparsity_out(0))
-    custom = ca.Function(f"jac_{which}_newton", [*args, out], jac(*args, ode.loops(*args)),
+    custom = ca.Function(f"jac_{which}_newton", [*args, out], jac(*args, *zl),
                          [*names, oname], [f"jac_{oname}_{n}" for n in names])
     # (call it on symbols of your own: on its own inputs CasADi inlines it, custom Jacobian lost)
     return ca.Function(f"{which}_newton", args, fun.call(args), names, [oname],
