@@ -531,7 +531,7 @@ def differentiable(ode: Ode, which: str = "ode", p_cols=None) -> ca.Function:
         # Jacobian against 0.7)
         if not fun.is_a("SXFunction"):
             return fun
-        a_sym = [ca.SX.sym(n, a.sparsity()) for n, a in zip(names, args)]
+        a_sym = fun.sx_in()
         value, ZL, zl = fun.call(a_sym)[0], [], []
     elif which == "out" and not all(n in where for n in ode.y_names):
         return fun
