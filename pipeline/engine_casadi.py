@@ -46,6 +46,9 @@ MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
+FORESEEN_POINTS = 64      # with loops held on a branch: points looked ahead for a relation on time
+FOLLOW_POINTS = 32        # points of a call where the loops' solutions are checked to follow on
+FOLLOW_TOL = 1e-3         # a loop's solution off the one followed point to point by more (relative): another root
 #: a call of the solver may use this share of the wall time still left
 CALL_SHARE = 0.4
 #: output points of a run's first call (whose steps and seconds size the calls after it)
@@ -205,9 +208,13 @@ class _Plan:
     """Integrators and output maps for one (model, input, grid, sensitivity) combination."""
 
     def __init__(self, model: CompiledModel, u: TimeSeries, t_out, sel, opts):
-        ode = model.ode
+        # a model with loops runs with their guesses after the parameters: each call of the
+        # solver starts their Newton methods from the last solution (:meth:`refresh`)
+        ode = self.ode = model.ode.warm or model.ode
         self.model, self.t_out, self.sel, self.u = model, t_out, sel, u
-        nx, npar, ns = len(ode.x_names), len(ode.p_names), len(sel)
+        self.ng = 0 if ode.guess0 is None else len(ode.guess0)
+        self.branched = bool((ode.events or {}).get("branches"))    # loops held on a branch
+        nx, npar, ns = len(ode.x_names), len(ode.p_names) + self.ng, len(sel)
         X, P, T = ca.MX.sym("x", nx), ca.MX.sym("p", npar), ca.MX.sym("t")
         if u.names:
             interp = ca.interpolant("U", "linear", [u.time], u.values.ravel(order="C"))
@@ -295,6 +302,12 @@ class _Plan:
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
                           (("x", nx), ("u", len(ode.u_names)), ("p", npar), ("t", 1)))
         self.checks = ode.checks.map(N)   # outputs and checks with one solve of the loops per point
+        if self.ng:     # at the output points, the loops solved from the guesses their call had
+            z = ode.solved(Xs, Us, Ps, Ts)
+            g = Ps[npar - self.ng:]
+            found = ca.logic_and(ca.mmin(z == z), ca.mmax(ca.fabs(z)) < np.inf)
+            self.at_guesses = ca.Function("at_guesses", [Xs, Us, Ps, Ts], [ca.if_else(found, z, g)]).map(N)
+        self.follow_maps: dict = {}
         if ns:
             Ss = ca.MX.sym("S", nx, ns)
             y = differentiable(ode, "out", p_cols=sel)(Xs, Us, Ps, Ts)
@@ -318,6 +331,14 @@ class _Plan:
         self._integrators.move_to_end(key)
         return self._integrators[key]
 
+    def refresh(self, x, t, p) -> None:
+        """The loops' guesses, the tail of ``p`` (changed in place: the event handling holds
+        it too), set to their solution at ``x``, ``t`` where it is found."""
+        if self.ng:
+            z = np.array(self.ode.solved(x[: self.nx], self.u_at(t), p, t)).ravel()
+            if np.all(np.isfinite(z)):       # (the comparisons of a failed solve are not its branch)
+                p[-self.ng:] = z
+
     def tau(self, t):
         return (np.asarray(t, float) - self.t_origin) / self.t_scale
 
@@ -334,6 +355,7 @@ class _Plan:
             self._integrators[key] = ca.integrator("hop", "cvodes", self.hop_oracle, 0.0, grid,
                                                    {**self.iopts, "max_num_steps": steps})
         integ = self._integrators[key]
+        self.refresh(x, ta, p)
         clock = Stopwatch(0)
         try:
             xf = integ(x0=x, p=np.concatenate([p, [self.bound, ta, tb - ta]]))["xf"]
@@ -343,11 +365,14 @@ class _Plan:
         self.within_bound(xf[: self.nx], ta + (tb - ta) * np.arange(1, points + 1) / points)
         return xf.ravel() if points == 1 else xf
 
-    def advance(self, x, t0, idx, p, budget: _Budget, traj):
+    def advance(self, x, t0, idx, p, budget: _Budget, traj, one_call: bool = False) -> int:
         """Integrate from ``x`` at ``t0`` over the grid points ``idx``, filling ``traj``; each
-        call sized by the budget. A call that runs out of its reduced steps ends the run."""
+        call sized by the budget. A call that runs out of its reduced steps ends the run.
+        ``one_call``: return after the first call that succeeds (the loops' guesses are
+        renewed at each call, and the relations read along it must be read with its own).
+        Returns the number of points filled."""
         pos, failed = 0, None
-        while pos < len(idx):
+        while pos < len(idx) and not (one_call and pos):
             budget.check(t0)
             # after a call that ran out of its reduced steps: again with more steps, sized with
             # all that is left, for its first point alone (the one that may need them all)
@@ -357,6 +382,7 @@ class _Plan:
                 raise _Stop(budget.reason(bound, t0))
             sub = idx[pos:pos + n]
             integ = self.integrator(t0, self.t_int[sub], steps)
+            self.refresh(x, t0, p)
             clock = Stopwatch(0)
             try:
                 xf = np.array(integ(x0=x, p=np.append(p, self.bound))["xf"])
@@ -373,7 +399,37 @@ class _Plan:
                 bad = sub[np.argmax(~np.all(np.isfinite(xf), axis=0))]
                 raise _Stop(f"non-finite state at t = {self.t_int[bad]:g}")
             self.within_bound(xf[: self.nx], self.t_int[sub])
-            x, t0, pos = xf[:, -1], self.t_int[sub[-1]], pos + n
+            kept = self.followed(xf, sub, p)
+            if self.ng:
+                self.guesses[:, sub[:kept]] = p[-self.ng:, None]
+            x, t0, pos = xf[:, kept - 1], self.t_int[sub[kept - 1]], pos + kept
+        return pos
+
+    def followed(self, xf, sub, p) -> int:
+        """The points of a call (the columns of ``xf``, at the grid points ``sub``) up to the
+        last sampled one where the loops' solution from the call's guesses (the tail of
+        ``p``) is still the one followed from the sample before, at least one: the call is
+        taken up to there and redone from there with its guesses renewed. A guess left
+        behind by a long call can find another solution (a junction with three balances)."""
+        n = len(sub)
+        if not self.ng or n < 2:
+            return n
+        at = np.unique(np.linspace(0, n - 1, min(n, FOLLOW_POINTS)).round().astype(int))
+        m = len(at)
+        t = self.t_int[sub][at]
+        X, U = xf[: self.nx, at], self.u_at(t).reshape(-1, m)
+        P = np.repeat(p[:, None], m, axis=1)
+        stale = np.array(self._solved_map(m)(X, U, P, t[None, :]))
+        P[-self.ng:, 1:] = stale[:, :-1]
+        follow = np.array(self._solved_map(m - 1)(X[:, 1:], U[:, 1:], P[:, 1:], t[None, 1:]))
+        off = ~(np.abs(stale[:, 1:] - follow) <= FOLLOW_TOL * (1 + np.abs(follow)))
+        bad = np.flatnonzero(off.any(axis=0))
+        return max(int(at[bad[0]]) + 1, 1) if bad.size else n
+
+    def _solved_map(self, m: int):
+        if m not in self.follow_maps:
+            self.follow_maps[m] = self.ode.solved.map(m)
+        return self.follow_maps[m]
 
     def within_bound(self, x: np.ndarray, times) -> None:
         """Stop the run where a state (columns of ``x`` at ``times``) passed the bound."""
@@ -385,7 +441,7 @@ class _Plan:
     def step_cost(self, x, u, p, t) -> float:
         """A first guess of the seconds per solver step (before any call has measured it): a
         step evaluates the right-hand side a few times and now and then its Jacobian."""
-        f = self.model.ode.ode
+        f = self.ode.ode
         best = math.inf
         for _ in range(3):
             clock = Stopwatch(0)
@@ -395,7 +451,9 @@ class _Plan:
 
     # -- a run -------------------------------------------------------------------------------
     def run(self, p: np.ndarray, opts: SimulationOptions) -> SimulationResult:
-        ode, t_out, N = self.model.ode, self.t_out, len(self.t_out)
+        ode, t_out, N = self.ode, self.t_out, len(self.t_out)
+        npu = len(p)
+        p = np.concatenate([np.asarray(p, float), ode.guess0]) if self.ng else p
         clock = Stopwatch(opts.time_limit)
         budget = _Budget(opts, clock)
         self.opts_max_steps = opts.max_steps
@@ -419,6 +477,10 @@ class _Plan:
         if not np.all(np.isfinite(xa)):
             return fail("initialisation failed: no start satisfying the initial equations was found "
                         "from the start values (give the states start values nearer the solution)")
+        self.refresh(xa, t_out[0], p)
+        # the guesses each grid point was integrated with (those of its call)
+        self.guesses = np.full((self.ng, len(self.t_int)), np.nan)
+        self.guesses[:, 0] = p[npu:]
         budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
         t_int = self.t_int
         traj = np.full((len(xa), len(t_int)), np.nan)
@@ -440,6 +502,9 @@ class _Plan:
         traj = traj[:, self.out_idx]
         X = traj[: self.nx]
         P = np.repeat(p[:, None], N, axis=1)
+        if self.ng:       # (a point set by an event or a probe: its last call's)
+            G = _filled_forward(self.guesses)[:, self.out_idx]
+            P[npu:] = np.array(self.at_guesses(X, self.u_out, np.vstack([P[:npu], G]), t_out[None, :]))
         try:
             y, res, drift = (np.array(v) for v in self.checks(X, self.u_out, P, t_out[None, :]))
         except RuntimeError as exc:
@@ -462,6 +527,12 @@ class _Plan:
             result.sensitivities = dy.reshape(len(names), N, self.ns).transpose(1, 0, 2)
             result.sensitivity_names = [ode.p_names[i] for i in self.sel]
         return result
+
+
+def _filled_forward(G: np.ndarray) -> np.ndarray:
+    """Each NaN column of ``G`` replaced by the last column before it that has none."""
+    idx = np.where(np.isnan(G).any(axis=0), 0, np.arange(G.shape[1]))
+    return G[:, np.maximum.accumulate(idx)]
 
 
 def _nsteps(integ) -> int:
@@ -622,7 +693,7 @@ class _Hybrid:
                 rest = rest[:ahead]
             if ahead != 0:
                 try:
-                    plan.advance(x0, t0, rest, p, budget, traj)
+                    rest = rest[:plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched)]
                 except _SolverFailed:
                     crossing = self.probe(plan, x0, t0, rest, p, budget, traj) if self.zero is not None else None
                     if crossing is None or self.count >= MAX_EVENTS:
@@ -697,6 +768,8 @@ class _Hybrid:
         free = self.state_free() if self.zero is not None else None
         if free is None or not free.any():
             return None
+        if plan.branched:       # (one call at a time: the points of one call, not all that are left)
+            rest = rest[:FORESEEN_POINTS]
         t = np.r_[t0, plan.t_int[rest]]
         X = np.repeat(np.asarray(x0, float)[: plan.nx, None], len(t), axis=1)
         flips = np.flatnonzero(self.changes(self.values(plan, X, t, p))[free].any(axis=0))

@@ -15,11 +15,11 @@ import casadi as ca
 import numpy as np
 
 from .errors import DataError, MclError
-from .compile.structure import Ode, expanded
+from .compile.structure import Ode, expanded, with_start_guesses
 
 _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks", "zero", "start", "init_start",
               "update", "init_discrete", "asserts",   # these three: a hybrid model's
-              "loops", "given")                        # a model with algebraic loops
+              "loops", "given", "solved")              # a model with algebraic loops
 
 
 @dataclass
@@ -109,15 +109,16 @@ class CompiledModel:
 
     def _write(self, d: Path) -> Path:
         """The files of a saved model, into the new directory ``d``."""
+        o = self.ode.warm or self.ode        # (with its loops' guesses an argument: see Ode.warm)
         for f in _FUNCTIONS:
-            if getattr(self.ode, f) is not None:     # zero: only a model with state events
-                getattr(self.ode, f).save(str(d / f"{f}.casadi"))
-        o = self.ode
+            if getattr(o, f) is not None:     # zero: only a model with state events
+                getattr(o, f).save(str(d / f"{f}.casadi"))
         meta = dict(name=self.name, info=self.info, x_names=o.x_names, u_names=o.u_names,
                     p_names=o.p_names, y_names=o.y_names, p_values=o.p_values.tolist(),
                     u_start=o.u_start.tolist(), probe_names=o.probe_names, index=o.index,
                     nonlinear_blocks=o.nonlinear_blocks, time_events=list(o.time_events),
-                    discrete=o.discrete, events=o.events)
+                    discrete=o.discrete, events=o.events,
+                    guess0=None if o.guess0 is None else o.guess0.tolist())
         (d / "model.json").write_text(json.dumps(meta, indent=1))
         if self.dae is not None:
             from .compile.saved import save_dae
@@ -142,7 +143,9 @@ class CompiledModel:
                   u_start=np.array(meta["u_start"]), probe_names=meta["probe_names"],
                   index=meta["index"], nonlinear_blocks=meta["nonlinear_blocks"],
                   time_events=tuple(meta.get("time_events", ())), discrete=meta.get("discrete", 0),
-                  events=meta.get("events"), **funcs)
+                  events=meta.get("events"), **funcs,
+                  guess0=None if meta.get("guess0") is None else np.array(meta["guess0"]))
+        ode = with_start_guesses(ode)
         from .compile.components import Structure
         from .compile.saved import load_dae
 

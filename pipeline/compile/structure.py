@@ -47,6 +47,14 @@ INIT_TOL = 1e-6
 ROUNDING = 1e3 * np.finfo(float).eps / LOOP_TOL
 DAMPED_ITERATIONS = 30       # Newton steps with a line search (the fallback)
 LINE_SEARCH_STEPS = 12       # step lengths tried: 1, 1/2, ..., 1/2^11
+BRACKET_STEPS = 20           # a scalar loop's fallback: sign changes sought out to 1e-3 x 4^19
+BISECTIONS = 80              # ... and the interval then halved (1e9 down to 1e-15)
+#: hold a loop of one unknown with branches on the branch its last solution was on (see
+#: causalise): an op-amp relaxation oscillator then swings with its textbook period, where
+#: solved anew at each call it chatters at a threshold. Off by default: the comparisons' events
+#: and crossing functions hold a loop solve each, and cost 5-70x on diode and amplifier
+#: circuits that need none (HeatingRectifier 0.4 -> 27 s of simulation)
+HOLD_BRANCHES = False
 
 
 @dataclass
@@ -83,6 +91,13 @@ class Ode:
     # -- models with algebraic loops: derivatives through the loops' Newton form
     loops: ca.Function | None = None       # -> the loops' solutions zl
     given: ca.Function | None = None       # (x, u, p, t, zl) -> (x', probe): the model at zl (SX)
+    # -- where the loops' Newton methods start: ``guess0`` set, every function's p ends with a
+    # guess per algebraic unknown (a run passes the last solution: an amplifier with positive
+    # feedback stays on its branch); the functions above, with ``warm`` set, start them from
+    # the start values (an FMU, a sensitivity along a run)
+    solved: ca.Function | None = None      # -> the algebraic unknowns: the next guesses
+    guess0: np.ndarray | None = None       # the start values, the guesses before a run's first solve
+    warm: "Ode | None" = None              # this model with the guesses an argument
 
 
 def reduce_index(dae: Dae):
@@ -150,9 +165,14 @@ def _blocks(sp: ca.Sparsity, nz: int):
     return blocks
 
 
-def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes: ca.SX | None = None):
+def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes: ca.SX | None = None,
+              guess: ca.SX | None = None):
     """Solve 0 = g(z, args) for z block by block; returns (Function args -> z, #nonlinear blocks,
-    the Newton form or None).
+    the Newton form or None). ``guess`` (a symbol like z): the loops' Newton methods start
+    there, an argument after ``args`` (a run passes the last solution), instead of ``z_guess``;
+    the Function then also gives, per loop with branches (a comparison in its residual: an
+    amplifier's limits), 1 where Newton's method converged from the guess and -1 where it did
+    not (its branch has ended: a relaxation oscillator's amplifier flips, see Ode.warm).
 
     Linear blocks A z_k + b = 0 are solved symbolically (small) or by sparse QR (large);
     nonlinear blocks by Newton's method started from ``z_guess``, on their tearing variables
@@ -171,10 +191,13 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     for r, c in zip(*sp.get_triplet()):
         reads.setdefault(r, set()).add(c)
     gs, zs = ca.vertsplit(g), ca.vertsplit(z)
+    args = [*args, guess] if guess is not None else args
     mx_args = [ca.MX.sym(f"a{i}", a.sparsity()) for i, a in enumerate(args)]
     solved: dict[int, ca.MX] = {}
+    free: dict[int, ca.MX] = {}         # z with each loop's branch sought anew (see ``guess``)
     newton: dict[int, ca.SX] | None = {}      # the Newton form's z, in args and the loops' zl
     zl_syms, zl_sols = [], []
+    held, now, crossings, ops = [], [], [], []     # per loop with branches: its comparisons
     n_nonlinear = 0
     running = ca.vertcat(args[0], args[2])     # states and time (blocks that read a mode are not symbolic)
     stepped = read_through_steps(g, z)        # rows that may hide a step in z (their block's own, to check)
@@ -183,6 +206,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         prev = sorted(set().union(*[reads.get(r, set()) for r in rows]) - set(cols))
         zprev = ca.vertcat(*[zs[c] for c in prev]) if prev else ca.SX(0, 1)
         prev_mx = ca.vertcat(*[solved[c] for c in prev]) if prev else ca.MX(0, 1)
+        prev_free = ca.vertcat(*[free[c] for c in prev]) if prev else ca.MX(0, 1)
         prev_sx = ca.vertcat(*[newton[c] for c in prev]) if prev and newton is not None else ca.SX(0, 1)
         A = ca.jacobian(gk, zk)
         # a block whose coefficients change with the model's mode (a clutch's locked: sa's
@@ -194,6 +218,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         small = len(cols) <= (MODED_SYMBOLIC_MAX if moded else SYMBOLIC_SOLVE_MAX)
         linear = not ca.depends_on(A, zk) and (stepped.isdisjoint(rows) or not read_through_steps(gk, zk))
         torn, residual, whole = ([], None, None) if linear else _tear([gs[r] for r in rows], [zs[c] for c in cols])
+        sol_free = None
         if linear:
             b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
             if small:
@@ -201,27 +226,53 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 if ca.depends_on(A, ca.vertcat(zprev, running)):      # coefficients that change in a run
                     sol_sx = _or_nearest(sol_sx, A, b, z_guess[cols])
                 f = ca.Function(f"blk{k}", [zprev, *args], [sol_sx])
-                sol = f(prev_mx, *mx_args)
+                block = (lambda pv, f=f: f(pv, *mx_args))
                 sol_newton = f(prev_sx, *args) if newton is not None else None
             else:
                 fa = ca.Function(f"blk{k}", [zprev, *args], [A, b])
-                A_mx, b_mx = fa(prev_mx, *mx_args)
                 # (a switch's block of a few unknowns, solved here for its modes: sparse, 20 % faster)
-                dense = SYMBOLIC_SOLVE_MAX < len(cols) <= DENSE_SOLVE_MAX
-                sol = -ca.solve(A_mx, b_mx, "lapackqr" if dense else "qr")
+                how = "lapackqr" if SYMBOLIC_SOLVE_MAX < len(cols) <= DENSE_SOLVE_MAX else "qr"
+                block = (lambda pv, fa=fa, how=how: -ca.solve(*fa(pv, *mx_args), how))
                 newton = None
         elif not torn:      # explicit in order (a step read an unknown known by then): no loop
             f = ca.Function(f"blk{k}", [zprev, *args], [whole])
-            sol = f(prev_mx, *mx_args)
+            block = (lambda pv, f=f: f(pv, *mx_args))
             sol_newton = f(prev_sx, *args) if newton is not None else None
         else:
             tears = ca.vertcat(*[zs[cols[i]] for i in torn])
             n_nonlinear += 1
             par = ca.vertcat(zprev, *args)
             resid = ca.Function(f"loop{k}", [tears, par], [residual])
-            t_sol = _loop_solve(f"loop{k}", resid, z_guess[[cols[i] for i in torn]], ca.vertcat(prev_mx, *mx_args))
+            at = [cols[i] for i in torn]
+            first = z_guess[at] if guess is None else mx_args[-1][at]      # Newton's first iterate
             spread = ca.Function(f"torn{k}", [tears, zprev, *args], [whole])
-            sol = spread(t_sol, prev_mx, *mx_args)
+
+            def block(pv, resid=resid, first=first, spread=spread, name=f"loop{k}", extra=(), at=at):
+                t_sol = _loop_solve(name, resid, first, ca.vertcat(pv, *mx_args, *extra),
+                                    start=None if guess is None else z_guess[at])
+                return spread(t_sol, pv, *mx_args), t_sol
+            cmps = _replay(resid, [tears, par])[1] if guess is not None and len(torn) == 1 and HOLD_BRANCHES else []
+            if cmps:
+                # a law with branches (an amplifier's limits) is held on the branch its last
+                # solution was on, its comparisons' values an argument (as a relation is held
+                # between events), and an event is where one of them would change: a solution
+                # sought anew could jump back to a branch just left (a relaxation oscillator
+                # chatters), and the solver meets no jump between events. Only a loop of one
+                # unknown: at a branch's end its next one is then bracketed (from two, Newton's
+                # methods can miss it next to the end: the non-inverting Schmitt trigger)
+                h = ca.SX.sym(f"h{k}", len(cmps))
+                out, _, cross, how = _replay(resid, [tears, par], h)
+                resid_h = ca.Function(f"loop{k}h", [tears, ca.vertcat(par, h)], out)
+                held.append(ca.MX.sym(f"held{k}", len(cmps)))
+                sol_free, t_free = block(prev_free)
+                now.append(ca.Function(f"cmp{k}", [tears, par], [ca.vertcat(*cmps)])(t_free, ca.vertcat(prev_free, *mx_args)))
+                sol, t_sol = block(prev_mx, resid=resid_h, name=f"loop{k}h", extra=(held[-1],))
+                crossings.append(ca.Function(f"cross{k}", [tears, par, h], [ca.vertcat(*cross)])(
+                    t_sol, ca.vertcat(prev_mx, *mx_args), held[-1]))
+                ops += how
+            else:
+                sol, t_sol = block(prev_mx)
+            loop_block, block = block, None
             if tears.numel() <= SYMBOLIC_SOLVE_MAX and newton is not None:
                 zl = ca.SX.sym(f"zl{k}", tears.numel())
                 J = ca.jacobian(residual, tears)
@@ -232,18 +283,63 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 zl_sols.append(t_sol)
             else:
                 newton = None
+        if block is not None:
+            sol = block(prev_mx)
+        if sol_free is None:      # the same as held unless a loop before it has branches
+            sol_free = sol if not held else block(prev_free) if block is not None else loop_block(prev_free)[0]
         for i, c in enumerate(cols):
-            solved[c] = sol[i]
+            solved[c], free[c] = sol[i], sol_free[i]
             if newton is not None:
                 newton[c] = sol_newton[i]
     nz = z.numel()
     zsol = ca.vertcat(*[solved[c] for c in range(nz)]) if nz else ca.MX(0, 1)
+    # the comparisons held: one argument, after the guesses
+    H = ca.MX.sym("held", sum(h.numel() for h in held))
+    at = np.cumsum([0] + [h.numel() for h in held]).tolist()
+    zl_sol, cross = ca.vertcat(*zl_sols), ca.vertcat(*crossings)
+    if held:
+        zsol, zl_sol, cross = ca.substitute([zsol, zl_sol, cross], held, [H[a:b] for a, b in zip(at, at[1:])])
     form = None
     if newton is not None and n_nonlinear:
         ZL = ca.vertcat(*zl_syms)
-        form = (ca.Function("loops", mx_args, [ca.vertcat(*zl_sols)]),
+        form = (ca.Function("loops", mx_args if guess is None else [*mx_args, H], [zl_sol]),
                 ca.Function("z_newton", [*args, ZL], [ca.vertcat(*[newton[c] for c in range(nz)])]))
-    return ca.Function("zsol", mx_args, [zsol]), n_nonlinear, form
+    if guess is None:
+        return ca.Function("zsol", mx_args, [zsol]), n_nonlinear, form
+    zfree = ca.vertcat(*[free[c] for c in range(nz)]) if nz else ca.MX(0, 1)
+    fun = ca.Function("zsol", [*mx_args, H], [zsol, zfree, ca.vertcat(*now) if now else ca.MX(0, 1), cross])
+    return fun, n_nonlinear, form, ops
+
+
+def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None):
+    """``f`` (an SX Function) rebuilt on ``inputs``: (its outputs, its comparisons a < b and a <=
+    b in order, their crossing functions a - b, their operators), with the comparisons'
+    values taken from ``held`` where it is given."""
+    work, outs = {}, [[None] * f.nnz_out(i) for i in range(f.n_out())]
+    cmps, cross, ops = [], [], []
+    for k in range(f.n_instructions()):
+        op, i, o = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
+        if op == ca.OP_INPUT:
+            work[o[0]] = inputs[i[0]].nz[i[1]]
+        elif op == ca.OP_OUTPUT:
+            outs[o[0]][o[1]] = work[i[0]]
+        elif op == ca.OP_CONST:
+            work[o[0]] = ca.SX(f.instruction_constant(k))
+        elif op in (ca.OP_LT, ca.OP_LE):
+            a, b = work[i[0]], work[i[1]]
+            cmps.append(ca.SX.binary(op, a, b))
+            cross.append(a - b)
+            ops.append("less" if op == ca.OP_LT else "less_equal")
+            # (a value held < 0: none yet, the comparison itself, as where the loop starts
+            # from its start values: an FMU's, the initial system's)
+            h = held[len(cmps) - 1] if held is not None else None
+            work[o[0]] = cmps[-1] if h is None else ca.if_else(h < 0, cmps[-1], h)
+        elif len(i) == 1:
+            work[o[0]] = ca.SX.unary(op, work[i[0]])
+        else:
+            work[o[0]] = ca.SX.binary(op, work[i[0]], work[i[1]])
+    outs = [ca.SX(f.sparsity_out(n), ca.vertcat(*nz) if nz else ca.SX(0, 1)) for n, nz in enumerate(outs)]
+    return outs, cmps, cross, ops
 
 
 def _tear(rows: list, unknowns: list):
@@ -316,40 +412,80 @@ def _or_nearest(sol: ca.SX, A: ca.SX, b: ca.SX, guess) -> ca.SX:
     return ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), sol, nearest)
 
 
-def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool = False) -> ca.MX:
-    """The solution of an algebraic loop 0 = resid(z, par): Newton's method from the start
-    values; where it does not converge (it cycles between the branches of a piecewise law, such
-    as an amplifier's output limit, or meets a singular Jacobian), Newton's method with a
-    backtracking line search from the start values, then polished by Newton. The fallback is
-    evaluated only when needed (a short-circuit conditional); everything stays C-generable.
+def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool = False,
+                start: np.ndarray | None = None) -> ca.MX:
+    """The solution of an algebraic loop 0 = resid(z, par): Newton's method from ``guess`` (the
+    start values; in a run the last solution, then the start values ``start``); where it does
+    not converge (it cycles between the branches of a piecewise law, such as an amplifier's
+    output limit, or meets a singular Jacobian), Newton's method with a backtracking line
+    search from the start values, then polished by Newton, and for one unknown a sign change
+    next to ``guess`` bracketed and halved. The fallback is evaluated only when needed (a short-circuit conditional);
+    everything stays C-generable.
     NaN where even the fallback leaves a residual above INIT_TOL (Newton's method can stop on
     a zero step at a singularity, sqrt(x) at x = 0, and return a wrong answer). ``strict`` (an
-    initial system): the fallback always starts off the start values."""
+    initial system): the fallback always starts off the start values. ``start``: the start
+    values where ``guess`` is another point (the last solution, in a run)."""
     quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
     z1 = quick(z0, par)
     met = _met(name, resid)
     ok = met(z1, par, LOOP_TOL)
+    if start is not None:
+        # from the last solution; where Newton's method fails there, from the start values,
+        # as without a last solution (a saturating core: a guess deep in saturation, left
+        # behind by the flux, sends Newton's method away where 0 does not)
+        z1 = ca.if_else(ok, z1, quick(ca.DM(start), par), True)
+        ok = met(z1, par, LOOP_TOL)
     step, jac = _damped_step(name, resid)
     # the initial system's fallback starts a hair off the start values: a start at a
     # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
     # A run's loops move only off a start where the law has no finite derivative (|B|^n with
     # n < 1 at B = 0); one where it is finite but singular (w2 v^2 + w3 v^3 = w1 i at v = 0,
     # a cubic's double root) stays the model's to resolve
-    off = z0 + 1e-6 * (1 + ca.fabs(z0))
+    # (in a run, from the start values too: the fallback is then the one without a last solution)
+    zf = z0 if start is None else ca.MX(ca.DM(start))
+    off = zf + 1e-6 * (1 + ca.fabs(zf))
     if strict:
         z = off
     else:
-        s = ca.sum1(ca.vec(jac(z0, par)))
-        z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), z0, off)
+        s = ca.sum1(ca.vec(jac(zf, par)))
+        z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), zf, off)
+    polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     for _ in range(DAMPED_ITERATIONS):
         z = step(z, par)
-    polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z2 = polish(z, par)
+    if z0.numel() == 1:
+        # one unknown: a sign change, then the root inside it (a Newton method with a line
+        # search stops at a local minimum of |r|, where an amplifier's branch has just ended)
+        z2 = ca.if_else(met(z2, par, INIT_TOL), z2, polish(_bracketed(resid, z0, par), par), True)
     # NaN, not an exception, where no solution is found: in a run the integrator then retries
     # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
     z2 = ca.if_else(met(z2, par, INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
     return ca.if_else(ok, z1, z2, True)
+
+
+def _bracketed(resid: ca.Function, z0: ca.MX, par: ca.MX) -> ca.MX:
+    """A root of the scalar resid(z, par) = 0 near ``z0``: points ever farther on either side
+    until the sign differs from r(z0)'s (``BRACKET_STEPS`` each way, out to 1e9 x (1 +
+    |z0|)), then that interval halved (``BISECTIONS`` times). Each evaluation after the root is
+    bracketed, or after it is found, is skipped; NaN where no sign change is found."""
+    r0 = resid(z0, par)
+    h = 1e-3 * (1 + ca.fabs(z0))
+    found, lo, hi = ca.MX(0), z0, z0
+    for j in range(BRACKET_STEPS):
+        for side in (1.0, -1.0):
+            near, far = z0 + side * h * (4.0 ** (j - 1) if j else 0.0), z0 + side * h * 4.0 ** j
+            r = ca.if_else(found, r0, resid(far, par), True)
+            new = ca.logic_and(ca.logic_not(found), ca.logic_and(r * r0 <= 0, r == r))
+            lo, hi = ca.if_else(new, near, lo), ca.if_else(new, far, hi)
+            found = ca.logic_or(found, new)
+    r_lo = r0 * 1.0
+    for _ in range(BISECTIONS):
+        mid = 0.5 * (lo + hi)
+        r = resid(mid, par)
+        same = r * ca.sign(r_lo) > 0
+        lo, r_lo, hi = ca.if_else(same, mid, lo), ca.if_else(same, r, r_lo), ca.if_else(same, hi, mid)
+    return ca.if_else(found, 0.5 * (lo + hi), np.nan)
 
 
 def _met(name: str, resid: ca.Function):
@@ -419,7 +555,7 @@ def _damped_step(name: str, resid: ca.Function) -> tuple[ca.Function, ca.Functio
 def build_ode(dae: Dae, name: str = "model") -> Ode:
     """Index reduction + causalisation + initialisation: the model's explicit ODE (a pure
     function of ``dae``; a hybrid model's discrete part included)."""
-    return _hybrid(dae, name) if dae.hybrid else _build(dae, name)
+    return with_start_guesses(_hybrid(dae, name) if dae.hybrid else _build(dae, name))
 
 
 def _build(dae: Dae, name: str = "model") -> Ode:
@@ -440,11 +576,20 @@ def _build(dae: Dae, name: str = "model") -> Ode:
 
     t = semi["t"]
     modes = ca.vertcat(*[dae.p[i] for i, n in enumerate(dae.p_names) if n.startswith("$")])
-    zfun, n_nl, newton = causalise(semi["alg"], zs, [xs, up, t], z_guess, modes)
-    X, U, P, T = (ca.MX.sym(n, k) for n, k in
-                  (("x", xs.numel()), ("u", nu), ("p", dae.p.numel()), ("t", 1)))
-    UP = ca.vertcat(U, P)
-    Z = zfun(X, UP, T)
+    zfun, n_nl, newton, cross_ops = causalise(semi["alg"], zs, [xs, up, t], z_guess, modes,
+                                              guess=ca.SX.sym("g", zs.numel()))
+    X, U, P0, T = (ca.MX.sym(n, k) for n, k in
+                   (("x", xs.numel()), ("u", nu), ("p", dae.p.numel()), ("t", 1)))
+    # a model with loops: a run's functions take the loops' guesses and the comparisons their
+    # branches were on after the parameters (the engine passes the last solution's: Ode.warm);
+    # the initial system's start from the start values
+    npar, nz, nh = dae.p.numel(), zs.numel(), zfun.size1_in(4)
+    ng = nz + nh if n_nl else 0
+    P = ca.MX.sym("p", npar + ng) if ng else P0
+    Pu, G, H = (P[:npar], P[npar:npar + nz], P[npar + nz:]) if ng else (P, ca.DM(z_guess), ca.DM.zeros(nh))
+    UP = ca.vertcat(U, Pu)
+    Z, z_free, cmp_now, branch = zfun(X, UP, T, G, H)
+    nb = branch.numel() if ng else 0      # an event where a loop would change its branch
     sx_fun = ca.Function("sx", [xs, zs, up, t],
                          [semi["ode"], semi["alg"], invariants_in(invariants, dae, x_impl, z_orig)])
     xdot, g, inv = sx_fun(X, Z, UP, T)
@@ -465,7 +610,7 @@ def _build(dae: Dae, name: str = "model") -> Ode:
 
     XI, ZI = orig_fun(X, Z)
     dXI = dxi_fun(X, Z, UP, T)
-    probe_all = probe_at(X, Z, U, P, T)
+    probe_all = probe_at(X, Z, U, Pu, T)
     y_idx = [probe_names.index(o) for o in dae.outputs]
 
     args, names = [X, U, P, T], ["x", "u", "p", "t"]
@@ -476,9 +621,9 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     drift = mk("drift", [absmax(inv)])
     probe = mk("probe", [probe_all])
     crossings = None
-    if dae.relations.numel():
+    if dae.relations.numel() or nb:
         rel_sx = ca.Function("rel", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [dae.relations])
-        crossings = expanded(mk("zero", [rel_sx(XI, ZI, U, P, T, dXI)]))
+        crossings = expanded(mk("zero", [ca.vertcat(rel_sx(XI, ZI, U, Pu, T, dXI), branch if nb else ca.MX(0, 1))]))
     y_all = probe_all[y_idx] if y_idx else ca.MX(0, 1)
     checks = ca.Function("checks", args, [y_all, absmax(g), absmax(inv)], names, ["y", "res", "drift"])
 
@@ -491,10 +636,16 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     wish_sx = wish(x_impl, z_orig, dae.u, dae.p, t, dxi_sx)
     joint = (zs, semi["alg"], ca.vertcat(invariants_in(invariants, dae, x_impl, z_orig), init_sx, wish_sx),
              xs, up, t)
-    start, init_start = _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint,
-                                     wish(XI, ZI, U, P, T, dXI))
-    init = ca.Function("init", [U, P, T], [init_start(U, P, T, start(P))], ["u", "p", "t"], ["x0"])
-    loops, given = _newton_functions(newton, args, names, sx_fun, probe_at, U, P)
+    if ng:      # the initial system's loops from the start values
+        UP0 = ca.vertcat(U, P0)
+        Z0 = zfun(X, UP0, T, ca.DM(z_guess), -ca.DM.ones(nh))[0]
+        (XI, ZI), dXI, inv = orig_fun(X, Z0), dxi_fun(X, Z0, UP0, T), sx_fun(X, Z0, UP0, T)[2]
+    start, init_start = _initialiser(dae, xs, X, U, P0, T, XI, ZI, inv, x_names, dXI, joint,
+                                     wish(XI, ZI, U, P0, T, dXI))
+    init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
+    if ng:
+        init, start, init_start = (_guesses_ignored(f, ng) for f in (init, start, init_start))
+    loops, given = _newton_functions(newton, args, names, sx_fun, probe_at, U, Pu, G, H)
     # SX evaluates faster than the MX call graph where there is no Newton or QR solve in it; a
     # loop's Newton solve expands too (a torn loop of one unknown), but as every iteration and
     # the fallback unrolled, all evaluated at each call, and its Jacobian through them all: the
@@ -508,8 +659,12 @@ def _build(dae: Dae, name: str = "model") -> Ode:
         ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe, checks=checks,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
         time_events=tuple(dae.time_events), zero=crossings, start=start, init_start=init_start,
-        events={"relation_ops": list(dae.relation_ops)} if dae.relation_ops else None,
+        events=({"relation_ops": [*dae.relation_ops, *cross_ops], **({"branches": nb} if nb else {})}
+                if dae.relation_ops or nb else None),
         loops=loops, given=given,
+        # (no comparison held before the first solve: -1 is neither true nor false)
+        solved=mk("solved", [ca.vertcat(z_free, cmp_now)]) if ng else None,
+        guess0=np.concatenate([z_guess, -np.ones(nh)]) if ng else None,
     )
 
 
@@ -567,19 +722,60 @@ def _jacobian_in(value, p, cols=None):
     return ca.mtimes(ca.mtimes(ca.jacobian(value, p), pick.T), pick)
 
 
-def _newton_functions(newton, args, names, sx_fun, probe_at, U, P):
+def with_start_guesses(ode: Ode) -> Ode:
+    """``ode`` whose functions take the loops' guesses after the parameters, as one whose
+    loops start from the start values, with the former as its ``warm``."""
+    if ode.guess0 is None:
+        return ode
+    import dataclasses
+
+    fixed = {f.name: _guesses_fixed(getattr(ode, f.name), ode.guess0) for f in dataclasses.fields(ode)
+             if isinstance(getattr(ode, f.name), ca.Function) and f.name != "solved"}
+    events, nb = ode.events, (ode.events or {}).get("branches", 0)
+    if nb:      # a branch's end is an event of a run alone: an FMU's loops start from the start values
+        ops = events["relation_ops"][:-nb]
+        zero = fixed["zero"]
+        args = zero.mx_in()
+        fixed["zero"] = expanded(ca.Function("zero", args, [zero.call(args)[0][:-nb]], zero.name_in(),
+                                             zero.name_out())) if ops else None
+        events = {**{k: v for k, v in events.items() if k != "branches"}, "relation_ops": ops}
+        events = None if events == {"relation_ops": []} else events
+    return dataclasses.replace(ode, **fixed, solved=None, guess0=None, events=events, warm=ode)
+
+
+def _guesses_fixed(f: ca.Function, guess0: np.ndarray) -> ca.Function:
+    """``f`` with the tail of its argument p fixed at ``guess0``."""
+    args, i = f.mx_in(), f.name_in().index("p")
+    p = ca.MX.sym("p", args[i].numel() - len(guess0))
+    call = [ca.vertcat(p, ca.DM(guess0)) if k == i else a for k, a in enumerate(args)]
+    out = ca.Function(f.name(), [p if k == i else a for k, a in enumerate(args)], f.call(call),
+                      f.name_in(), f.name_out())
+    return expanded(out) if f.is_a("SXFunction") else out
+
+
+def _guesses_ignored(f: ca.Function, ng: int) -> ca.Function:
+    """``f`` taking ``ng`` guesses after its parameters, which it does not read."""
+    args, i = f.mx_in(), f.name_in().index("p")
+    p = ca.MX.sym("p", args[i].numel() + ng)
+    call = [p[: args[i].numel()] if k == i else a for k, a in enumerate(args)]
+    return ca.Function(f.name(), [p if k == i else a for k, a in enumerate(args)], f.call(call),
+                       f.name_in(), f.name_out())
+
+
+def _newton_functions(newton, args, names, sx_fun, probe_at, U, P, G, H):
     """(loops: (x, u, p, t) -> zl, given: (x, u, p, t, zl) -> (x', every probe)) from
     :func:`causalise`'s Newton form, or (None, None): ``given`` at the loops' solution is the
-    model, with the loops' implicit derivatives and none in zl (an SX function)."""
+    model, with the loops' implicit derivatives and none in zl (an SX function). ``P``: the
+    parameters, ``G`` the loops' guesses and ``H`` the comparisons held (the tail of p)."""
     if newton is None:
         return None, None
     loops_fun, z_newton = newton
-    X, _, _, T = args
+    X, T = args[0], args[3]
     UP = ca.vertcat(U, P)
-    ZL = ca.MX.sym("zl", z_newton.size1_in(3))
-    Zg = z_newton(X, UP, T, ZL)
+    ZL = ca.MX.sym("zl", z_newton.size1_in(4))
+    Zg = z_newton(X, UP, T, G, ZL)
     xdot = sx_fun(X, Zg, UP, T)[0]
-    loops = ca.Function("loops", args, [loops_fun(X, UP, T)], names, ["zl"])
+    loops = ca.Function("loops", args, [loops_fun(X, UP, T, G, H)], names, ["zl"])
     given = ca.Function("given", [*args, ZL], [xdot, probe_at(X, Zg, U, P, T)], [*names, "zl"], ["xdot", "probe"])
     return loops, expanded(given)
 
@@ -619,8 +815,12 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         if j is None and not ca.is_equal(dae.x_reinit[k], dae.x[k]):
             raise UnsupportedConstruct(f"model {name}: reinit() of {dae.x_names[k]}, a state index "
                                        "reduction replaced")
+    # the loops' guesses: after the parameters, outside as inside
+    npar, ng = len(dae.p_names), (0 if inner.guess0 is None else len(inner.guess0))
+    nb = (inner.events or {}).get("branches", 0)
     X, D, U, P, T = (ca.MX.sym(n, k) for n, k in (("x", nx), ("d", nd), ("u", len(dae.u_names)),
-                                                  ("p", len(dae.p_names)), ("t", 1)))
+                                                  ("p", npar + ng), ("t", 1)))
+    Pu, G = (P[:npar], P[npar:]) if ng else (P, ca.MX(0, 1))
     XF = ca.vertcat(X, D)
     PRE, FL = ca.MX.sym("pre", nx + nd), ca.MX.sym("flags", nf)
 
@@ -628,7 +828,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         return ca.vertcat(*[v[j] if j is not None else ca.MX(0) for j in where]) if nx0 else ca.MX(0, 1)
 
     def inner_p(D, D_pre, x_pre, flags, z_pre=None):     # the order of ``extra``
-        return ca.vertcat(P, D, D_pre, x_pre, flags, ca.MX.zeros(nzp) if z_pre is None else z_pre)
+        return ca.vertcat(Pu, D, D_pre, x_pre, flags, ca.MX.zeros(nzp) if z_pre is None else z_pre, G)
 
     PA = inner_p(D, D, orig(X), ca.MX.zeros(nf))
     names = inner.probe_names
@@ -658,7 +858,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         upd = ca.vertcat(*x_new, after[idx["update"]] if nd else ca.MX(0, 1))
         update = expanded(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
                                       ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
-    D0 = d0_fun(P, U, T) if nd else ca.MX(0, 1)
+    D0 = d0_fun(Pu, U, T) if nd else ca.MX(0, 1)
     # the initial system's parameters: the discrete starts, and initial() true (an equation
     # if initial() then ... holds there: the MSL's hysteresis starts with its slope at 0)
     initial_flags = ca.MX(ca.DM([1.0] + [0.0] * (nf - 1))) if nf else ca.MX(0, 1)
@@ -675,7 +875,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
                                 ["u", "p", "t", "d"], ["x0"])
     S = ca.MX.sym("s", nx + nd)
     SD = S[nx:] if nd else ca.MX(0, 1)       # (an empty slice of MX is 1x0)
-    D0s = d0_fun(P, dae.u_start, 0.0) if nd else ca.MX(0, 1)     # guesses: at t = 0, the inputs' starts
+    D0s = d0_fun(Pu, dae.u_start, 0.0) if nd else ca.MX(0, 1)     # guesses: at t = 0, the inputs' starts
     PA0s = at_start(D0s)
     start = ca.Function("start", [P], [ca.vertcat(inner.start(PA0s), D0s)], ["p"], ["s"]) if inner.start else None
     init_start = (ca.Function("init_start", [U, P, T, S], [ca.vertcat(inner.init_start(
@@ -703,8 +903,10 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         discrete=nd, update=update, init_discrete=expanded(init_discrete), asserts=asserts,
         events={"clocks": [list(c) for c in dae.clocks], "flags": ["initial", "terminal"] +
                 [f"tick{k}" for k in range(len(dae.clocks))], "asserts": [list(a) for a in dae.assert_info],
-                "relation_ops": list(dae.relation_ops)},
+                "relation_ops": list((inner.events or {}).get("relation_ops", dae.relation_ops)),
+                **({"branches": nb} if nb else {})},
         loops=loops, given=given,
+        solved=mk("solved", [inner.solved(X, U, PA, T)]) if ng else None, guess0=inner.guess0,
     )
 
 
