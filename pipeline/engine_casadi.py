@@ -46,7 +46,6 @@ MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
-FORESEEN_POINTS = 64      # with loops held on a branch: points looked ahead for a relation on time
 FOLLOW_POINTS = 32        # points of a call where the loops' solutions are checked to follow on
 FOLLOW_TOL = 1e-3         # a loop's solution off the one followed point to point by more (relative): another root
 #: a call of the solver may use this share of the wall time still left
@@ -302,7 +301,7 @@ class _Plan:
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
                           (("x", nx), ("u", len(ode.u_names)), ("p", npar), ("t", 1)))
         self.checks = ode.checks.map(N)   # outputs and checks with one solve of the loops per point
-        if self.ng:     # at the output points, the loops solved from the guesses their call had
+        if self.branched:   # at the output points, the loops' branches their call had
             z = ode.solved(Xs, Us, Ps, Ts)
             g = Ps[npar - self.ng:]
             found = ca.logic_and(ca.mmin(z == z), ca.mmax(ca.fabs(z)) < np.inf)
@@ -502,9 +501,10 @@ class _Plan:
         traj = traj[:, self.out_idx]
         X = traj[: self.nx]
         P = np.repeat(p[:, None], N, axis=1)
-        if self.ng:       # (a point set by an event or a probe: its last call's)
-            G = _filled_forward(self.guesses)[:, self.out_idx]
-            P[npu:] = np.array(self.at_guesses(X, self.u_out, np.vstack([P[:npu], G]), t_out[None, :]))
+        if self.ng:       # the guesses each point's call had (a point set by an event: its last call's)
+            P[npu:] = _filled_forward(self.guesses)[:, self.out_idx]
+            if self.branched:    # (held comparisons: the branch at the point, not at its call's start)
+                P[npu:] = np.array(self.at_guesses(X, self.u_out, P, t_out[None, :]))
         try:
             y, res, drift = (np.array(v) for v in self.checks(X, self.u_out, P, t_out[None, :]))
         except RuntimeError as exc:
@@ -768,8 +768,6 @@ class _Hybrid:
         free = self.state_free() if self.zero is not None else None
         if free is None or not free.any():
             return None
-        if plan.branched:       # (one call at a time: the points of one call, not all that are left)
-            rest = rest[:FORESEEN_POINTS]
         t = np.r_[t0, plan.t_int[rest]]
         X = np.repeat(np.asarray(x0, float)[: plan.nx, None], len(t), axis=1)
         flips = np.flatnonzero(self.changes(self.values(plan, X, t, p))[free].any(axis=0))

@@ -745,19 +745,22 @@ def with_start_guesses(ode: Ode) -> Ode:
 
 def _guesses_fixed(f: ca.Function, guess0: np.ndarray) -> ca.Function:
     """``f`` with the tail of its argument p fixed at ``guess0``."""
-    args, i = f.mx_in(), f.name_in().index("p")
-    p = ca.MX.sym("p", args[i].numel() - len(guess0))
-    call = [ca.vertcat(p, ca.DM(guess0)) if k == i else a for k, a in enumerate(args)]
-    out = ca.Function(f.name(), [p if k == i else a for k, a in enumerate(args)], f.call(call),
-                      f.name_in(), f.name_out())
+    out = _with_p(f, -len(guess0), lambda p: ca.vertcat(p, ca.DM(guess0)))
     return expanded(out) if f.is_a("SXFunction") else out
 
 
 def _guesses_ignored(f: ca.Function, ng: int) -> ca.Function:
     """``f`` taking ``ng`` guesses after its parameters, which it does not read."""
+    n = f.size1_in(f.name_in().index("p"))
+    return _with_p(f, ng, lambda p: p[:n])
+
+
+def _with_p(f: ca.Function, grown: int, old_p) -> ca.Function:
+    """``f`` whose argument p is ``grown`` entries longer (shorter if negative), the p it
+    had being ``old_p(new p)``."""
     args, i = f.mx_in(), f.name_in().index("p")
-    p = ca.MX.sym("p", args[i].numel() + ng)
-    call = [p[: args[i].numel()] if k == i else a for k, a in enumerate(args)]
+    p = ca.MX.sym("p", args[i].numel() + grown)
+    call = [old_p(p) if k == i else a for k, a in enumerate(args)]
     return ca.Function(f.name(), [p if k == i else a for k, a in enumerate(args)], f.call(call),
                        f.name_in(), f.name_out())
 
