@@ -49,6 +49,9 @@ DAMPED_ITERATIONS = 30       # Newton steps with a line search (the fallback)
 LINE_SEARCH_STEPS = 12       # step lengths tried: 1, 1/2, ..., 1/2^11
 BRACKET_STEPS = 20           # a scalar loop's fallback: sign changes sought out to 1e-3 x 4^19
 BISECTIONS = 80              # ... and the interval then halved (1e9 down to 1e-15)
+#: a hybrid model's function holding loops stays SX up to this many instructions (a loop's
+#: solve unrolled, with its fallbacks, is 5 000-50 000: MX then evaluates only what it needs)
+COMPACT_SX_MAX = 20000
 #: hold a loop of one unknown with branches on the branch its last solution was on (see
 #: causalise): an op-amp relaxation oscillator then swings with its textbook period, where
 #: solved anew at each call it chatters at a threshold. Off by default: the comparisons' events
@@ -623,7 +626,7 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     crossings = None
     if dae.relations.numel() or nb:
         rel_sx = ca.Function("rel", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [dae.relations])
-        crossings = expanded(mk("zero", [ca.vertcat(rel_sx(XI, ZI, U, Pu, T, dXI), branch if nb else ca.MX(0, 1))]))
+        crossings = (compact if n_nl else expanded)(mk("zero", [ca.vertcat(rel_sx(XI, ZI, U, Pu, T, dXI), branch if nb else ca.MX(0, 1))]))
     y_all = probe_all[y_idx] if y_idx else ca.MX(0, 1)
     checks = ca.Function("checks", args, [y_all, absmax(g), absmax(inv)], names, ["y", "res", "drift"])
 
@@ -736,8 +739,8 @@ def with_start_guesses(ode: Ode) -> Ode:
         ops = events["relation_ops"][:-nb]
         zero = fixed["zero"]
         args = zero.mx_in()
-        fixed["zero"] = expanded(ca.Function("zero", args, [zero.call(args)[0][:-nb]], zero.name_in(),
-                                             zero.name_out())) if ops else None
+        kept = ca.Function("zero", args, [zero.call(args)[0][:-nb]], zero.name_in(), zero.name_out())
+        fixed["zero"] = (expanded(kept) if zero.is_a("SXFunction") else kept) if ops else None
         events = {**{k: v for k, v in events.items() if k != "branches"}, "relation_ops": ops}
         events = None if events == {"relation_ops": []} else events
     return dataclasses.replace(ode, **fixed, solved=None, guess0=None, events=events, warm=ode)
@@ -840,8 +843,10 @@ def _hybrid(dae: Dae, name: str) -> Ode:
     visible = [j for j, n in enumerate(names) if not n.startswith("$")]
     args, io = [XF, U, P, T], ["x", "u", "p", "t"]
 
+    expand = expanded if not inner.nonlinear_blocks else compact
+
     def mk(fname, outs, out_names=("out",)):
-        return expanded(ca.Function(fname, args, outs, io, list(out_names)))
+        return expand(ca.Function(fname, args, outs, io, list(out_names)))
 
     ode = mk("ode", [ca.vertcat(inner.ode(X, U, PA, T), ca.MX.zeros(nd))])
     probe_all = inner.probe(X, U, PA, T)
@@ -859,7 +864,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         for k in reinits:
             x_new[where[k]] = after[idx["reinit"][k]]
         upd = ca.vertcat(*x_new, after[idx["update"]] if nd else ca.MX(0, 1))
-        update = expanded(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
+        update = expand(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
                                       ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
     D0 = d0_fun(Pu, U, T) if nd else ca.MX(0, 1)
     # the initial system's parameters: the discrete starts, and initial() true (an equation
@@ -897,13 +902,13 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         x_names=[*inner.x_names, *dae.d_names], u_names=list(dae.u_names), p_names=list(dae.p_names),
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
         ode=ode, out=mk("out", [y]), alg_res=mk("alg_res", [res]), drift=mk("drift", [drift]),
-        init=expanded(init), probe=mk("probe", [probe_all[visible]]),
+        init=expand(init), probe=mk("probe", [probe_all[visible]]),
         checks=mk("checks", [y, res, drift], ("y", "res", "drift")),
         probe_names=[names[j] for j in visible], index=inner.index, nonlinear_blocks=inner.nonlinear_blocks,
         time_events=tuple(dae.time_events), zero=zero,
-        start=expanded(start) if start is not None else None,
-        init_start=expanded(init_start) if init_start is not None else None,
-        discrete=nd, update=update, init_discrete=expanded(init_discrete), asserts=asserts,
+        start=expand(start) if start is not None else None,
+        init_start=expand(init_start) if init_start is not None else None,
+        discrete=nd, update=update, init_discrete=expand(init_discrete), asserts=asserts,
         events={"clocks": [list(c) for c in dae.clocks], "flags": ["initial", "terminal"] +
                 [f"tick{k}" for k in range(len(dae.clocks))], "asserts": [list(a) for a in dae.assert_info],
                 "relation_ops": list((inner.events or {}).get("relation_ops", dae.relation_ops)),
@@ -925,6 +930,15 @@ def expanded(f: ca.Function) -> ca.Function:
         return f.expand()
     except RuntimeError:  # holds a rootfinder or a run-time linear solver
         return f
+
+
+def compact(f: ca.Function) -> ca.Function:
+    """``f`` expanded to SX where that stays small (a loop it holds does not reach its
+    outputs), else as it is: expanded, a loop's Newton solve is unrolled, every iteration and
+    fallback evaluated at every call, into each function that reads it (a pump's one loop: a
+    4 MB C function each, 15x the simulation time of the MX call graph)."""
+    e = expanded(f)
+    return e if e.is_a("SXFunction") and e.n_instructions() <= COMPACT_SX_MAX else f
 
 
 def invariants_in(invariants: ca.SX, dae: Dae, x_impl, z_orig):
