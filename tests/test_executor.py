@@ -31,6 +31,21 @@ def test_local_executor_isolates_crash_hang_and_error():
     assert isinstance(out[6], TaskFailed) and "bad input" in out[6].reason
 
 
+def pid_or_crash(_, x):
+    if x == 4:
+        os.kill(os.getpid(), 11)
+    return os.getpid()
+
+
+def test_a_worker_serves_many_tasks_and_a_crashed_one_is_replaced():
+    """Forked per task, a short task paid for the fork and its copied pages: a worker takes one
+    task after another, and one that crashes takes only its own task with it."""
+    out = LocalExecutor(workers=2).map(pid_or_crash, list(range(12)), timeout=30, progress=False)
+    assert isinstance(out[4], TaskFailed) and "crashed" in out[4].reason
+    pids = {r for k, r in enumerate(out) if k != 4}
+    assert len(pids) <= 3 and os.getpid() not in pids     # two workers, and the crashed one's heir
+
+
 def test_results_are_reported_as_they_arrive():
     seen = []
     out = LocalExecutor(workers=2).map(square, [1, 2, 3], context=0, progress=False,
