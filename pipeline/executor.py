@@ -183,7 +183,7 @@ def die_with_parent() -> None:
 
 def _serve(fn, context, tasks, results) -> None:
     """A worker's life: each item received, its result (or TaskFailed) sent back, until the
-    parent closes the task pipe."""
+    parent kills it (:meth:`_Worker.stop`) or its task pipe is closed."""
     die_with_parent()
     while True:
         try:

@@ -740,7 +740,7 @@ def with_start_guesses(ode: Ode) -> Ode:
         zero = fixed["zero"]
         args = zero.mx_in()
         kept = ca.Function("zero", args, [zero.call(args)[0][:-nb]], zero.name_in(), zero.name_out())
-        fixed["zero"] = (expanded(kept) if zero.is_a("SXFunction") else kept) if ops else None
+        fixed["zero"] = _same_kind(zero, kept) if ops else None
         events = {**{k: v for k, v in events.items() if k != "branches"}, "relation_ops": ops}
         events = None if events == {"relation_ops": []} else events
     return dataclasses.replace(ode, **fixed, solved=None, guess0=None, events=events, warm=ode)
@@ -748,8 +748,12 @@ def with_start_guesses(ode: Ode) -> Ode:
 
 def _guesses_fixed(f: ca.Function, guess0: np.ndarray) -> ca.Function:
     """``f`` with the tail of its argument p fixed at ``guess0``."""
-    out = _with_p(f, -len(guess0), lambda p: ca.vertcat(p, ca.DM(guess0)))
-    return expanded(out) if f.is_a("SXFunction") else out
+    return _same_kind(f, _with_p(f, -len(guess0), lambda p: ca.vertcat(p, ca.DM(guess0))))
+
+
+def _same_kind(f: ca.Function, g: ca.Function) -> ca.Function:
+    """``g``, a rewrapping of ``f``, expanded where ``f`` was SX."""
+    return expanded(g) if f.is_a("SXFunction") else g
 
 
 def _guesses_ignored(f: ca.Function, ng: int) -> ca.Function:
@@ -865,7 +869,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
             x_new[where[k]] = after[idx["reinit"][k]]
         upd = ca.vertcat(*x_new, after[idx["update"]] if nd else ca.MX(0, 1))
         update = expand(ca.Function("update", [XF, U, P, T, PRE, FL], [upd],
-                                      ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
+                                    ["x", "u", "p", "t", "pre", "flags"], ["x_new"]))
     D0 = d0_fun(Pu, U, T) if nd else ca.MX(0, 1)
     # the initial system's parameters: the discrete starts, and initial() true (an equation
     # if initial() then ... holds there: the MSL's hysteresis starts with its slope at 0)
