@@ -37,6 +37,7 @@ CHUNK_NUMBERS = 4_000_000
 #: linearisation functions kept (a fit builds one Linearisation per Gauss-Newton step of the
 #: same model and parameters: the Jacobians' CasADi functions are made once)
 _FUNCTIONS: OrderedDict = OrderedDict()
+_INITIAL: dict = {}              # d x0 / d q functions by (init, selection), holding their ode
 _KEEP = 8
 
 
@@ -156,7 +157,7 @@ def _low_rank_steps(A, prev_A, G, h, S0, first: bool) -> np.ndarray | None:
     fixed parts): I - h A_k / 2 = M - (h/2) E D_k with M fixed and D_k the rows that vary, so
     by Woodbury its inverse is M^-1 + W (I - D_k W)^-1 D_k M^-1, W = (h/2) M^-1 E: O(nx^2 ns) a
     step instead of O(nx^3). None when the step varies or too many rows vary (the caller then
-    takes the blocked scan). ``first``: the chunk starts the run (S there is 0)."""
+    takes the blocked scan). ``first``: the chunk starts the run (S there is ``S0``)."""
     n, nx, ns = G.shape
     steps = h[1:] if first else h
     if not len(steps) or np.ptp(steps) > 1e-9 * steps[0]:
@@ -175,9 +176,7 @@ def _low_rank_steps(A, prev_A, G, h, S0, first: bool) -> np.ndarray | None:
     out = np.empty((n, nx, ns))
     S = np.asarray(S0, float)
     for k in range(n):
-        if k == 0 and first:
-            S = np.zeros((nx, ns))
-        else:
+        if not (k == 0 and first):
             z = Minv @ (S + R[k] @ S + G[k])
             S = z + W @ (Cinv[k] @ (D[k] @ z)) if Cinv is not None else z
         out[k] = S
@@ -192,7 +191,7 @@ class Linearisation:
         ode = model.ode
         self.time = np.asarray(time, float)
         idx = [ode.p_names.index(n) for n in params]
-        self.ode = ode
+        self.ode, self.idx = ode, idx
         self.fun, self._maps = _functions(ode, idx)
         u = prepare_inputs(model, inputs)
         N = len(self.time)
@@ -238,15 +237,16 @@ class Linearisation:
         A = self._at(pick)[0].reshape(self.nx, n, self.nx).transpose(1, 0, 2)
         return float(np.max(np.abs(np.linalg.eigvals(A))))
 
-    def propagate(self, forcing, at: np.ndarray, ns: int, batched: bool = False) -> np.ndarray:
+    def propagate(self, forcing, at: np.ndarray, ns: int, batched: bool = False, S0=None) -> np.ndarray:
         """Output sensitivities (len(at), ny, ns) at grid points ``at`` (increasing), for forcing
         ``forcing(k, B, E) -> (Fx (nx, ns), Fy (ny, ns))``: the direct effect at grid point k
         on x' and on y, given df/dq and dy/dq there; with ``batched``, ``forcing(k0, k1, B, E)``
-        gives them for the points k0 .. k1-1 at once ((n, nx, ns), (n, ny, ns)). S(t0) = 0."""
+        gives them for the points k0 .. k1-1 at once ((n, nx, ns), (n, ny, ns)). S(t0) = ``S0``
+        (nx, ns), 0 when not given."""
         t, N, nx, ny = self.time, len(self.time), self.nx, self.ny
         at = np.asarray(at, int)
         Y = np.zeros((len(at), ny, ns))
-        S = np.zeros((nx, ns))
+        S = np.zeros((nx, ns)) if S0 is None else np.asarray(S0, float).reshape(nx, ns)
         I = np.eye(nx)
         F_prev, A_prev = None, None
         for k0 in range(0, N, self.chunk):
@@ -271,8 +271,8 @@ class Linearisation:
                     lhs = I - 0.5 * h * A
                     P = np.linalg.solve(lhs, I + 0.5 * h * prev_A)
                     G = np.linalg.solve(lhs, 0.5 * h * (prev_F + Fx))
-                    if k0 == 0:                 # S(t0) = 0
-                        G[0] = 0.0
+                    if k0 == 0:                 # S(t0) = S0
+                        G[0] = S
                         P[0] = 0.0
                     Sk = affine_scan(P, G, S)
                 S = Sk[-1]
@@ -283,5 +283,19 @@ class Linearisation:
         return Y
 
     def parameters(self, at: np.ndarray) -> np.ndarray:
-        """d y / d q at grid points ``at`` for every parameter q of the linearisation."""
-        return self.propagate(lambda k0, k1, B, E: (B, E), at, self.nq, batched=True)
+        """d y / d q at grid points ``at`` for every parameter q of the linearisation, from the
+        initial state's own dependence on q (a parameter that sets a state in an initial
+        equation, s0 in M.s = s0, acts through it alone)."""
+        return self.propagate(lambda k0, k1, B, E: (B, E), at, self.nq, batched=True, S0=self.initial())
+
+    def initial(self) -> np.ndarray:
+        """d x(t0) / d q (nx, nq): the initial equations differentiated in the parameters."""
+        if not (self.nx and self.nq):
+            return np.zeros((self.nx, self.nq))
+        key = (id(self.ode.init), tuple(self.idx))
+        if key not in _INITIAL:
+            U, P, T = self.ode.init.mx_in()
+            _INITIAL[key] = (self.ode, ca.Function("dx0", [U, P, T], [ca.densify(ca.jacobian(self.ode.init(U, P, T), P)[:, self.idx])]))
+            if len(_INITIAL) > _KEEP:
+                _INITIAL.pop(next(iter(_INITIAL)))
+        return np.array(_INITIAL[key][1](self.U[:, 0], self.p, self.time[0]), float)

@@ -1,8 +1,8 @@
 """Forward sensitivities of the in-process engine against central finite differences."""
 import numpy as np
 
-from helpers import compiled, multisine, rel_err, series
-from mcl.api import simulate
+from helpers import compiled, msl_path, multisine, needs_msl, rel_err, series
+from mcl.api import compile_model, simulate
 
 OPTS = {"rtol": 1e-12, "atol": 1e-14}  # finite differences need it: their noise is rtol / h
 
@@ -69,6 +69,7 @@ def test_the_low_rank_steps_equal_the_blocked_scan(monkeypatch):
     nx, ny, nq, N = 20, 2, 3, 700
     A0 = -np.diag(rng.uniform(1, 40, nx)) + 0.3 * rng.normal(size=(nx, nx))
     B, C, E = rng.normal(size=(N, nx, nq)), rng.normal(size=(N, ny, nx)), rng.normal(size=(N, ny, nq))
+    S0 = rng.normal(size=(nx, nq))
     wobble = np.sin(np.linspace(0, 9, N))                     # a law varying along the run, in rows 3 and 7
     A = np.repeat(A0[None], N, 0)
     A[:, [3, 7], :] += 2.0 * wobble[:, None, None] * rng.normal(size=(2, nx))[None]
@@ -80,8 +81,59 @@ def test_the_low_rank_steps_equal_the_blocked_scan(monkeypatch):
         def jacobians(self, k0, k1):
             return A[k0:k1], B[k0:k1], C[k0:k1], E[k0:k1]
 
+        def initial(self):                                    # parameters that set the initial state
+            return S0
+
     at = np.arange(0, N, 7)
     fast = Along().parameters(at)
     monkeypatch.setattr(sensitivity, "LOW_RANK_MIN_STATES", 10**9)
     blocked = Along().parameters(at)
     assert np.max(np.abs(fast - blocked)) < 1e-9 * np.max(np.abs(blocked))
+
+
+INITIAL_STATE = """
+model Heated "a body warming from a start temperature the engineer does not know"
+  import Modelica.Units.SI;
+  import Modelica.Thermal.HeatTransfer;
+  Modelica.Blocks.Interfaces.RealInput Q(unit = "W") "heater power";
+  Modelica.Blocks.Interfaces.RealOutput T(unit = "K") "measured temperature";
+  parameter SI.Temperature T0 = 300 "temperature at the start";
+  parameter SI.ThermalConductance G = 2.0;
+  HeatTransfer.Components.HeatCapacitor body(C = 50);
+  HeatTransfer.Components.ThermalConductor wall(G = G);
+  HeatTransfer.Sources.FixedTemperature ambient(T = 293.15);
+  HeatTransfer.Sources.PrescribedHeatFlow heater;
+  HeatTransfer.Sensors.TemperatureSensor sensor;
+initial equation
+  body.T = T0;
+equation
+  connect(Q, heater.Q_flow);
+  connect(heater.port, body.port);
+  connect(body.port, wall.port_a);
+  connect(wall.port_b, ambient.port);
+  connect(body.port, sensor.port);
+  connect(sensor.T, T);
+end Heated;
+"""
+
+
+@needs_msl()
+def test_a_parameter_of_an_initial_equation_has_its_sensitivity(tmp_path):
+    """A parameter that only sets a state in an initial equation (T0 in body.T = T0) moves the
+    outputs through the initial state: the fits' linearised sensitivities follow central finite
+    differences for it as for a parameter of the equations (they were 0: the initial state's own
+    dependence was dropped)."""
+    from mcl.fit import FitProblem
+
+    (tmp_path / "Heated.mo").write_text(INITIAL_STATE)
+    model = compile_model([tmp_path / "Heated.mo"], "Heated", libraries=[msl_path()])
+    t = np.linspace(0, 60, 301)
+    u = series(t, Q=20 + 10 * np.sin(0.3 * t), T=np.zeros_like(t))
+    names = ["T0", "G"]
+    problem = FitProblem(model, u, names, options=OPTS)
+    res = problem.simulate([300.0, 2.0], gradient=True)
+    assert res.ok
+    for j, (n, v) in enumerate(zip(names, [300.0, 2.0])):
+        fd = finite_difference(model, u.select(["Q"]), n, v, 1e-3 * v)
+        assert rel_err(res.sensitivities[:, :, j], fd) < 1e-3, n
+    assert np.allclose(res.sensitivities[:, 0, 0], np.exp(-2.0 / 50 * t), atol=1e-3)
