@@ -145,3 +145,46 @@ def test_a_current_in_the_voltage_is_the_resistors_not_a_capacitor_leak(tmp_path
     assert cause["component"] == "Rp", cause["effect"]
     assert curve_error(cause, load) < 0.05
     assert [e["component"] for e in cause["equivalents"]] == ["C"]
+
+
+AXIS = """
+model Axis "a carriage pushed by its motor's force along guides with friction; the position is measured"
+  import Modelica.Mechanics.Translational.Components.{Mass, Damper, Fixed};
+  import Modelica.Mechanics.Translational.Sources.Force;
+  import Modelica.Mechanics.Translational.Sensors.PositionSensor;
+  Modelica.Blocks.Interfaces.RealInput F(unit = "N") "motor force";
+  Modelica.Blocks.Interfaces.RealOutput s(unit = "m") "encoder";
+  Fixed frame;
+  Force motor;
+  Mass M(m = 1.0);
+  Damper D(d = 1.5) "viscous friction of the guides";
+  PositionSensor encoder;
+initial equation
+  M.s = 0;
+  M.v = 0;
+equation
+  connect(F, motor.f);
+  connect(motor.flange, M.flange_a);
+  connect(frame.flange, D.flange_a);
+  connect(D.flange_b, M.flange_a);
+  connect(M.flange_b, encoder.flange);
+  connect(encoder.s, s);
+end Axis;
+"""
+
+
+def test_friction_with_an_offset_force_is_the_dampers_law_with_its_constant(tmp_path):
+    """A positioning axis's friction, f = Fv v + Fc tanh(v/0.05) + offset (the EMPS benchmark's
+    law): the position drifts off under a constant force the nominal viscous damper cannot give;
+    the damper's law is learned with its constant."""
+    (tmp_path / "Axis.mo").write_text(AXIS)
+    friction = lambda v: 1.5 * v + 0.6 * np.tanh(v / 0.05) + 0.3
+    for seed, file in ((5, "train.csv"), (6, "validate.csv")):      # the suspension without its spring
+        suspension_data(tmp_path / file, seed, lambda s: 0.0 * s, friction, "s")
+    report = discover(tmp_path, "Axis.mo", "Axis")
+    cause = report["cause"]
+    assert cause["component"] == "D", cause["effect"]
+    assert curve_error(cause, friction) < 0.1, cause["law"]["equation"]
+    assert "missing from the nominal law: a constant" in cause["effect"], cause["effect"]
+    g = report["gain"]
+    assert g["validation_rms_after"] < 0.2 * g["validation_rms_before"]

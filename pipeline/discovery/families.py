@@ -14,7 +14,8 @@ simulation of a candidate reproduces the nominal model):
 
 - ``static``: i = f(v) (cubic; with a constant when the nominal law has one); a storage law
   i = f(v) dv + g(v) (a spring with damping);
-- ``rate``: i = h(dv) (a damper cubic in the speed; Coulomb-like friction tanh(dv/s)); the
+- ``rate``: i = c0 + h(dv) (a damper cubic in the speed; Coulomb-like friction tanh(dv/s); a
+  constant: the offset force of a friction model, the bias current of a capacitor); the
   storage law (a capacitor whose
   capacitance depends on its voltage, a leaky capacitor: i = C dv + G v);
 - ``integral``: v = f(i) di + g(i);
@@ -121,12 +122,14 @@ def families(role: str, env: dict | None = None) -> list[dict]:
     Coulomb-like friction terms tanh(dv/s), the dissipative element's classic non-polynomial
     part, at two fixed scales (a twentieth and a quarter of the rate's nominal span: the law
     stays linear in its parameters, and pruning keeps what the data need; the shape stage
-    fits the scale itself)."""
+    fits the scale itself), and a constant (the offset force of a positioning axis's friction,
+    M q'' = tau - Fv q' - Fc sign(q') - offset: without it a law bends its other terms to mimic
+    one, and an open-loop position drifts)."""
     out = [dict(f) for f in FAMILIES[role]]
     span = float(np.max(np.abs(env["dv"]))) if env is not None and np.any(env["dv"]) else 1.0
     for f in out:
         if f.get("family") == "rate":
-            f["rhs"] = [*f["rhs"], f"tanh(dv/{0.05 * span:.3g})", f"tanh(dv/{0.25 * span:.3g})"]
+            f["rhs"] = ["1", *f["rhs"], f"tanh(dv/{0.05 * span:.3g})", f"tanh(dv/{0.25 * span:.3g})"]
         if f.get("family") == "static" and env is not None and _constant(env):
             f["rhs"] = ["1", *f["rhs"]]       # the nominal law has a constant: so may the law
     if role == "absolute":
