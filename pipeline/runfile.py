@@ -42,6 +42,9 @@ DEFAULT_TEMPLATES = None
 #: a long record is searched on its first this many samples (each fit simulates it tens of
 #: times; the laws of a system show in a few thousand samples, and the gain is measured on all)
 MAX_SAMPLES = 8192
+#: the joint refit (``free:``) fits up to this many times as many: the model delivered, one
+#: fit, where a calibration on the head alone drifts off in the rest of the record
+CALIBRATION_SPAN = 4
 CRITERIA = ("bic", "aic", "aicc")   # the built-in criteria (plugins may add more)
 FITTING_ALGORITHMS = ("levenberg-marquardt", "algorithm1", "algorithm3")   # mcl.fit.FITTERS
 METHODS = ("simulation", "full-discretisation")   # the built-in fitters (plugins may add more)

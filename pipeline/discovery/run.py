@@ -34,6 +34,7 @@ import numpy as np
 from ..data import TimeSeries
 from ..errors import ConfigError
 from ..progress import log
+from ..runfile import CALIBRATION_SPAN
 from ..stats import misfit_significance, noise_levels, rms
 from .candidates import Base
 from .families import spec_name
@@ -362,8 +363,10 @@ def cpu_seconds() -> float:
 
 def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate, outputs, whole=None) -> None:
     """Each cause's parameters with standard errors and its curve's band (the laws together, in
-    the extended model); with ``free:``, the laws refitted with the nominal parameters (both on
-    the samples searched, ``train``; the calibrated RMS on all of them, ``whole``)."""
+    the extended model, on the samples searched, ``train``); with ``free:``, the laws refitted
+    with the nominal parameters on the training record ``whole`` (up to CALIBRATION_SPAN times
+    the samples searched: the model delivered; a calibration fitted to the head of a long
+    record drifts off in the rest, its initial state bent to the head's errors)."""
     from .calibrate import calibrate, uncertainty
 
     params = base.model.parameters
@@ -378,7 +381,9 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
     if spec.free:
         names = [n for law in laws for n in refitted(law["names"], law["active"])]
         held = [n for law in laws for n in law["names"] if n not in names]
-        cal = calibrate(base.model, train, validate, params, names, spec.free, outputs, held, judged_on=whole)
+        whole = train if whole is None else whole
+        cal = calibrate(base.model, head(whole, CALIBRATION_SPAN * spec.max_samples), validate, params, names,
+                        spec.free, outputs, held, judged_on=whole)
         report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
 
 
