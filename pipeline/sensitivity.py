@@ -293,9 +293,14 @@ class Linearisation:
         if not (self.nx and self.nq):
             return np.zeros((self.nx, self.nq))
         key = (id(self.ode.init), tuple(self.idx))
-        if key not in _INITIAL:
-            U, P, T = self.ode.init.mx_in()
-            _INITIAL[key] = (self.ode, ca.Function("dx0", [U, P, T], [ca.densify(ca.jacobian(self.ode.init(U, P, T), P)[:, self.idx])]))
-            if len(_INITIAL) > _KEEP:
-                _INITIAL.pop(next(iter(_INITIAL)))
-        return np.array(_INITIAL[key][1](self.U[:, 0], self.p, self.time[0]), float)
+        try:
+            if key not in _INITIAL:
+                U, P, T = self.ode.init.mx_in()
+                dx0 = ca.jacobian(self.ode.init(U, P, T), P)[:, self.idx]
+                _INITIAL[key] = (self.ode, ca.Function("dx0", [U, P, T], [ca.densify(dx0)]))
+                if len(_INITIAL) > _KEEP:
+                    _INITIAL.pop(next(iter(_INITIAL)))
+            S0 = np.array(_INITIAL[key][1](self.U[:, 0], self.p, self.time[0]), float)
+        except RuntimeError:        # an initial solve that does not differentiate: from 0, as before
+            return np.zeros((self.nx, self.nq))
+        return np.where(np.isfinite(S0), S0, 0.0)
