@@ -7,8 +7,8 @@ chosen on the last 20 % of the training split, the test splits unseen), and the 
 "mcl law alone" and "mcl law + joint refit" that :func:`mcl_discovery` fills once discovery can
 run on a case (the case's model from parts, trained on the training split alone; n/a for a
 case without one). Every Modelica model starts each test split from the initial state fitted on
-the split's first ``window`` samples (the benchmark's protocol). Each method's CPU seconds are printed; the results go to
-benchmarks/results/real_data.json.
+the split's first ``window`` samples (the benchmark's protocol). Each method's CPU seconds are
+printed; the results go to benchmarks/results/real_data.json.
 
 The data are the benchmarks' own files split by examples/real/prepare.py; they are looked up in
 $MCL_REAL_DATA, then ../shared/real beside the checkout (a case whose files are missing is
