@@ -147,10 +147,12 @@ class _Budget:
         within ``share`` of the time left and within the steps left."""
         cap = self.opts.max_steps
         if self.points and self.rate is not None and self.opts.max_work is None:
-            # a run going as it has so far (4x its steps per point) fits easily: one call for
-            # the rest, so that a run's numbers never depend on how fast the machine was
+            # a run going as it has so far (4x its steps per point) fits in the call's share of
+            # the time left: one call for the rest, so that a run's numbers do not depend on how
+            # fast the machine was (at a tenth of the share, a loaded machine cut EMPS's refits
+            # into calls sized by the measured rate, and their restarts moved the fit)
             expected = 4.0 * self.steps / self.points * n_points * self.rate
-            if expected <= 0.1 * share * max(self.opts.time_limit - self.clock.elapsed, 0.0):
+            if expected <= share * max(self.opts.time_limit - self.clock.elapsed, 0.0):
                 return n_points, cap, None
         elif not self.points:        # the first call: a fixed few points, its cost then measured
             n_points = min(n_points, FIRST_CALL)
