@@ -141,19 +141,27 @@ class _Budget:
         if self.opts.max_work is not None and self.steps >= self.opts.max_work:
             raise _Stop(f"work budget of {self.opts.max_work} solver steps exceeded at t = {t:g}")
 
-    def call_size(self, n_points: int, share: float = CALL_SHARE) -> tuple[int, int, str | None]:
+    def call_size(self, n_points: int, share: float = CALL_SHARE, rest: bool = False) -> tuple[int, int, str | None]:
         """(points, steps per point, the bound that limited them) for the next call of at most
         ``n_points`` points: the worst case of a call (every point using its steps) stays
-        within ``share`` of the time left and within the steps left."""
+        within ``share`` of the time left and within the steps left. ``rest``: the call is the
+        rest of a run (not a retry, not a hop), which may go in one call as it has so far."""
         cap = self.opts.max_steps
-        if self.points and self.rate is not None and self.opts.max_work is None:
+        if self.points and self.rate is not None:
             # a run going as it has so far (4x its steps per point) fits in the call's share of
             # the time left: one call for the rest, so that a run's numbers do not depend on how
-            # fast the machine was (at a tenth of the share, a loaded machine cut EMPS's refits
-            # into calls sized by the measured rate, and their restarts moved the fit)
+            # fast the machine was (calls sized by the measured rate put the solver's restarts
+            # where the machine's load put them: EMPS's fits and refit differed run to run)
             expected = 4.0 * self.steps / self.points * n_points * self.rate
             if expected <= share * max(self.opts.time_limit - self.clock.elapsed, 0.0):
-                return n_points, cap, None
+                if self.opts.max_work is None:
+                    return n_points, cap, None
+                # with a work budget, each point may take 8x the steps the points have taken,
+                # while the work left covers them all (a law that blows up still stops soon; a
+                # point that needs more is retried alone with what is left)
+                need = _pow2(min(max(64, int(8 * self.steps / self.points)), cap))
+                if rest and n_points * need <= self.opts.max_work - self.steps:
+                    return n_points, need, "work"
         elif not self.points:        # the first call: a fixed few points, its cost then measured
             n_points = min(n_points, FIRST_CALL)
         allowed, bound = math.inf, None
@@ -377,7 +385,7 @@ class _Plan:
             budget.check(t0)
             # after a call that ran out of its reduced steps: again with more steps, sized with
             # all that is left, for its first point alone (the one that may need them all)
-            n, steps, bound = (budget.call_size(len(idx) - pos) if failed is None
+            n, steps, bound = (budget.call_size(len(idx) - pos, rest=True) if failed is None
                                else budget.call_size(1, 1.0))
             if failed is not None and steps <= failed:
                 raise _Stop(budget.reason(bound, t0))
