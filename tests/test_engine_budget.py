@@ -86,3 +86,43 @@ def test_a_run_that_passes_its_state_bound_stops_there(tmp_path):
     crossed = float(bounded.reason.rsplit("t = ", 1)[1])
     assert np.log(1e3) / 2 <= crossed <= np.log(1e3) / 2 + 0.1     # stopped where it crossed
     assert bounded.steps < free.steps
+
+
+OSCILLATOR = """
+model Oscillator "a lightly damped oscillator driven by its input"
+  input Real u;
+  Real x(start = 0, fixed = true);
+  Real v(start = 0, fixed = true);
+  output Real y;
+equation
+  der(x) = v;
+  der(v) = u - 0.2*v - 40*x;
+  y = x;
+end Oscillator;
+"""
+
+
+@pytest.mark.parametrize("work", [None, 10**9])
+def test_a_runs_numbers_do_not_follow_the_machines_speed(tmp_path, monkeypatch, work):
+    """The same run on a machine 100x slower (the step rate the budget measures) gives the same
+    numbers to the last digit, with a work budget (a candidate's fit) or without one (the
+    calibration): the calls, and so the solver's restarts, are not sized by the measured rate
+    while the run fits easily in its time (they were: a loaded machine moved the fits)."""
+    import mcl.engine_casadi as engine
+
+    (tmp_path / "Oscillator.mo").write_text(OSCILLATOR)
+    model = compile_model([tmp_path / "Oscillator.mo"], "Oscillator")
+    t = np.linspace(0, 20, 20001)
+    u = TimeSeries(t, np.sin(3.0 * t)[:, None] + np.sin(7.3 * t)[:, None], ["u"])
+    steps = simulate(model, u).steps
+    record = engine._Budget.record
+    runs = []
+    # the measured rate, made up: a fast machine, and one where the run would take 4 s at 4x its
+    # steps (a 15th of the time limit; the calls were sized by the rate from a 25th of it)
+    for seconds_per_step in (1e-7, 4.0 / (4 * steps)):
+        monkeypatch.setattr(engine._Budget, "record", lambda self, n, seconds, points=0, r=seconds_per_step:
+                            record(self, n, r * max(int(n), 1), points))
+        res = simulate(model, u, options={"max_work": work})
+        assert res.ok, res.reason
+        runs.append(res.outputs)
+    assert np.array_equal(runs[0], runs[1])
