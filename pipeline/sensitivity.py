@@ -37,7 +37,6 @@ CHUNK_NUMBERS = 4_000_000
 #: linearisation functions kept (a fit builds one Linearisation per Gauss-Newton step of the
 #: same model and parameters: the Jacobians' CasADi functions are made once)
 _FUNCTIONS: OrderedDict = OrderedDict()
-_INITIAL: dict = {}              # d x0 / d q functions by (init, selection), holding their ode
 _KEEP = 8
 
 
@@ -87,11 +86,11 @@ class _Mapped:
 
 
 def _functions(ode, idx: list[int]):
-    """(df/dx, df/dq, dy/dx, dy/dq as one dense CasADi function, its maps by size), made once per
-    model and parameter selection. A model with algebraic loops is differentiated through their
+    """(df/dx, df/dq, dy/dx, dy/dq as one dense CasADi function, its maps by size and the initial
+    state's derivative, made on first use), once per model and parameter selection. A model with algebraic loops is differentiated through their
     Newton form (:func:`mcl.compile.structure.causalise`): the function then takes the loops'
     solutions as a fifth argument."""
-    key = (id(ode.ode), id(ode.out), tuple(idx))
+    key = (id(ode.ode), id(ode.out), id(ode.init), tuple(idx))
     entry = _FUNCTIONS.get(key)
     if entry is None:
         X, U, P, T = ode.ode.mx_in()
@@ -292,15 +291,12 @@ class Linearisation:
         """d x(t0) / d q (nx, nq): the initial equations differentiated in the parameters."""
         if not (self.nx and self.nq):
             return np.zeros((self.nx, self.nq))
-        key = (id(self.ode.init), tuple(self.idx))
         try:
-            if key not in _INITIAL:
+            if "dx0" not in self._maps:     # made once per model and selection, with the others
                 U, P, T = self.ode.init.mx_in()
                 dx0 = ca.jacobian(self.ode.init(U, P, T), P)[:, self.idx]
-                _INITIAL[key] = (self.ode, ca.Function("dx0", [U, P, T], [ca.densify(dx0)]))
-                if len(_INITIAL) > _KEEP:
-                    _INITIAL.pop(next(iter(_INITIAL)))
-            S0 = np.array(_INITIAL[key][1](self.U[:, 0], self.p, self.time[0]), float)
+                self._maps["dx0"] = ca.Function("dx0", [U, P, T], [ca.densify(dx0)])
+            S0 = np.array(self._maps["dx0"](self.U[:, 0], self.p, self.time[0]), float)
         except RuntimeError:        # an initial solve that does not differentiate: from 0, as before
             return np.zeros((self.nx, self.nq))
         return np.where(np.isfinite(S0), S0, 0.0)

@@ -361,7 +361,7 @@ def cpu_seconds() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate, outputs, whole=None) -> None:
+def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate, outputs, whole) -> None:
     """Each cause's parameters with standard errors and its curve's band (the laws together, in
     the extended model, on the samples searched, ``train``); with ``free:``, the laws refitted
     with the nominal parameters on the training record ``whole`` (up to CALIBRATION_SPAN times
@@ -381,7 +381,6 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
     if spec.free:
         names = [n for law in laws for n in refitted(law["names"], law["active"])]
         held = [n for law in laws for n in law["names"] if n not in names]
-        whole = train if whole is None else whole
         cal = calibrate(base.model, head(whole, CALIBRATION_SPAN * spec.max_samples), validate, params, names,
                         spec.free, outputs, held, judged_on=whole)
         report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
