@@ -10,6 +10,7 @@ sensors; the bodies from MSL parts through imports); the data come from the syst
 written by hand and solved by SciPy.
 """
 import json
+import re
 from types import SimpleNamespace
 
 import numpy as np
@@ -280,3 +281,24 @@ def test_radiation_between_two_bodies_whose_temperatures_both_vary(tmp_path):
     assert g["validation_rms_after"] < 0.2 * g["validation_rms_before"], g
     text = (tmp_path / "out" / report["extended"]["modelica"]).read_text()
     assert "port_a.T^4" in text and "extends Modelica.Thermal.HeatTransfer.Interfaces.Element1D" in text
+
+
+def test_an_opening_above_the_levels_datum_is_torricellis_law_with_its_height(tmp_path):
+    """The upper tank's opening sits 0.1 m above the level's datum (the tank's bottom):
+    q = c sqrt(h - 0.1). The outlet is named with Torricelli's law and the opening's height,
+    in the engineer's words, not a polynomial that bends to look like it."""
+    above = lambda h: ORIFICE * np.sqrt(np.maximum(h - 0.1, 0.0))
+    h = tanks_data(tmp_path / "train.csv", 1, above)
+    tanks_data(tmp_path / "validate.csv", 2, above)
+    report = discover(tmp_path, "Tanks.mo", "Tanks.Cascade", TANKS)
+    cause = report["cause"]
+    assert cause["component"] == "Outlet1", cause["effect"]
+    law = cause["law"]
+    opening = re.search(r"sqrt\(abs\(Outlet1\.a\.h-([0-9.e+-]+)\)\)", law["equation"])
+    assert opening and abs(float(opening.group(1)) - 0.1) < 0.02, law["equation"]
+    assert "Torricelli" in cause["effect"], cause["effect"]
+    xs, fs = np.array(law["curve"]).T
+    assert xs.min() <= h[0].min() + 0.02
+    assert np.max(np.abs(fs - above(xs))) / np.max(above(xs)) < 0.03, law["equation"]
+    g = report["gain"]
+    assert g["validation_rms_after"] < 0.2 * g["validation_rms_before"], g

@@ -33,6 +33,8 @@ readable law over that basis (:func:`distil`), which is fitted and pruned like t
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 STATIC = {"name": "polynomial", "lhs": ["i"], "rhs": ["v", "v^2", "v^3"], "family": "static"}
@@ -174,16 +176,57 @@ _SHAPES = ("tanh({x}/{s})", "sinh({x}/{s})", "{x}/sqrt(1 + ({x}/{s})^2)", "exp({
            "{x} - {s}*tanh({x}/{s})", "tanh({x}/{s})*exp(-({x}/{s})^2)", "sqrt(abs({x}))*tanh({x}/{s})")
 
 
+#: Torricelli's outflow from an opening s above the level's datum (a level measured from the
+#: tank's bottom, or by a sensor whose zero is not the opening's height)
+_TORRICELLI = "sqrt(abs({x} - {s}))*sign({x} - {s})"
+
+
+#: what an engineer calls each shape (the effect's words)
+_SHAPE_WORDS = {"tanh({x}/{s})": "Coulomb-like friction or saturation", "sinh({x}/{s})": "an exponential rise on both sides",
+                "{x}/sqrt(1 + ({x}/{s})^2)": "saturation", "exp({x}/{s}) - 1": "an exponential rise (a diode, an overflow)",
+                "{x} - {s}*tanh({x}/{s})": "a dead zone", "tanh({x}/{s})*exp(-({x}/{s})^2)": "the Stribeck effect",
+                "sqrt(abs({x}))*tanh({x}/{s})": "a square root (an orifice)",
+                _TORRICELLI: "a square root of the level above an opening (Torricelli)"}
+
+
+def shape_words(term: str) -> str:
+    """``term`` (a basis term, its scale named s1, s2, ...) with what an engineer calls it:
+    "a dead zone: v - s1*tanh(v/s1)"; a term of no named shape as it is."""
+    for pattern, said in _SHAPE_WORDS.items():
+        if re.fullmatch(_pattern(pattern), term.replace(" ", "")):
+            return f"{said}: {term}"
+    return term
+
+
+def _pattern(shape: str) -> str:
+    """A regular expression for ``shape`` with any variable and any named scale (s1, s2, ...)."""
+    parts = re.split(r"(\{x\}|\{s\})", shape.replace(" ", ""))
+    out, seen = [], set()
+    for p in parts:
+        if p in ("{x}", "{s}"):
+            g = p[1]
+            out.append(f"(?P={g})" if g in seen else (r"(?P<x>[a-z]+)" if g == "x" else r"(?P<s>s\d+)"))
+            seen.add(g)
+        else:
+            out.append(re.escape(p))
+    return "".join(out)
+
+
 def basis(x: np.ndarray, name: str) -> list[tuple[str, float | None]]:
     """Candidate terms in the variable ``name`` for a law visited over ``x``, as (pattern, scale):
     polynomials, |x| x, and the shapes of friction, saturation and exponential laws at scales
     spread over the visited span (the scale of a chosen shape is then fitted); in a connector's
-    own potential (va, vb) also a constant (an outflow that starts above the bottom)."""
+    own potential (va, vb) also a constant (an outflow that starts above the bottom); in a
+    variable that stays above 0 (a level) also Torricelli's square root of its height above an
+    opening, the opening's height s fitted (the level's datum is rarely the opening's)."""
     span = float(np.max(np.abs(x))) or 1.0
     terms = [(t, None) for t in ("{x}", "{x}^2", "{x}^3", "{x}*abs({x})", "sqrt(abs({x}))*sign({x})")]
+    shapes = [(shape, k * span) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
     if name in ("va", "vb"):
         terms.insert(0, ("1", None))
-    return terms + [(shape, k * span) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
+    if np.min(x) > 0:      # a level (or a drop) that stays above 0: an opening may sit above its datum
+        shapes += [(_TORRICELLI, k * float(np.min(x))) for k in (0.25, 0.5, 0.75, 0.9)]
+    return terms + shapes
 
 
 def _text(term, name: str, scale=None, digits: int = 4) -> str:
