@@ -431,7 +431,8 @@ def main(argv=None) -> int:
         print("real benchmark data not found: set MCL_REAL_DATA or place them in ../shared/real "
               "(examples/real/prepare.py makes them from the benchmarks' files); nothing run")
         return 0
-    results = {}
+    out = Path(args.json)
+    results = json.loads(out.read_text()) if out.exists() else {}     # other cases' rows are kept
     for name in args.cases.split(","):
         case = CASES[name]
         if not (root / name / "train.csv").exists():
@@ -439,8 +440,8 @@ def main(argv=None) -> int:
             continue
         results[name] = run_case(case, root)
         print(table({name: results[name]}), flush=True)
-    Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.json).write_text(json.dumps(results, indent=1, default=float) + "\n")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(results, indent=1, default=float) + "\n")
     print(f"results -> {args.json}")
     return 0
 

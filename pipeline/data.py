@@ -49,6 +49,10 @@ class TimeSeries:
         idx = [self.names.index(n) for n in names]
         return TimeSeries(self.time, self.values[:, idx], list(names), self.source)
 
+    def head(self, n: int) -> "TimeSeries":
+        """The first ``n`` samples (where a model's initial state holds)."""
+        return TimeSeries(self.time[:n], self.values[:n], list(self.names), self.source)
+
     def to_frame(self):
         """A pandas DataFrame indexed by ``time``, one column per signal."""
         import pandas as pd

@@ -28,6 +28,7 @@ def discovered(name: str) -> dict:
 def test_the_tanks_outflow_is_named_and_the_joint_refit_reaches_the_good_models():
     found = discovered("cascaded_tanks")
     assert found["cause"].split()[0] in ("out1", "out2")       # an outflow, as the literature says
+    assert "Torricelli" in found["cause"], found["cause"]          # with its kind of law: a square root
     assert found["joint"]["test.csv"] < 0.45                     # the good models' range: 0.34-0.45 V
     assert found["joint"]["test.csv"] < found["law"]["test.csv"]   # the grey-box refit adds to the law
 

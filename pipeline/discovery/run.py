@@ -294,7 +294,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         val_y = [_outputs_of(nominal, sv, outputs), None]
     searched, base0 = train, Base(nominal, sim0)
     if significant and len(train.time) > spec.max_samples:
-        searched = head(train, spec.max_samples)
+        searched = train.head(spec.max_samples)
         log.info("      the search fits the first %d of %d training samples (fitting.max_samples); the gain is "
                  "measured on all", spec.max_samples, len(train.time))
         base0 = Base(nominal, simulate(nominal, searched))
@@ -348,11 +348,6 @@ def refitted(names: list[str], active) -> list[str]:
     return [n for k, (n, on) in enumerate(zip(names, active)) if on and k > 0]
 
 
-def head(data: TimeSeries, n: int) -> TimeSeries:
-    """The first ``n`` samples of ``data`` (where the model's initial state holds)."""
-    return dataclasses.replace(data, time=data.time[:n], values=data.values[:n])
-
-
 def cpu_seconds() -> float:
     """CPU seconds of this process and its finished workers (user + system)."""
     import resource
@@ -381,7 +376,7 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
     if spec.free:
         names = [n for law in laws for n in refitted(law["names"], law["active"])]
         held = [n for law in laws for n in law["names"] if n not in names]
-        cal = calibrate(base.model, head(whole, CALIBRATION_SPAN * spec.max_samples), validate, params, names,
+        cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
                         spec.free, outputs, held, judged_on=whole)
         report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
 
