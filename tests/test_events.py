@@ -729,3 +729,33 @@ def test_a_diode_relation_is_held_between_events_and_the_rectifier_is_exact(tmp_
         return [(i - v[0] / 100) / 1e-3]
     ref = solve_ivp(rhs, (0, 0.2), [0.0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=1e-5).y[0]
     assert np.max(np.abs(res.output("vC") - ref)) < 1e-3          # of 10 V
+
+
+CLOCKED = """
+model Clocked "a sample() clock read by an equation, and initial(), with no discrete variable"
+  import Modelica.Blocks.Sources;
+  Sources.SampleTrigger trigger(period = 0.5, startTime = 0.25) "a tick every 0.5 s";
+  Real x(start = 1, fixed = true);
+  output Real y;
+  output Real first;
+equation
+  der(x) = if trigger.y then 0 else -x;
+  y = x;
+  first = if initial() then 5 else x;
+end Clocked;
+"""
+
+
+@needs_msl()
+def test_a_clock_read_by_an_equation_alone_makes_the_model_hybrid(tmp_path):
+    """A SampleTrigger whose tick only a continuous equation reads (no when, no discrete
+    variable): the tick and initial() are the discrete part. It was a CasADi error ("flags_2 are
+    free") where it is an engineer's model; its ticks are instants, so x decays as exp(-t)."""
+    (tmp_path / "Clocked.mo").write_text(CLOCKED)
+    model = compile_model([tmp_path / "Clocked.mo"], "Clocked", libraries=[msl_path()])
+    assert model.ode.events["clocks"] == [[0.25, 0.5]]
+    t = np.linspace(0, 2, 21)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    assert np.max(np.abs(res.output("y") - np.exp(-t))) < 1e-5
+    assert np.max(np.abs(res.output("first")[1:] - np.exp(-t[1:]))) < 1e-5

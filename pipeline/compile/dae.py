@@ -81,7 +81,16 @@ class Dae:
 
     @property
     def hybrid(self) -> bool:
-        return self.d.numel() > 0 or self.asserts.numel() > 0
+        """Whether the model has a discrete part: discrete variables, asserts, or equations that
+        read pre(), initial(), terminal() or a sample() clock's tick (a SampleTrigger alone)."""
+        if self.d.numel() > 0 or self.asserts.numel() > 0 or self.clocks:
+            return True
+        hybrid = ca.vertcat(self.d_pre, self.x_pre, self.z_pre, self.flags)
+        if not hybrid.numel():
+            return False
+        reads = ca.vertcat(self.residual, self.init_residual, *self.exprs.values()) if self.exprs else \
+            ca.vertcat(self.residual, self.init_residual)
+        return any(ca.depends_on(reads, s) for s in ca.vertsplit(hybrid))
 
 
 def check_balance(residual: ca.SX, nx: int, nz: int, name: str) -> None:
