@@ -47,6 +47,20 @@ class CompiledModel:
     def parameters(self) -> dict[str, float]:
         return dict(zip(self.ode.p_names, map(float, self.ode.p_values)))
 
+    @property
+    def initial_parameters(self) -> list[str]:
+        """The free parameters that only the initial equations read (an initial position, a
+        tank's start level): no equation of the run and no output depends on them."""
+        o, n = self.ode, len(self.ode.p_names)
+        cols = lambda f, k: {c for c in f.sparsity_jac(k, 0).get_col() if c < n}
+        try:
+            read = set().union(*(cols(getattr(o, f), 2) for f in ("ode", "out", "zero", "update", "asserts", "loops")
+                                 if getattr(o, f, None) is not None))
+            init = cols(o.init, 1)
+        except RuntimeError:      # a function CasADi cannot give the sparsity of: claim none
+            return []
+        return [o.p_names[k] for k in sorted(init - read)]
+
     def __repr__(self) -> str:
         o = self.ode
         return (f"CompiledModel({self.name!r}: {len(o.x_names)} states, {len(o.u_names)} inputs, "

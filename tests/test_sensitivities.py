@@ -137,3 +137,13 @@ def test_a_parameter_of_an_initial_equation_has_its_sensitivity(tmp_path):
         fd = finite_difference(model, u.select(["Q"]), n, v, 1e-3 * v)
         assert rel_err(res.sensitivities[:, :, j], fd) < 1e-3, n
     assert np.allclose(res.sensitivities[:, 0, 0], np.exp(-2.0 / 50 * t), atol=1e-3)
+
+
+@needs_msl()
+def test_the_parameters_only_initial_equations_read_are_told_apart(tmp_path):
+    """T0 only sets the body's start (the calibration fits it after the physics); G and the
+    capacitor's C are read by the equations of the run."""
+    (tmp_path / "Heated.mo").write_text(INITIAL_STATE)
+    model = compile_model([tmp_path / "Heated.mo"], "Heated", libraries=[msl_path()])
+    assert "T0" in model.initial_parameters, model.parameters
+    assert not {"G", "body.C", "wall.G"} & set(model.initial_parameters)

@@ -118,7 +118,6 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     (names, or "auto": those the data determine). Returns what was freed, what the data cannot
     determine, the values with standard errors, and the training and validation RMS (the
     training RMS on ``judged_on`` when given: the whole record of which ``train`` is the head)."""
-    from ..fit import FitProblem, LevenbergMarquardt
     from ..services import simulate
 
     nominal = [n for n in model.ode.p_names if n not in laws and n not in held and np.isfinite(params[n])]
@@ -140,10 +139,13 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     log.info("      calibration: %s refitted with the laws%s", ", ".join(determined) or "nothing",
              f"; not determined by the data: {', '.join(undetermined)}" if undetermined else "")
     names = laws + determined
-    fixed = {k: v for k, v in params.items() if k not in names}
-    problem = FitProblem(model, train, names, fixed=fixed, options=FIT_OPTIONS)
-    res = LevenbergMarquardt(max_simulations=60, axis=None, tol=1e-6).fit(problem, [params[n] for n in names])
-    new = {**params, **dict(zip(names, map(float, res.w)))}
+    # the initial state is a nuisance: the laws and the physical parameters are fitted first
+    # from the start as given, then everything from there. Fitted together from the start, a
+    # long record's initial state can lead the fit into a worse optimum that absorbs drift
+    # (EMPS: 1.9 against 1.5 mm on training, 8.3 against 5.2 mm on the test record)
+    initial = set(getattr(model, "initial_parameters", ())) & set(determined)
+    start = _refit(model, train, params, [n for n in names if n not in initial]) if initial else params
+    new = _refit(model, train, start, names)
     r2, J2 = jacobian(model, train, new, names)
     cov = covariance(r2, J2) if r2 is not None else np.full((len(names), len(names)), np.nan)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -159,6 +161,16 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
         out["validation_rms"] = rms(residual(validate, model, sv, outputs)) if sv.ok else None
     out["params"] = new
     return out
+
+
+def _refit(model, data: TimeSeries, params: dict, names: list[str]) -> dict:
+    """``params`` with ``names`` refitted on ``data`` (Levenberg-Marquardt from their values)."""
+    from ..fit import FitProblem, LevenbergMarquardt
+
+    fixed = {k: v for k, v in params.items() if k not in names}
+    problem = FitProblem(model, data, names, fixed=fixed, options=FIT_OPTIONS)
+    res = LevenbergMarquardt(max_simulations=60, axis=None, tol=1e-6).fit(problem, [params[n] for n in names])
+    return {**params, **dict(zip(names, map(float, res.w)))}
 
 
 def _determined(r, J, laws, candidates, params, strict: bool) -> tuple[list[str], list[str]]:
