@@ -490,7 +490,10 @@ class _Plan:
         # the guesses each grid point was integrated with (those of its call)
         self.guesses = np.full((self.ng, len(self.t_int)), np.nan)
         self.guesses[:, 0] = p[npu:]
-        budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
+        try:
+            budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
+        except RuntimeError as exc:       # (a linear block that sparse QR finds singular)
+            return fail(f"model evaluation failed at the start: {_last_line(exc)}")
         t_int = self.t_int
         traj = np.full((len(xa), len(t_int)), np.nan)
         hybrid = self.hybrid

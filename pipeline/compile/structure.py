@@ -235,9 +235,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 sol_newton = f(prev_sx, *args) if newton is not None else None
             else:
                 fa = ca.Function(f"blk{k}", [zprev, *args], [A, b])
-                # dense QR: NaN where singular, where sparse QR raised and took the whole
-                # evaluation down (a diode bridge's moded block of 13, its DC link floating)
-                how = "lapackqr" if len(cols) <= DENSE_SOLVE_MAX else "qr"
+                # (a switch's block of a few unknowns, solved here for its modes: sparse, 20 % faster;
+                # dense QR there changed a lossy gear's rounding enough that its modes chattered)
+                how = "lapackqr" if SYMBOLIC_SOLVE_MAX < len(cols) <= DENSE_SOLVE_MAX else "qr"
                 block = (lambda pv, fa=fa, how=how: -ca.solve(*fa(pv, *mx_args), how))
                 newton = None
         elif not torn:      # explicit in order (a step read an unknown known by then): no loop
