@@ -26,7 +26,7 @@ import numpy as np
 
 from .data import TimeSeries
 from .errors import DataError
-from .compile.structure import differentiable
+from .compile.structure import differentiable, initial_state
 from .model import CompiledModel
 from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
                          quiet_native_output)
@@ -322,8 +322,7 @@ class _Plan:
             y = differentiable(ode, "out", p_cols=sel)(Xs, Us, Ps, Ts)
             dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel]
             self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts], [dy]).map(N)
-            x0 = ode.init(Us, Ps, Ts)
-            self.dx0 = ca.Function("dx0", [Us, Ps, Ts], [x0, ca.jacobian(x0, Ps)[:, sel]])
+            self.dx0 = initial_state(ode, sel)
         self.nx, self.ns = nx, ns
         self.scale = lambda p: _sens_scale(np.asarray(p, float)[self.sel])
         self.u_at = (lambda t: np.array([np.interp(t, u.time, u.values[:, j]) for j in range(len(u.names))]))

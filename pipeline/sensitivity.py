@@ -293,10 +293,10 @@ class Linearisation:
             return np.zeros((self.nx, self.nq))
         try:
             if "dx0" not in self._maps:     # made once per model and selection, with the others
-                U, P, T = self.ode.init.mx_in()
-                dx0 = ca.jacobian(self.ode.init(U, P, T), P)[:, self.idx]
-                self._maps["dx0"] = ca.Function("dx0", [U, P, T], [ca.densify(dx0)])
-            S0 = np.array(self._maps["dx0"](self.U[:, 0], self.p, self.time[0]), float)
+                from .compile.structure import initial_state
+
+                self._maps["dx0"] = initial_state(self.ode, self.idx)
+            S0 = np.array(self._maps["dx0"](self.U[:, 0], self.p, self.time[0])[1], float)
         except RuntimeError:        # an initial solve that does not differentiate: from 0, as before
             return np.zeros((self.nx, self.nq))
         return np.where(np.isfinite(S0), S0, 0.0)

@@ -88,8 +88,7 @@ class Dae:
         hybrid = ca.vertcat(self.d_pre, self.x_pre, self.z_pre, self.flags)
         if not hybrid.numel():
             return False
-        reads = ca.vertcat(self.residual, self.init_residual, *self.exprs.values()) if self.exprs else \
-            ca.vertcat(self.residual, self.init_residual)
+        reads = ca.vertcat(self.residual, self.init_residual, *self.exprs.values())
         return any(ca.depends_on(reads, s) for s in ca.vertsplit(hybrid))
 
 

@@ -703,6 +703,15 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     )
 
 
+def initial_state(ode: Ode, p_cols) -> ca.Function:
+    """(u, p, t) -> (x0, d x0 / d p[:, p_cols]): the initial equations and their derivative in
+    the parameters ``p_cols`` (where a parameter that only sets a state, s0 in M.s = s0, acts).
+    Raises RuntimeError for an initial solve that CasADi cannot differentiate."""
+    U, P, T = ode.init.mx_in()
+    x0 = ode.init(U, P, T)
+    return ca.Function("dx0", [U, P, T], [x0, ca.densify(ca.jacobian(x0, P)[:, p_cols])])
+
+
 def differentiable(ode: Ode, which: str = "ode", p_cols=None) -> ca.Function:
     """``ode.ode`` (x') or ``ode.out`` (y) for a caller that differentiates it (an integrator's
     Newton method and forward sensitivities, the outputs' sensitivities): the function itself,

@@ -148,7 +148,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     # (the second fit starts next to its optimum: a third of the first's simulations)
     initial = set(getattr(model, "initial_parameters", ())) & set(determined)
     start = _refit(model, train, params, [n for n in names if n not in initial]) if initial else params
-    new = _refit(model, train, start, names, budget=REFIT_BUDGET // 3 if initial else REFIT_BUDGET)
+    new = _refit(model, train, start, names, REFIT_BUDGET // 3 if initial else REFIT_BUDGET)
     r2, J2 = jacobian(model, train, new, names)
     cov = covariance(r2, J2) if r2 is not None else np.full((len(names), len(names)), np.nan)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -166,14 +166,14 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     return out
 
 
-def _refit(model, data: TimeSeries, params: dict, names: list[str], budget: int | None = None) -> dict:
+def _refit(model, data: TimeSeries, params: dict, names: list[str], budget: int = REFIT_BUDGET) -> dict:
     """``params`` with ``names`` refitted on ``data`` (Levenberg-Marquardt from their values, in
     at most ``budget`` simulations)."""
     from ..fit import FitProblem, LevenbergMarquardt
 
     fixed = {k: v for k, v in params.items() if k not in names}
     problem = FitProblem(model, data, names, fixed=fixed, options=FIT_OPTIONS)
-    res = LevenbergMarquardt(max_simulations=budget or REFIT_BUDGET, axis=None, tol=1e-6).fit(
+    res = LevenbergMarquardt(max_simulations=budget, axis=None, tol=1e-6).fit(
         problem, [params[n] for n in names])
     return {**params, **dict(zip(names, map(float, res.w)))}
 
