@@ -759,3 +759,58 @@ def test_a_clock_read_by_an_equation_alone_makes_the_model_hybrid(tmp_path):
     assert res.ok, res.reason
     assert np.max(np.abs(res.output("y") - np.exp(-t))) < 1e-5
     assert np.max(np.abs(res.output("first")[1:] - np.exp(-t[1:]))) < 1e-5
+
+
+INTERLOCK = """
+model Interlock "A press interlock: the door sensor feeds both the run gate and the alarm"
+  import Modelica.Blocks.MathBoolean;
+  import Modelica.Blocks.MathInteger;
+  import Modelica.Blocks.Sources;
+  Sources.BooleanPulse door(width=50, period=1) "door closed";
+  Sources.BooleanPulse key(width=30, period=0.4) "operator's key";
+  Sources.BooleanStep stop(startTime=1.5) "emergency stop";
+  MathBoolean.And run(nu=2);
+  MathBoolean.Or alarm(nu=2);
+  Sources.IntegerStep level(height=2, offset=1, startTime=0.7);
+  MathInteger.Sum total(nu=2);
+  MathInteger.Product square(nu=2);
+  Modelica.Blocks.Interfaces.BooleanOutput running;
+  Modelica.Blocks.Interfaces.BooleanOutput alarmed;
+  Modelica.Blocks.Interfaces.IntegerOutput doubled;
+  Modelica.Blocks.Interfaces.IntegerOutput squared;
+equation
+  connect(key.y, run.u[1]);
+  connect(door.y, run.u[2]);
+  connect(stop.y, alarm.u[1]);
+  connect(door.y, alarm.u[2]);
+  connect(level.y, total.u[1]);
+  connect(level.y, total.u[2]);
+  connect(level.y, square.u[1]);
+  connect(level.y, square.u[2]);
+  connect(run.y, running);
+  connect(alarm.y, alarmed);
+  connect(total.y, doubled);
+  connect(square.y, squared);
+end Interlock;
+"""
+
+
+@needs_msl()
+def test_one_logic_signal_fed_to_elements_of_two_gates_inputs_compiles_and_is_exact(tmp_path):
+    """The door sensor drives an element of both the And and the Or gate's vector input (and
+    one Integer source all four elements of two blocks): rumoca 0.10.2 refuses such a
+    connection set ("invalid Appendix B discrete solved form"); written as equations it is the
+    same model. The gates' outputs are the truth tables of the sources, computed here."""
+    (tmp_path / "Interlock.mo").write_text(INTERLOCK)
+    source = (tmp_path / "Interlock.mo").read_text()
+    model = compile_model([tmp_path / "Interlock.mo"], "Interlock", libraries=[msl_path()])
+    assert (tmp_path / "Interlock.mo").read_text() == source      # the user's file is not touched
+    t = np.arange(0.05, 2, 0.1)                                   # between the sources' edges
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    door, key, stop = (t % 1) < 0.5, (t % 0.4) < 0.12, t >= 1.5
+    level = np.where(t >= 0.7, 3, 1)
+    assert np.array_equal(res.output("running"), (door & key).astype(float))
+    assert np.array_equal(res.output("alarmed"), (door | stop).astype(float))
+    assert np.array_equal(res.output("doubled"), 2.0 * level)
+    assert np.array_equal(res.output("squared"), 1.0 * level ** 2)

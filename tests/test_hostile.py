@@ -83,6 +83,30 @@ def test_unsupported_delay_is_a_clear_error_not_a_crash(tmp_path, capsys):
     assert "D.mo:4: unsupported Modelica construct: delay()" in capsys.readouterr().err
 
 
+PANIC = """model P "A count of the thresholds passed: a sum over a comprehension, in a when"
+  parameter Integer n = 3;
+  Real y(start=0, fixed=true);
+  Boolean x[n] = {time > 0.1*i for i in 1:n};
+equation
+  when sample(0, 0.1) then
+    y = sum(if x[i] then 2^(i - 1) else 0 for i in 1:n);
+  end when;
+end P;
+"""
+
+
+def test_a_model_that_crashes_the_front_end_is_a_clear_error_and_the_next_compiles(tmp_path, capsys):
+    """rumoca 0.10.2 panics (a Rust panic: pyo3's PanicException, not an Exception) on this
+    model; that is the user's one-line error, and the session it left is not used again."""
+    (tmp_path / "P.mo").write_text(PANIC)
+    assert main(["compile", str(tmp_path / "P.mo"), "--model", "P", "-o", str(tmp_path / "p.fmu")]) == 2
+    err = capsys.readouterr().err
+    assert "P.mo" in err and "front end (rumoca) stopped on an internal error" in err
+    assert "Traceback" not in err
+    (tmp_path / "D.mo").write_text("model D\n  Real x(start=1, fixed=true);\nequation\n  der(x) = -x;\nend D;\n")
+    assert main(["compile", str(tmp_path / "D.mo"), "--model", "D", "-o", str(tmp_path / "d.fmu")]) == 0
+
+
 UNROLL = """model Unroll "a function whose loops unroll (as a medium's property functions do)"
   function f
     input Real x;

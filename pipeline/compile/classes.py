@@ -13,6 +13,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .sources import COMMENT_OR_STRING
+
 _KEYWORDS = r"(?:model|block|connector|record|package|class|type|function|operator)"
 _PREFIXES = {"parameter", "constant", "input", "output", "flow", "stream", "discrete", "final", "inner",
              "outer", "replaceable", "redeclare", "each", "public", "protected", "expandable"}
@@ -29,8 +31,7 @@ class ClassInfo:
 
 def _strip(text: str) -> str:
     """Comments, strings and annotations out (they hold ';' and keywords)."""
-    text = re.sub(r"//[^\n]*|/\*.*?\*/", " ", text, flags=re.S)
-    text = re.sub(r'"(?:\\.|[^"\\])*"', " ", text)
+    text = COMMENT_OR_STRING.sub(" ", text)
     out, i = [], 0
     for m in re.finditer(r"\bannotation\s*\(", text):
         if m.start() < i:

@@ -118,6 +118,11 @@ class _Front:
         stub = f"model {ENTRY}\n  extends {model};\nend {ENTRY};\n"
         return self.session.loads(stub, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo")
 
+    def reset(self):
+        """Forget every document (after rumoca failed inside, its session is not trusted)."""
+        self.session.clear()
+        self.docs, self.owner = {}, {}
+
     def _load(self, path: Path, digest: str, model: str):
         """A package directory is read as a tree; a single file under a name of its own, so that
         rumoca does not also read the files beside it (a run directory holds many)."""
@@ -183,6 +188,10 @@ def virtual_name(path: Path, digest: str) -> str:
 
 
 ENTRY = "MclEntry_"
+class FrontEndCrash(Exception):
+    """rumoca panicked (a Rust panic): its message, to be said in the model's words."""
+
+
 _FRONTS: dict[tuple, _Front] = {}
 
 
@@ -336,12 +345,13 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
     """rumoca's DAE-stage IR of ``model`` and the text of the files it read."""
     import rumoca
 
+    from .library import available, library_path
+
     prep = prepared or prepare(paths, libraries, model)
+    libs = available(library_path(prep.libraries))     # here: the rumoca thread runs without MODELICAPATH
     top = model.split(".")[0]
     if not any(top in names for _, names in prep.docs.values()):
-        from .library import available, library_path
-
-        if top not in available(library_path(libraries)):
+        if top not in libs:
             raise ModelicaError(f"class '{model}' not found: no source and no library on the path "
                                 f"defines '{top}'", where=str(paths[0]) if paths else None)
     real = prep.virtual
@@ -349,11 +359,11 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
     def work():
         subset = prep.whole != prep.roots
         try:
-            compiled = _front(prep.roots).compile(prep.docs, model)
+            compiled = _compile(prep, prep.roots, model, libs)
         except rumoca.RumocaError:
             if not subset:
                 raise
-            compiled, subset = _front(prep.whole).compile(prep.docs, model), False   # a file the subset missed
+            compiled, subset = _compile(prep, prep.whole, model, libs), False   # a file the subset missed
         ir = compiled.to_dict("dae")
         ir["library_subset"] = subset
         # the flat stage names each equation's origin (a component's own equation, a flow
@@ -365,9 +375,57 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
         ir = in_rumoca_thread(work)
     except rumoca.RumocaError as exc:
         raise _located_error(exc, model, prep.files, real) from None
+    except FrontEndCrash as exc:
+        raise UnsupportedConstruct(f"cannot compile {model}: the Modelica front end (rumoca) stopped on an "
+                                   f"internal error ({exc}); a construct of the model it cannot translate",
+                                   where=str(prep.files[0]) if prep.files else None) from None
     roots = str(roots_dir())
     located = Located({f[0]: (real.get(f[1]) or _real(f[1], roots), f[2]) for f in ir.get("source_map", {}).get("files", [])})
     return ir, located
+
+
+def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]):
+    """rumoca's compiled ``model``; where rumoca cannot lower a discrete signal fanned out to
+    vector elements (:mod:`.fanout`), a copy of the model with those connections as equations."""
+    import rumoca
+
+    front = _front(roots)
+    try:
+        return front.compile(prep.docs, model)
+    except BaseException as exc:    # a Rust panic is pyo3's PanicException, a BaseException
+        if type(exc).__name__ == "PanicException":
+            front.reset()
+            raise FrontEndCrash(str(exc).strip().splitlines()[0] if str(exc).strip() else "panic") from None
+        if not isinstance(exc, rumoca.RumocaError):
+            raise
+        if "Appendix B" not in str(exc):
+            raise
+        source = _fanned_out(prep, model, libs)
+        if source is None:
+            raise
+        package = model.rpartition(".")[0]
+        try:
+            return front.session.loads(source, model=f"{package}.{ENTRY}" if package else ENTRY,
+                                       filename=f"{VIRTUAL}/{ENTRY}.mo")
+        except rumoca.RumocaError:
+            raise exc from None
+
+
+def _fanned_out(prep: Prepared, model: str, libs: dict[str, Path]) -> str | None:
+    from .classes import LibraryClasses
+    from .fanout import rewritten_entry
+
+    lib = LibraryClasses(libs)
+    short = model.split(".")[-1]
+    if any(model.split(".")[0] in names for _, names in prep.docs.values()):
+        candidates = prep.files
+    else:
+        candidates = [located[0]] if (located := lib.file_of(model)) else []
+    for path in candidates:
+        text = path.read_text(encoding="utf-8", errors="replace")
+        if re.search(rf"\b(model|block|class)\s+{short}\b", text):
+            return rewritten_entry(model, text, ENTRY, lib)
+    return None
 
 
 # rumoca's words -> (error class, our words, a pattern that finds the place in the user's files)

@@ -12,6 +12,8 @@ constrainedby der discrete each else elseif elsewhen encapsulated end enumeratio
 extends external false final flow for function if import impure in initial inner input loop model not
 operator or outer output package parameter partial protected public pure record redeclare replaceable
 return stream then true type when while within""".split())
+#: a string or a comment, matched left to right (a string may hold "//", as in modelica://)
+COMMENT_OR_STRING = re.compile(r'"(?:\\.|[^"\\])*"|//[^\n]*|/\*.*?\*/', re.S)
 
 
 def checked(paths) -> list[Path]:

@@ -17,12 +17,11 @@ import re
 from pathlib import Path
 
 from .overlays import files_of, rewritten
-from .sources import KEYWORDS
+from .sources import COMMENT_OR_STRING, KEYWORDS
 
 #: a library smaller than this (bytes of .mo) is taken whole
 WHOLE = 400_000
 
-_STRIP = re.compile(r'"(?:\\.|[^"\\])*"|//[^\n]*|/\*.*?\*/', re.S)
 _NAME = re.compile(r"(?<![\w.])([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)")
 _IMPORT = re.compile(r"\bimport\s+(?:(\w+)\s*=\s*)?([\w.]+?)(\.\*|\.\{([^}]*)\})?\s*;")
 _EXTENDS = re.compile(r"\bextends\s+([\w.]+)")
@@ -124,7 +123,7 @@ def _read(text: str):
     """The names a text uses; those its extends and import clauses use (all a package needs of
     the file declaring it when none of its classes there is used); its imports (alias -> full
     name, wildcard packages)."""
-    code = _STRIP.sub(" ", text)
+    code = COMMENT_OR_STRING.sub(" ", text)
     aliases, wild = {}, []
     for alias, target, star, group in _IMPORT.findall(code):
         if group:
