@@ -236,3 +236,14 @@ def test_default_experiment_without_data(small, tmp_path):
     assert guess.source == "estimate" and 5 <= guess.stop <= 500 and 0 < guess.step <= guess.stop / 100
     with zipfile.ZipFile(small["Switched"]) as z:
         assert "<DefaultExperiment" in z.read("modelDescription.xml").decode()
+
+
+def test_a_link_in_the_documentation_does_not_hide_the_experiment(tmp_path):
+    """``modelica://`` in a string on the annotation's line is not a comment: the stop time
+    after it is read (it was cut off as one, and the stop time estimated)."""
+    (tmp_path / "Doc.mo").write_text(
+        'model Doc\n  Real x(start=1, fixed=true);\nequation\n  der(x) = -x;\n'
+        '  annotation(Documentation(info="<a href=\\"modelica://Doc\\">Doc</a>"), experiment(StopTime=7, Interval=0.01));\n'
+        'end Doc;\n')
+    ex = for_model(compile_model([tmp_path / "Doc.mo"], "Doc"))
+    assert (ex.source, ex.stop, ex.step) == ("annotation", 7.0, 0.01)

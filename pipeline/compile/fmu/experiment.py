@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..sources import COMMENT_OR_STRING
+
 DEFAULT_TOLERANCE = 1e-6
 
 
@@ -117,8 +119,9 @@ def _in_root(root: Path, parts: list[str], top_level: bool) -> str | None:
 
 
 def _read(path: Path) -> str:
+    """The file without its comments (its strings kept: a "//" in one is not a comment)."""
     text = path.read_text(encoding="utf-8", errors="replace")
-    return re.sub(r"//[^\n]*|/\*.*?\*/", " ", text, flags=re.S)
+    return COMMENT_OR_STRING.sub(lambda m: m[0] if m[0].startswith('"') else " ", text)
 
 
 def _walk(text: str, parts: list[str]) -> str | None:
