@@ -107,6 +107,17 @@ def test_a_model_that_crashes_the_front_end_is_a_clear_error_and_the_next_compil
     assert main(["compile", str(tmp_path / "D.mo"), "--model", "D", "-o", str(tmp_path / "d.fmu")]) == 0
 
 
+def test_a_parameter_the_compiler_needs_but_only_started_is_named_with_the_fix(tmp_path, capsys):
+    """A sample() interval read from a parameter that has only a start value: other tools take
+    the start with a warning, rumoca stops; the error names the parameter, its line and how
+    to set it, not an "unsupported runtime operator"."""
+    (tmp_path / "Tick.mo").write_text("model Tick\n  Real x(start=1, fixed=true);\n  parameter Real T(start=0.5);\n"
+                                      "  Boolean tick = sample(0, T);\nequation\n  der(x) = -x;\nend Tick;\n")
+    assert main(["compile", str(tmp_path / "Tick.mo"), "--model", "Tick", "-o", str(tmp_path / "t.fmu")]) == 2
+    err = capsys.readouterr().err
+    assert "Tick.mo:3: parameter T of Tick has no value, only a start value" in err and "T = ..." in err
+
+
 UNROLL = """model Unroll "a function whose loops unroll (as a medium's property functions do)"
   function f
     input Real x;

@@ -436,7 +436,20 @@ _KNOWN = [
      lambda m, model: "unsupported Modelica construct: der() of an expression (write der(x) of a variable)",
      r"\bder\s*\(\s*[^)]*[*/+-]"),
     (r"resolve/parse failed", ModelicaError, None, None),
+    # a parameter declared with a start value and no binding, where its value must be known
+    # when compiling (a sample() interval or start, an array size): other tools warn and take
+    # the start value; rumoca stops
+    (r"not parameter-evaluable: unknown variable: ([\w.]+)", ModelicaError,
+     lambda m, model: f"parameter {m[1]} of {model} has no value, only a start value, and the compiler needs "
+                      f"it (a sample() time, an array size): set it, e.g. {_modifier(m[1])}",
+     lambda m: rf"\b{re.escape(m[1].split('.')[0])}\b\s*[(;\[]"),
 ]
+
+
+def _modifier(name: str) -> str:
+    """``p.period`` -> ``p(period = ...)``: how a value for parameter ``name`` is written."""
+    *path, last = name.split(".")
+    return "".join(f"{p}(" for p in path) + f"{last} = ..." + ")" * len(path)
 
 
 def _find(files: list[Path], pattern: str) -> str | None:
@@ -476,6 +489,7 @@ def _located_error(exc, model: str, files: list[Path], real: dict | None = None)
             continue
         if words is None:          # a class that is not there: say what is
             return _missing_class(model, files) or ModelicaError(f"cannot compile {model}: {detail}", where=where)
+        place = place(hit) if callable(place) else place
         return cls(words(hit, model), where=where or (_find(files, place) if place else
                                                       _find(files, rf"\b(model|block|class)\s+{model.split('.')[-1]}\b")))
     if where is None:
