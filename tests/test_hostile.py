@@ -13,8 +13,10 @@ import pytest
 import mcl.api
 import mcl.services
 from helpers import LIB
-from mcl import hookimpl
+from mcl import compile_model, hookimpl
 from mcl.cli import main
+from mcl.data import TimeSeries
+from mcl.engine_casadi import CasadiEngine
 from mcl.errors import DataError
 from mcl.executor import LocalExecutor
 from mcl.compile.fmu.archive import check_archive
@@ -107,15 +109,23 @@ def test_a_model_that_crashes_the_front_end_is_a_clear_error_and_the_next_compil
     assert main(["compile", str(tmp_path / "D.mo"), "--model", "D", "-o", str(tmp_path / "d.fmu")]) == 0
 
 
-def test_a_parameter_the_compiler_needs_but_only_started_is_named_with_the_fix(tmp_path, capsys):
-    """A sample() interval read from a parameter that has only a start value: other tools take
-    the start with a warning, rumoca stops; the error names the parameter, its line and how
-    to set it, not an "unsupported runtime operator"."""
-    (tmp_path / "Tick.mo").write_text("model Tick\n  Real x(start=1, fixed=true);\n  parameter Real T(start=0.5);\n"
-                                      "  Boolean tick = sample(0, T);\nequation\n  der(x) = -x;\nend Tick;\n")
-    assert main(["compile", str(tmp_path / "Tick.mo"), "--model", "Tick", "-o", str(tmp_path / "t.fmu")]) == 2
+def test_a_parameter_the_compiler_needs_but_only_started_takes_its_start_or_is_named(tmp_path, capsys):
+    """A sample() interval read from a parameter that has only a start value: as other tools
+    do, the start value is taken, with a warning (rumoca alone stops: "unsupported runtime
+    operator"); a start that is not a literal cannot be taken, and the error names the
+    parameter, its line and how to set it."""
+    tick = ("model Tick\n  output Integer n(start=0, fixed=true);\n  parameter Real T(start=0.5);\nequation\n"
+            "  when sample(0, T) then\n    n = pre(n) + 1;\n  end when;\nend Tick;\n")
+    (tmp_path / "Tick.mo").write_text(tick)
+    model = compile_model([tmp_path / "Tick.mo"], "Tick")
+    t = np.array([0.2, 0.7, 1.2, 1.9])
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok and list(np.diff(res.output("n"))) == [1, 1, 1]      # one tick each 0.5 s
+    (tmp_path / "Tock.mo").write_text(tick.replace("Tick", "Tock").replace("T(start=0.5)", "T(start=2*T0)")
+                                      .replace("  output Integer n", "  parameter Real T0 = 0.25;\n  output Integer n"))
+    assert main(["compile", str(tmp_path / "Tock.mo"), "--model", "Tock", "-o", str(tmp_path / "t.fmu")]) == 2
     err = capsys.readouterr().err
-    assert "Tick.mo:3: parameter T of Tick has no value, only a start value" in err and "T = ..." in err
+    assert "Tock.mo:4: parameter T of Tock has no value, only a start value" in err and "T = ..." in err
 
 
 UNROLL = """model Unroll "a function whose loops unroll (as a medium's property functions do)"

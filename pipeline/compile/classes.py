@@ -27,6 +27,10 @@ class ClassInfo:
     extends: list[str] = field(default_factory=list)
     declarations: list[tuple[set, str, str, bool]] = field(default_factory=list)  # prefixes, type, name, conditional
     short: str | None = None       # `connector RealInput = input Real`: the right-hand side
+    starts: dict[str, str] = field(default_factory=dict)   # a declaration's literal start value
+
+#: a literal start value in a declaration's modifier: ``period(final min=small, start=1)``
+_START = re.compile(r"\bstart\s*=\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|true|false)\s*[,)]")
 
 
 def _strip(text: str) -> str:
@@ -159,6 +163,9 @@ class LibraryClasses:
                 continue
             conditional = bool(re.search(r"\bif\b", st))
             info.declarations.append((prefixes, type_name, tokens[k], conditional))
+            start = _START.search(st)
+            if start:
+                info.starts[tokens[k]] = start.group(1)
         return info
 
     def resolve(self, name: str, scope: str) -> ClassInfo | None:
@@ -186,6 +193,22 @@ class LibraryClasses:
             out.append((prefixes, self.resolve(type_name, info.name) or self.resolve(type_name, scope),
                         type_name, name, conditional))
         return out
+
+    def start_of(self, info: ClassInfo, name: str, seen=None) -> str | None:
+        """The literal start value that ``info`` or a class it extends declares ``name`` with."""
+        seen = seen or set()
+        if info.name in seen:
+            return None
+        seen.add(info.name)
+        if name in info.starts:
+            return info.starts[name]
+        scope = info.name.rsplit(".", 1)[0]
+        for base in info.extends:
+            b = self.resolve(base, scope) or self.resolve(base, info.name)
+            found = self.start_of(b, name, seen) if b is not None else None
+            if found is not None:
+                return found
+        return None
 
     def connector_variables(self, info: ClassInfo) -> tuple[list[str], list[str]]:
         """(potential, flow) variable names of a connector class."""

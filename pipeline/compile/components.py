@@ -276,16 +276,16 @@ def _nets(flat: dict, connectors: dict) -> list[list[str]]:
 _DECL_PREFIX = r"(?:(?:parameter|constant|input|output|inner|outer|replaceable|redeclare|final|flow|discrete|each)\s+)*"
 
 
-def declared_classes(names, model: str, texts: dict[str, str], libraries=()) -> dict[str, str]:
+def declared_classes(names, model: str, texts: dict[str, str], libraries=(), lib=None) -> dict[str, str]:
     """The fully qualified class of each component in ``names`` (instance paths), read from its
     declaration in the texts the compiler read (``{path: text}``, the user's files first), with
     the imports in force there; a class that cannot be resolved keeps the name as written, one
-    whose declaration is not found is left out."""
+    whose declaration is not found is left out. ``lib``: the library classes, when already read."""
     from .classes import LibraryClasses
     from .library import available, library_path
 
     stripped = _Texts(texts)
-    lib = LibraryClasses(available(library_path(libraries)))
+    lib = lib or LibraryClasses(available(library_path(libraries)))
     out = {}
     for name in names:
         body, scope = None, model

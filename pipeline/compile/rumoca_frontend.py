@@ -385,33 +385,122 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
 
 
 def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]):
-    """rumoca's compiled ``model``; where rumoca cannot lower a discrete signal fanned out to
-    vector elements (:mod:`.fanout`), a copy of the model with those connections as equations."""
+    """rumoca's compiled ``model``. Where rumoca cannot lower a discrete signal fanned out to
+    vector elements (:mod:`.fanout`): a copy of the model with those connections as equations.
+    Where it needs the value of a parameter declared with a start value alone (a sample()
+    time): the model with the start values as the parameters' values, as other tools take
+    them (with a warning)."""
     import rumoca
 
     front = _front(roots)
     try:
-        return front.compile(prep.docs, model)
-    except BaseException as exc:    # a Rust panic is pyo3's PanicException, a BaseException
-        if type(exc).__name__ == "PanicException":
-            front.reset()
-            raise FrontEndCrash(str(exc).strip().splitlines()[0] if str(exc).strip() else "panic") from None
-        if not isinstance(exc, rumoca.RumocaError):
+        return _guarded(front, lambda: front.compile(prep.docs, model))
+    except rumoca.RumocaError as exc:
+        if "Appendix B" in str(exc):
+            source, entry = _fanned_out(prep, model, libs), _in_package(model, ENTRY)
+        elif _UNVALUED.search(str(exc)):
+            source, entry = _started(front, prep, model, libs, exc), ENTRY
+        else:
             raise
-        if "Appendix B" not in str(exc):
-            raise
-        source = _fanned_out(prep, model, libs)
         if source is None:
             raise
-        package = model.rpartition(".")[0]
         try:
-            return front.session.loads(source, model=f"{package}.{ENTRY}" if package else ENTRY,
-                                       filename=f"{VIRTUAL}/{ENTRY}.mo")
+            return _guarded(front, lambda: front.session.loads(source, model=entry, filename=f"{VIRTUAL}/{ENTRY}.mo"))
         except rumoca.RumocaError:
             raise exc from None
 
 
+def _guarded(front: _Front, compile_):
+    """``compile_()``; a Rust panic in rumoca (pyo3's PanicException, a BaseException) is a
+    :class:`FrontEndCrash`, and the session it happened in is reset."""
+    try:
+        return compile_()
+    except BaseException as exc:
+        if type(exc).__name__ != "PanicException":
+            raise
+        front.reset()
+        raise FrontEndCrash(str(exc).strip().splitlines()[0] if str(exc).strip() else "panic") from None
+
+
+def _in_package(model: str, name: str) -> str:
+    package = model.rpartition(".")[0]
+    return f"{package}.{name}" if package else name
+
+
+#: rumoca needs a parameter's value that only has a start value
+_UNVALUED = re.compile(r"not parameter-evaluable: unknown variable: ([\w.]+)")
+#: parameters given their start values in one compile, at most (each found by one failure)
+MAX_STARTED = 8
+
+
+def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], exc) -> str | None:
+    """A model extending ``model`` that gives each parameter rumoca needs, and that has only a
+    start value, that value; None where one has no literal start value to take."""
+    import logging
+
+    import rumoca
+
+    from .classes import LibraryClasses
+
+    lib, values = LibraryClasses(libs), {}
+    for _ in range(MAX_STARTED):
+        hit = _UNVALUED.search(str(exc))
+        if hit is None:
+            break
+        name = hit[1]
+        value = None if name in values else _start_value(name, model, prep, lib)
+        if value is None:
+            return None
+        values[name] = value
+        source = f"model {ENTRY}\n  extends {model}({_modifiers(values)});\nend {ENTRY};\n"
+        try:
+            _guarded(front, lambda: front.session.loads(source, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo"))
+        except rumoca.RumocaError as again:
+            exc = again
+            continue
+        for n, v in values.items():
+            logging.getLogger(__name__).warning("parameter %s has no value: its start value %s is used", n, v)
+        return source
+    return None
+
+
+def _modifiers(values: dict[str, str]) -> str:
+    """``{"p.period": "1", "p.startTime": "0", "T": "2"}`` -> ``p(period=1, startTime=0), T=2``."""
+    tree: dict = {}
+    for name, value in values.items():
+        *path, last = name.split(".")
+        node = tree
+        for part in path:
+            node = node.setdefault(part, {})
+        node[last] = value
+
+    def text(node):
+        return ", ".join(f"{k}({text(v)})" if isinstance(v, dict) else f"{k}={v}" for k, v in node.items())
+    return text(tree)
+
+
+def _start_value(name: str, model: str, prep: Prepared, lib) -> str | None:
+    """The literal start value parameter ``name`` (a path in ``model``) is declared with."""
+    from .components import _Texts, declared_classes
+
+    *path, param = name.split(".")
+    texts = {str(f): f.read_text(encoding="utf-8", errors="replace") for f in prep.files}
+    located = lib.file_of(model)
+    if located is not None and located[0].is_file():
+        texts.setdefault(str(located[0]), located[0].read_text(encoding="utf-8", errors="replace"))
+    owner = declared_classes([".".join(path)], model, texts, lib=lib).get(".".join(path)) if path else model
+    if owner is None:
+        return None
+    info = lib.find(owner)
+    if info is None:                      # a class of the user's own files
+        body = _Texts(texts).class_body(owner.split(".")[-1])
+        info = lib._info(owner, "model", body) if body is not None else None
+    return lib.start_of(info, param) if info is not None else None
+
+
 def _fanned_out(prep: Prepared, model: str, libs: dict[str, Path]) -> str | None:
+    """The source of :data:`ENTRY` in ``model``'s package: the model with its fanned-out
+    discrete connections as equations (:mod:`.fanout`); None where it has none."""
     from .classes import LibraryClasses
     from .fanout import rewritten_entry
 
