@@ -41,6 +41,10 @@ class ConfigError(MclError):
     """A run file or command-line value is invalid."""
 
 
+class FitError(MclError):
+    """A fit that cannot proceed: no parameter value near its start simulates."""
+
+
 class NotFittedError(MclError, AttributeError):
     """A result of an estimator (``law_``, ``cause_``, ...) read before ``fit``; also an
     AttributeError, so ``hasattr(d, "law_")`` is False before fit."""

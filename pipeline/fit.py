@@ -36,7 +36,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from .data import TimeSeries
-from .errors import ConfigError, DataError
+from .errors import ConfigError, DataError, FitError
 from .feasibility import LogisticFeasibility, binary_entropy
 from .stats import gram_inverse
 
@@ -565,7 +565,7 @@ class LevenbergMarquardt(Fitter):
         w, ok = self._start(problem, w, q, budget=self.restore, fixed=[] if self.axis is None else [self.axis])
         current = self._step_data(problem, w) if ok else None
         if current is None:
-            raise ConfigError("no start point of the fit simulates (tried around the given one)")
+            raise FitError("no start point of the fit simulates (tried around the given one)")
         if self.progress:
             self.progress(current[2])
         message = "budget reached"
