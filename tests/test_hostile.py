@@ -125,7 +125,7 @@ def test_a_parameter_the_compiler_needs_but_only_started_takes_its_start_or_is_n
                                       .replace("  output Integer n", "  parameter Real T0 = 0.25;\n  output Integer n"))
     assert main(["compile", str(tmp_path / "Tock.mo"), "--model", "Tock", "-o", str(tmp_path / "t.fmu")]) == 2
     err = capsys.readouterr().err
-    assert "Tock.mo:4: parameter T of Tock has no value, only a start value" in err and "T = ..." in err
+    assert "Tock.mo:4: parameter T of Tock has no value, only a start value" in err and "T=..." in err
 
 
 UNROLL = """model Unroll "a function whose loops unroll (as a medium's property functions do)"

@@ -188,6 +188,8 @@ def virtual_name(path: Path, digest: str) -> str:
 
 
 ENTRY = "MclEntry_"
+
+
 class FrontEndCrash(Exception):
     """rumoca panicked (a Rust panic): its message, to be said in the model's words."""
 
@@ -396,16 +398,17 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
     try:
         return _guarded(front, lambda: front.compile(prep.docs, model))
     except rumoca.RumocaError as exc:
-        if "Appendix B" in str(exc):
-            source, entry = _fanned_out(prep, model, libs), _in_package(model, ENTRY)
-        elif _UNVALUED.search(str(exc)):
-            source, entry = _started(front, prep, model, libs, exc), ENTRY
-        else:
-            raise
+        if _UNVALUED.search(str(exc)):
+            compiled = _started(front, prep, model, libs, exc)
+            if compiled is None:
+                raise
+            return compiled
+        source = _fanned_out(prep, model, libs) if "Appendix B" in str(exc) else None
         if source is None:
             raise
         try:
-            return _guarded(front, lambda: front.session.loads(source, model=entry, filename=f"{VIRTUAL}/{ENTRY}.mo"))
+            return _guarded(front, lambda: front.session.loads(source, model=_in_package(model, ENTRY),
+                                                               filename=f"{VIRTUAL}/{ENTRY}.mo"))
         except rumoca.RumocaError:
             raise exc from None
 
@@ -433,9 +436,9 @@ _UNVALUED = re.compile(r"not parameter-evaluable: unknown variable: ([\w.]+)")
 MAX_STARTED = 8
 
 
-def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], exc) -> str | None:
-    """A model extending ``model`` that gives each parameter rumoca needs, and that has only a
-    start value, that value; None where one has no literal start value to take."""
+def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], exc):
+    """rumoca's compiled model extending ``model`` that gives each parameter rumoca needs, and
+    that has only a start value, that value; None where one has no literal start value."""
     import logging
 
     import rumoca
@@ -454,13 +457,13 @@ def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], e
         values[name] = value
         source = f"model {ENTRY}\n  extends {model}({_modifiers(values)});\nend {ENTRY};\n"
         try:
-            _guarded(front, lambda: front.session.loads(source, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo"))
+            compiled = _guarded(front, lambda: front.session.loads(source, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo"))
         except rumoca.RumocaError as again:
             exc = again
             continue
         for n, v in values.items():
             logging.getLogger(__name__).warning("parameter %s has no value: its start value %s is used", n, v)
-        return source
+        return compiled
     return None
 
 
@@ -530,15 +533,9 @@ _KNOWN = [
     # the start value; rumoca stops
     (r"not parameter-evaluable: unknown variable: ([\w.]+)", ModelicaError,
      lambda m, model: f"parameter {m[1]} of {model} has no value, only a start value, and the compiler needs "
-                      f"it (a sample() time, an array size): set it, e.g. {_modifier(m[1])}",
+                      f"it (a sample() time, an array size): set it, e.g. {_modifiers({m[1]: '...'})}",
      lambda m: rf"\b{re.escape(m[1].split('.')[0])}\b\s*[(;\[]"),
 ]
-
-
-def _modifier(name: str) -> str:
-    """``p.period`` -> ``p(period = ...)``: how a value for parameter ``name`` is written."""
-    *path, last = name.split(".")
-    return "".join(f"{p}(" for p in path) + f"{last} = ..." + ")" * len(path)
 
 
 def _find(files: list[Path], pattern: str) -> str | None:
