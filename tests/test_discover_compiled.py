@@ -153,6 +153,7 @@ def test_rotational_msl_model_with_imports_bearing_friction(tmp_path):
     cause = report["cause"]
     assert cause["component"] == "bearing" and cause["class"] == "Modelica.Mechanics.Rotational.Components.Damper"
     assert cause["law"]["equation"].startswith("bearing.tau = ") and "tanh" in cause["law"]["equation"]
+    assert "Coulomb-like friction" in cause["effect"], cause["effect"]      # named as an engineer does
     assert curve_error(cause, friction) < 0.05
     g = report["gain"]
     assert g["validation_rms_after"] < 0.2 * g["validation_rms_before"]

@@ -48,5 +48,5 @@ def test_the_emps_friction_is_named_and_the_joint_refit_adds_to_the_law():
     on the test record (the initial state fitted after the physics: fitted together, it led the
     refit into an optimum that absorbed drift, 7.9 mm against 5.9 mm for the law alone)."""
     found = discovered("emps")
-    assert found["cause"].split()[0] == "F" and "tanh" in found["cause"], found["cause"]
+    assert found["cause"].split()[0] == "F" and "Coulomb-like friction" in found["cause"], found["cause"]
     assert found["joint"]["test.csv"] < found["law"]["test.csv"] < 0.0075, found

@@ -198,14 +198,18 @@ def shape_words(term: str) -> str:
     return term
 
 
+#: a shape's scale in a term: named (s1, s2, ...) or a number (a family's fixed scales)
+_SCALE = r"(?P<s>s\d+|(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
+
+
 def _pattern(shape: str) -> str:
-    """A regular expression for ``shape`` with any variable and any named scale (s1, s2, ...)."""
+    """A regular expression for ``shape`` with any variable and any scale, named or a number."""
     parts = re.split(r"(\{x\}|\{s\})", shape.replace(" ", ""))
     out, seen = [], set()
     for p in parts:
         if p in ("{x}", "{s}"):
             g = p[1]
-            out.append(f"(?P={g})" if g in seen else (r"(?P<x>[a-z]+)" if g == "x" else r"(?P<s>s\d+)"))
+            out.append(f"(?P={g})" if g in seen else (r"(?P<x>[a-z]+)" if g == "x" else _SCALE))
             seen.add(g)
         else:
             out.append(re.escape(p))
