@@ -111,6 +111,7 @@ class LocalExecutor(Executor):
                     busy[worker.results] = worker
                 ready = wait(list(busy), timeout=0.05)
                 now = time.perf_counter()
+                bar.tick(now - min(w.started for w in busy.values()))
                 for conn, worker in list(busy.items()):
                     k = worker.task
                     if conn in ready:

@@ -105,6 +105,21 @@ class Progress:
         if self.done == self.total:
             self.close()
 
+    def tick(self, running: float = 0.0) -> None:
+        """Between results (called as the batch waits): the bar's clock moves on, and a log
+        file gets a line every :data:`LOG_EVERY` seconds saying how long the oldest task still
+        running (``running`` seconds) has taken, so a long fit is not silence."""
+        if not self.on:
+            return
+        now = time.perf_counter()
+        if self.tty:
+            if now - self.bar.last_print_t >= 1.0:
+                self.bar.refresh()
+            return
+        if now - self.said >= LOG_EVERY:
+            self.said = now
+            log.info("%s: %d/%d, one running for %.0f s", self.label, self.done, self.total, running)
+
     def close(self) -> None:
         if self.on and self.done:
             log.info("%s: %d/%d done (%d failed) in %.0f s", self.label, self.done, self.total,

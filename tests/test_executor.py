@@ -83,6 +83,23 @@ def test_progress_eta_counts_rounds_of_workers(caplog):
     assert "batch: 4/4 done (1 failed)" in caplog.text
 
 
+def nap(seconds, x):
+    time.sleep(seconds)
+    return x
+
+
+def test_a_long_task_is_not_silence_in_a_log(caplog, monkeypatch):
+    """Where stderr is a log file, a batch whose task runs long says so now and then (a
+    candidate's fit of 17 minutes printed nothing at all)."""
+    import mcl.progress
+
+    monkeypatch.setattr(mcl.progress, "LOG_EVERY", 0.2)
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        out = LocalExecutor(workers=1).map(nap, [1], context=0.7, timeout=60, label="fits")
+    assert out == [1]
+    assert "fits: 0/1, one running for" in caplog.text, caplog.text
+
+
 class InlineExecutor(SerialExecutor):
     name = "inline"
 
