@@ -134,9 +134,11 @@ class LibraryClasses:
             if found is None:
                 return None
             kind, body = found
-        return self._info(qualified, kind, body)
+        return self.parse(qualified, kind, body)
 
-    def _info(self, qualified: str, kind: str, body: str) -> ClassInfo:
+    def parse(self, qualified: str, kind: str, body: str) -> ClassInfo:
+        """The class called ``qualified`` from its ``body`` (stripped, see :func:`_strip`): a
+        library's, or one of the user's own files."""
         info = ClassInfo(qualified, kind)
         if body.startswith("="):
             info.short = body[1:].strip()
@@ -185,10 +187,8 @@ class LibraryClasses:
         seen.add(info.name)
         scope = info.name.rsplit(".", 1)[0]
         out = []
-        for base in info.extends:
-            b = self.resolve(base, scope) or self.resolve(base, info.name)
-            if b is not None:
-                out += self.members(b, seen)
+        for b in self.bases(info):
+            out += self.members(b, seen)
         for prefixes, type_name, name, conditional in info.declarations:
             out.append((prefixes, self.resolve(type_name, info.name) or self.resolve(type_name, scope),
                         type_name, name, conditional))
@@ -202,13 +202,14 @@ class LibraryClasses:
         seen.add(info.name)
         if name in info.starts:
             return info.starts[name]
+        return next((v for b in self.bases(info) if (v := self.start_of(b, name, seen)) is not None), None)
+
+    def bases(self, info: ClassInfo) -> list[ClassInfo]:
+        """The classes ``info`` extends that are found (looked up from its enclosing scope, then
+        from its own)."""
         scope = info.name.rsplit(".", 1)[0]
-        for base in info.extends:
-            b = self.resolve(base, scope) or self.resolve(base, info.name)
-            found = self.start_of(b, name, seen) if b is not None else None
-            if found is not None:
-                return found
-        return None
+        found = (self.resolve(base, scope) or self.resolve(base, info.name) for base in info.extends)
+        return [b for b in found if b is not None]
 
     def connector_variables(self, info: ClassInfo) -> tuple[list[str], list[str]]:
         """(potential, flow) variable names of a connector class."""

@@ -17,6 +17,7 @@ import re
 
 from .classes import LibraryClasses, _strip
 from .components import _declared_type, _qualified
+from .sources import COMMENT_OR_STRING
 
 _REF = r"[A-Za-z_][\w.]*(?:\[[^\]]*\])?(?:\.[A-Za-z_]\w*(?:\[[^\]]*\])?)*"
 _CONNECT = re.compile(rf"\bconnect\s*\(\s*({_REF})\s*,\s*({_REF})\s*\)")
@@ -81,7 +82,8 @@ def _statement_end(body: str, at: int) -> int:
     while i < len(body):
         ch = body[i]
         if ch == '"':
-            i = body.index('"', i + 1) if '"' in body[i + 1:] else len(body)
+            string = COMMENT_OR_STRING.match(body, i)
+            i = string.end() - 1 if string else len(body)
         elif ch == "(":
             depth += 1
         elif ch == ")":
@@ -98,8 +100,9 @@ def _role(ref: str, body: str, model: str, lib: LibraryClasses) -> str | None:
     None for anything else or what cannot be read."""
     parts = [re.sub(r"\[.*\]$", "", p) for p in ref.split(".")]
     if len(parts) == 1:
-        decl = _own_declaration(body, parts[0])
-        kind = _signal(decl, body, lib, model) if decl else None
+        own = lib.parse(model, "model", body).declarations
+        decl = next(((prefixes, type_name) for prefixes, type_name, name, _c in own if name == parts[0]), None)
+        kind = _signal(*decl, body, lib, model) if decl else None
         return {"input": "source", "output": "sink"}.get(kind)
     if len(parts) != 2:
         return None
@@ -112,16 +115,12 @@ def _role(ref: str, body: str, model: str, lib: LibraryClasses) -> str | None:
     return {"output": "source", "input": "sink"}.get(kind)
 
 
-def _own_declaration(body: str, name: str) -> str | None:
-    m = re.search(rf"(?:^|[;\s])((?:input|output)\s+)?([A-Za-z_][\w.]*)\s*(?:\[[^\]]*\])?\s+{re.escape(name)}\b", body)
-    return m.group(0).strip() if m else None
-
-
-def _signal(decl: str, body: str, lib: LibraryClasses, model: str) -> str | None:
-    words = decl.split()
-    if words[0] in ("input", "output") and words[1] in ("Boolean", "Integer"):
-        return words[0]
-    type_name = words[1] if words[0] in ("input", "output") else words[0]
+def _signal(prefixes: set, type_name: str, body: str, lib: LibraryClasses, model: str) -> str | None:
+    """"input" or "output" for the class's own connector declared ``input Boolean`` (or
+    Integer), or with a signal connector class."""
+    causal = prefixes & {"input", "output"}
+    if causal and type_name in ("Boolean", "Integer"):
+        return causal.pop()
     return _signal_class(lib.find(_qualified(type_name, body, model, lib)))
 
 

@@ -487,17 +487,14 @@ def _start_value(name: str, model: str, prep: Prepared, lib) -> str | None:
     from .components import _Texts, declared_classes
 
     *path, param = name.split(".")
-    texts = {str(f): f.read_text(encoding="utf-8", errors="replace") for f in prep.files}
-    located = lib.file_of(model)
-    if located is not None and located[0].is_file():
-        texts.setdefault(str(located[0]), located[0].read_text(encoding="utf-8", errors="replace"))
+    texts = _model_texts(prep, model, lib)
     owner = declared_classes([".".join(path)], model, texts, lib=lib).get(".".join(path)) if path else model
     if owner is None:
         return None
     info = lib.find(owner)
     if info is None:                      # a class of the user's own files
         body = _Texts(texts).class_body(owner.split(".")[-1])
-        info = lib._info(owner, "model", body) if body is not None else None
+        info = lib.parse(owner, "model", body) if body is not None else None
     return lib.start_of(info, param) if info is not None else None
 
 
@@ -508,16 +505,19 @@ def _fanned_out(prep: Prepared, model: str, libs: dict[str, Path]) -> str | None
     from .fanout import rewritten_entry
 
     lib = LibraryClasses(libs)
-    short = model.split(".")[-1]
-    if any(model.split(".")[0] in names for _, names in prep.docs.values()):
-        candidates = prep.files
-    else:
-        candidates = [located[0]] if (located := lib.file_of(model)) else []
-    for path in candidates:
-        text = path.read_text(encoding="utf-8", errors="replace")
-        if re.search(rf"\b(model|block|class)\s+{short}\b", text):
-            return rewritten_entry(model, text, ENTRY, lib)
-    return None
+    return next((src for text in _model_texts(prep, model, lib).values()
+                 if (src := rewritten_entry(model, text, ENTRY, lib)) is not None), None)
+
+
+def _model_texts(prep: Prepared, model: str, lib) -> dict[str, str]:
+    """{path: text} of the files that may define ``model``: the user's (as :func:`prepare` read
+    them), then, for a library's class, the library file that holds it."""
+    texts = (dict(zip(map(str, prep.files), prep.texts)) if prep.texts is not None else
+             {str(f): f.read_text(encoding="utf-8", errors="replace") for f in prep.files})
+    located = lib.file_of(model) if model.split(".")[0] not in prep.shadowed else None
+    if located is not None and located[0].is_file():
+        texts.setdefault(str(located[0]), located[0].read_text(encoding="utf-8", errors="replace"))
+    return texts
 
 
 # rumoca's words -> (error class, our words, a pattern that finds the place in the user's files)
