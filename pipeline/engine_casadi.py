@@ -26,6 +26,7 @@ import numpy as np
 
 from .data import TimeSeries
 from .errors import DataError
+from .compile import parametric
 from .compile.structure import differentiable, initial_state
 from .model import CompiledModel
 from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
@@ -233,11 +234,19 @@ class _Plan:
         else:
             Ut = ca.MX(0, 1)
             self.u_out = np.zeros((0, len(t_out)))
-        f = differentiable(ode, p_cols=sel)(X, Ut, P, T)
+        # what the parameters alone determine (a filter's coefficients) is computed once per
+        # run, outside the solver's calls: q, and dq/dp for the sensitivities (QP)
+        self.split = None if self.ng else parametric.split(ode)
+        if self.split is not None:
+            Q, QP = ca.MX.sym("q", self.split.nq), ca.MX.sym("qp", self.split.nq, ns)
+            f = self.split.ode(X, Ut, P, Q, T)
+        else:
+            f = differentiable(ode, p_cols=sel)(X, Ut, P, T)
         xa, fa = X, f
         if ns:
             S = ca.MX.sym("S", nx, ns)
-            dS = ca.mtimes(ca.jacobian(f, X), S) + ca.mtimes(ca.jacobian(f, P)[:, sel], ca.diag(_sens_scale(P[sel])))
+            f_p = ca.jacobian(f, P)[:, sel] + (ca.mtimes(ca.jacobian(f, Q), QP) if self.split is not None else 0)
+            dS = ca.mtimes(ca.jacobian(f, X), S) + ca.mtimes(f_p, ca.diag(_sens_scale(P[sel])))
             xa, fa = ca.vertcat(X, ca.vec(S)), ca.vertcat(f, ca.vec(dS))
         fa = ca.densify(fa)       # CVODES takes dense right-hand sides (a state held constant is a structural 0)
         # a run that leaves the caller's bound on |x| (a candidate law that blows up) is frozen
@@ -247,7 +256,7 @@ class _Plan:
         B = ca.MX.sym("bound")
         if opts.state_bound is not None:
             fa = fa * (ca.mmax(ca.fabs(X)) <= B)
-        P = ca.vertcat(P, B)
+        P = ca.vertcat(P, B, *((Q, ca.vec(QP)) if self.split is not None else ()))
         self.na = xa.numel()
         empty = ca.MX.sym("z", 0, 1), ca.MX.sym("u", 0, 1)
         # one oracle for every integrator: its derivatives are built once, so an integrator
@@ -310,7 +319,8 @@ class _Plan:
         N = len(t_out)
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
                           (("x", nx), ("u", len(ode.u_names)), ("p", npar), ("t", 1)))
-        self.checks = ode.checks.map(N)   # outputs and checks with one solve of the loops per point
+        # outputs and checks with one solve of the loops per point (with q, where split)
+        self.checks = (self.split.checks if self.split is not None else ode.checks).map(N)
         if self.branched:   # at the output points, the loops' branches their call had
             z = ode.solved(Xs, Us, Ps, Ts)
             g = Ps[npar - self.ng:]
@@ -319,9 +329,15 @@ class _Plan:
         self.follow_maps: dict = {}
         if ns:
             Ss = ca.MX.sym("S", nx, ns)
-            y = differentiable(ode, "out", p_cols=sel)(Xs, Us, Ps, Ts)
-            dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel]
-            self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts], [dy]).map(N)
+            if self.split is not None:     # q and dq/dp (flattened) as the last arguments
+                Qs, QPs = ca.MX.sym("q", self.split.nq), ca.MX.sym("qp", self.split.nq, ns)
+                y = self.split.out(Xs, Us, Ps, Qs, Ts)
+                dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel] + ca.jacobian(y, Qs) @ QPs
+                self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts, Qs, ca.vec(QPs)], [dy]).map(N)
+            else:
+                y = differentiable(ode, "out", p_cols=sel)(Xs, Us, Ps, Ts)
+                dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel]
+                self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts], [dy]).map(N)
             self.dx0 = initial_state(ode, sel)
         self.nx, self.ns = nx, ns
         self.scale = lambda p: _sens_scale(np.asarray(p, float)[self.sel])
@@ -366,7 +382,7 @@ class _Plan:
         self.refresh(x, ta, p)
         clock = Stopwatch(0)
         try:
-            xf = integ(x0=x, p=np.concatenate([p, [self.bound, ta, tb - ta]]))["xf"]
+            xf = integ(x0=x, p=np.concatenate([p, self.tail, [ta, tb - ta]]))["xf"]
         finally:
             budget.record(_nsteps(integ), clock.elapsed)
         xf = np.array(xf)
@@ -393,7 +409,7 @@ class _Plan:
             self.refresh(x, t0, p)
             clock = Stopwatch(0)
             try:
-                xf = np.array(integ(x0=x, p=np.append(p, self.bound))["xf"])
+                xf = np.array(integ(x0=x, p=np.concatenate([p, self.tail]))["xf"])
             except RuntimeError as exc:
                 budget.record(_nsteps(integ) or steps, clock.elapsed)   # its steps, the rate measured
                 if bound is not None and "TOO_MUCH_WORK" in str(exc):
@@ -466,6 +482,11 @@ class _Plan:
         budget = _Budget(opts, clock)
         self.opts_max_steps = opts.max_steps
         self.bound = math.inf if opts.state_bound is None else float(opts.state_bound)
+        # the integrators' parameters after p: the bound, and the parametric parts q(p), dq/dp
+        self.tail = np.array([self.bound])
+        if self.split is not None:
+            qp = self.split.jacobian(p, self.sel) if self.ns else np.zeros((self.split.nq, 0))
+            self.tail = np.concatenate([self.tail, self.split.values(p), qp.ravel(order="F")])
         names = ode.y_names
 
         def fail(reason):
@@ -518,7 +539,10 @@ class _Plan:
             if self.branched:    # (held comparisons: the branch at the point, not at its call's start)
                 P[npu:] = np.array(self.at_guesses(X, self.u_out, P, t_out[None, :]))
         try:
-            y, res, drift = (np.array(v) for v in self.checks(X, self.u_out, P, t_out[None, :]))
+            at = (X, self.u_out, P, t_out[None, :])
+            if self.split is not None:
+                at = (*at[:3], np.repeat(self.split.values(p)[:, None], N, 1), at[3])
+            y, res, drift = (np.array(v) for v in self.checks(*at))
         except RuntimeError as exc:
             return fail(f"evaluating the outputs failed: {_last_line(exc)}")
         result = SimulationResult(t_out.copy(), y.T, list(names), seconds=clock.elapsed,
@@ -535,7 +559,9 @@ class _Plan:
             # column k of traj holds vec(S(t_k)); the mapped function wants [S(t_1), ..., S(t_N)]
             S = np.hstack([traj[self.nx:, k].reshape(self.nx, self.ns, order="F") / self.scale(p)
                            for k in range(N)])
-            dy = np.array(self.sens(X, S, self.u_out, P, t_out[None, :]))
+            extra = ([np.repeat(self.tail[1:1 + self.split.nq, None], N, 1),
+                      np.repeat(self.tail[1 + self.split.nq:, None], N, 1)] if self.split is not None else [])
+            dy = np.array(self.sens(X, S, self.u_out, P, t_out[None, :], *extra))
             result.sensitivities = dy.reshape(len(names), N, self.ns).transpose(1, 0, 2)
             result.sensitivity_names = [ode.p_names[i] for i in self.sel]
         return result

@@ -20,6 +20,7 @@ from collections import OrderedDict
 import casadi as ca
 import numpy as np
 
+from .compile import parametric
 from .simulation import prepare_inputs
 
 #: points per data interval on the grid the rule integrates on (at least, and at most)
@@ -96,15 +97,23 @@ def _functions(ode, idx: list[int]):
         X, U, P, T = ode.ode.mx_in()
         args = [X, U, P, T]
         where = {n: k for k, n in enumerate(ode.probe_names)}
-        if getattr(ode, "given", None) is not None and all(n in where for n in ode.y_names):
+        split = parametric.split(ode)
+        if split is not None:      # the parametric parts q(p) as arguments, and dq/dp (QP)
+            Q, QP = ca.MX.sym("q", split.nq), ca.MX.sym("qp", split.nq, len(idx))
+            f, y = split.ode(X, U, P, Q, T), split.out(X, U, P, Q, T)
+            jac = [ca.densify(J) for J in (ca.jacobian(f, X), ca.jacobian(f, P)[:, idx] + ca.jacobian(f, Q) @ QP,
+                                           ca.jacobian(y, X), ca.jacobian(y, P)[:, idx] + ca.jacobian(y, Q) @ QP)]
+            args += [Q, QP]
+        elif getattr(ode, "given", None) is not None and all(n in where for n in ode.y_names):
             ZL = ca.MX.sym("zl", ode.given.size1_in(4))
             f, probe = ode.given(X, U, P, T, ZL)
             y = probe[[where[n] for n in ode.y_names]] if ode.y_names else ca.MX(0, 1)
             args.append(ZL)
         else:
             f, y = ode.ode(X, U, P, T), ode.out(X, U, P, T)
-        jac = [ca.densify(J) for J in (ca.jacobian(f, X), ca.jacobian(f, P)[:, idx], ca.jacobian(y, X),
-                                       ca.jacobian(y, P)[:, idx])]
+        if split is None:
+            jac = [ca.densify(J) for J in (ca.jacobian(f, X), ca.jacobian(f, P)[:, idx], ca.jacobian(y, X),
+                                           ca.jacobian(y, P)[:, idx])]
         # the entry holds the ode, so that its id is not reused while the entry lives
         entry = (ode, _expand(ca.Function("lin", args, jac)), {})
         _FUNCTIONS[key] = entry
@@ -196,6 +205,9 @@ class Linearisation:
         N = len(self.time)
         self.U = np.array([np.interp(self.time, u.time, u.values[:, k]) for k in range(len(u.names))]).reshape(-1, N)
         self.X, self.p = np.asarray(states, float).T, np.asarray(p, float)
+        self.split = parametric.split(ode)
+        if self.split is not None:
+            self.q, self.qp = self.split.values(self.p), self.split.jacobian(self.p, idx)
         self.nx, self.ny, self.nq = len(ode.x_names), len(ode.y_names), len(idx)
         nx, ny, nq = self.nx, self.ny, self.nq
         # per point: the four Jacobians, and the rule's matrices and partial solutions
@@ -215,7 +227,9 @@ class Linearisation:
         X, U, t = self.X[:, pick], self.U[:, pick], self.time[None, pick]
         n = X.shape[1]
         args = [X, U, np.repeat(self.p[:, None], n, 1), t]
-        if self.fun.n_in() == 5:
+        if self.split is not None:
+            args += [np.repeat(self.q[:, None], n, 1), np.repeat(self.qp.ravel(order="F")[:, None], n, 1)]
+        elif self.fun.n_in() == 5:
             args.append(self._mapped(self.ode.loops, n)(*args)[0])
         return self._mapped(self.fun, n)(*args)
 
@@ -234,7 +248,8 @@ class Linearisation:
         pick = np.unique(np.linspace(0, len(self.time) - 1, min(50, len(self.time))).astype(int))
         n = len(pick)
         A = self._at(pick)[0].reshape(self.nx, n, self.nx).transpose(1, 0, 2)
-        return float(np.max(np.abs(np.linalg.eigvals(A))))
+        A = A[np.isfinite(A).all(axis=(1, 2))]        # a point where the model has no derivative
+        return float(np.max(np.abs(np.linalg.eigvals(A)))) if len(A) else 0.0
 
     def propagate(self, forcing, at: np.ndarray, ns: int, batched: bool = False, S0=None) -> np.ndarray:
         """Output sensitivities (len(at), ny, ns) at grid points ``at`` (increasing), for forcing
