@@ -158,8 +158,10 @@ class Expression:
         """The term as a CasADi expression of ``env``'s symbols (variables and scale names)."""
         import casadi as ca
 
+        # sqrt's derivative is infinite at 0, and sqrt(|v|) tanh(v/s) at v = 0 (the start of
+        # many runs) differentiates to inf * 0 = NaN: offset by 1e-200 it is 5e99 * 0 = 0
         funcs = {"tanh": ca.tanh, "sinh": ca.sinh, "cosh": ca.cosh, "exp": ca.exp, "abs": ca.fabs, "sign": ca.sign,
-                 "sqrt": ca.sqrt, "atan": ca.atan, "log": ca.log}
+                 "sqrt": lambda a: ca.sqrt(a + 1e-200), "atan": ca.atan, "log": ca.log}
         ops = {ast.Add: lambda a, b: a + b, ast.Sub: lambda a, b: a - b, ast.Mult: lambda a, b: a * b,
                ast.Div: lambda a, b: a / b, ast.Pow: lambda a, b: a ** b}
 
@@ -305,10 +307,15 @@ class Template:
         """A component class implementing the template, with the connectors of ``component``;
         ``note`` goes into the class description (e.g. the range the law was learned on)."""
         a, b = component.connectors
-        xa, fa, xb, fb = a.potential[0], a.flow[0], b.potential[0], b.flow[0]
         w = self.start() if w is None else np.asarray(w, dtype=float)
         params = "\n".join(f"  parameter Real {n} = {float(v)!r}" + (f' "{d}"' if d else "") + ";"
                            for n, v, d in zip(self.parameter_names(), w, self.parameter_descriptions()))
+        if getattr(component, "signal", False):       # a block: its output i in its input v
+            return (f'block {class_name} "{self.description} (mcl template {self.name}){note}"\n'
+                    f"  {a.cls} {a.name};\n  {b.cls} {b.name};\n"
+                    f'  Real v "the input";\n  Real i "the output";\n{params}\n'
+                    f"equation\n  v = {a.name};\n  i = {b.name};\n  {self.law()};\nend {class_name};\n")
+        xa, fa, xb, fb = a.potential[0], a.flow[0], b.potential[0], b.flow[0]
         memory = ""
         if "dv" in self.uses:
             memory += "  Real dv \"der(v)\";\n"

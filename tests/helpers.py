@@ -42,6 +42,19 @@ def compiled(name: str, sources=None):
     return _compiled[key]
 
 
+def discovered(directory: Path, source: str, name: str, text: str) -> dict:
+    """``mcl run`` on the model ``text`` (written to ``directory/source``, built on the MSL) with
+    the train.csv and validate.csv there: the report."""
+    import json
+
+    from mcl.cli import main
+
+    (directory / source).write_text(text)
+    (directory / "run.yaml").write_text(
+        f"model: {{sources: [{source}], name: {name}, libraries: [{msl_path()}]}}\n"
+        "data: {train: train.csv, validate: validate.csv}\noutput: out\n")
+    assert main(["--quiet", "run", str(directory / "run.yaml")]) == 0
+    return json.loads((directory / "out" / "report.json").read_text())
 
 
 def multisine(t, parts=((2.0, 0.5, 0.0), (0.5, 2.1, 0.3))):

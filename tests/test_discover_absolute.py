@@ -9,7 +9,6 @@ connector of their own, a tank with an initial equation, a pump driven by a Real
 sensors; the bodies from MSL parts through imports); the data come from the systems' ODEs
 written by hand and solved by SciPy.
 """
-import json
 import re
 from types import SimpleNamespace
 
@@ -17,8 +16,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import msl_path, needs_msl
-from mcl.cli import main
+from helpers import discovered, msl_path, needs_msl
 
 MSL = msl_path()
 pytestmark = [pytest.mark.slow, needs_msl()]
@@ -160,13 +158,7 @@ def test_a_law_at_the_affine_outlet_starts_as_the_nominal_model(tmp_path):
         assert np.max(np.abs(first.output(out) - nominal.output(out))) < 1e-6, out
 
 
-def discover(tmp_path, source: str, name: str, text: str) -> dict:
-    (tmp_path / source).write_text(text)
-    (tmp_path / "run.yaml").write_text(
-        f"model: {{sources: [{source}], name: {name}, libraries: [{MSL}]}}\n"
-        "data: {train: train.csv, validate: validate.csv}\noutput: out\n")
-    assert main(["--quiet", "run", str(tmp_path / "run.yaml")]) == 0
-    return json.loads((tmp_path / "out" / "report.json").read_text())
+discover = discovered
 
 
 def test_a_tanks_free_outflow_follows_the_level_upstream(tmp_path):

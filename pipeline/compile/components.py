@@ -41,6 +41,15 @@ class Component:
     parameters: list[str] = field(default_factory=list)   # its own parameters, qualified names
     inputs: list[str] = field(default_factory=list)       # its signal inputs and outputs
     declaration: str = ""                                 # the declaration as written, if found
+    kind: str = "physical"   # or "signal": a block with one Real input and one Real output
+    chain: bool = False      # a signal block that reads a model input or gives a model output
+
+    @property
+    def signal(self) -> bool:
+        """A signal block (``Gain``, ``Limiter``, a user's ``block`` with ``input Real u;
+        output Real y``): its law is its output as a function of its input; its connectors
+        are the input and the output, in that order, without potential or flow variables."""
+        return self.kind == "signal"
 
     @property
     def two_connector(self) -> bool:
@@ -54,14 +63,20 @@ class Component:
     def domain(self) -> str:
         return self.connectors[0].cls if self.connectors else ""
 
-    def across(self) -> tuple[str, str]:
-        """Qualified potential variables of connectors a and b."""
+    def across(self) -> tuple[str, str | None]:
+        """Qualified potential variables of connectors a and b; a signal block's input (its
+        'across value', against no second one: None)."""
         a, b = self.connectors
+        if self.signal:
+            return f"{self.name}.{a.name}", None
         return f"{self.name}.{a.name}.{a.potential[0]}", f"{self.name}.{b.name}.{b.potential[0]}"
 
-    def flow(self) -> tuple[str, str]:
-        """Qualified flow variables of connectors a and b (each into the component)."""
+    def flow(self) -> tuple[str, str | None]:
+        """Qualified flow variables of connectors a and b (each into the component); a signal
+        block's output (what its law gives, as a flow law gives the flow: None for b)."""
         a, b = self.connectors
+        if self.signal:
+            return f"{self.name}.{b.name}", None
         return f"{self.name}.{a.name}.{a.flow[0]}", f"{self.name}.{b.name}.{b.flow[0]}"
 
     def owns(self, variable: str) -> bool:
@@ -81,8 +96,13 @@ class Structure:
 
     def candidates(self) -> list[Component]:
         """The components whose law discovery may question: two connectors of one kind, no
-        signal inputs or outputs (sources and sensors are the measurement, not the plant)."""
-        return [c for c in self.two_connector_components() if not c.inputs]
+        signal inputs or outputs (sources and sensors are the measurement, not the plant), and
+        the static signal blocks of one input and one output (a block diagram's elements). In a
+        model with such physical components, a block that reads a model input or gives a model
+        output (the gain of a driver, of a sensor) is the measuring chain, as sensors are."""
+        physical = {c.name for c in self.components.values() if c.two_connector and not c.inputs}
+        return [c for c in self.components.values()
+                if c.name in physical or (c.signal and not (physical and c.chain))]
 
     def net_of(self, connector: str) -> int | None:
         for k, net in enumerate(self.nets):
@@ -99,7 +119,7 @@ class Structure:
         """Two-connector components joining the same two nets as ``name`` (either way round):
         what flows through one cannot be told from what flows through the other."""
         mine = self.terminals(name)
-        if None in mine:
+        if None in mine or self.components[name].signal:
             return []
         return [c.name for c in self.candidates()
                 if c.name != name and set(self.terminals(c.name)) == set(mine) and len(set(mine)) == 2]
@@ -114,7 +134,7 @@ class Structure:
         for n, c in d["components"].items():
             conns = [Connector(k["name"], k["cls"], tuple(k["potential"]), tuple(k["flow"])) for k in c["connectors"]]
             comps[n] = Component(c["name"], c["cls"], conns, list(c["parameters"]), list(c["inputs"]),
-                                 c.get("declaration", ""))
+                                 c.get("declaration", ""), c.get("kind", "physical"), c.get("chain", False))
         return cls(d["model"], comps, [list(n) for n in d["nets"]])
 
     def draw(self, path) -> Path:
@@ -128,8 +148,9 @@ class Structure:
         from ..plots import save_figure
 
         g = nx.Graph()
+        candidates = {c.name for c in self.candidates()}
         for c in self.components.values():
-            g.add_node(c.name, kind="candidate" if c.two_connector and not c.inputs else "component")
+            g.add_node(c.name, kind="candidate" if c.name in candidates else "component")
         for k, net in enumerate(self.nets):
             owners = sorted({".".join(split_name(conn)[:-1]) for conn in net} & set(self.components))
             if len(owners) > 2:          # a node joining several: drawn as a dot of its own
@@ -152,9 +173,10 @@ class Structure:
     def describe(self) -> str:
         """A text listing: components with class and connectors, then the nets."""
         lines = [f"{self.model}: {len(self.components)} components, {len(self.nets)} nets"]
+        candidates = {c.name for c in self.candidates()}
         for c in self.components.values():
             ports = ", ".join(f"{p.name}:{p.cls.split('.')[-1]}" for p in c.connectors)
-            mark = " [candidate]" if c.two_connector and not c.inputs else ""
+            mark = " [candidate]" if c.name in candidates else ""
             lines.append(f"  {c.name:16s} {c.cls:44s} {ports}{mark}")
         lines.append("nets:")
         lines += [f"  {{{', '.join(sorted(n))}}}" for n in self.nets]
@@ -225,7 +247,64 @@ def structure_of(flat: dict, model: str, classes: dict[str, str] | None = None) 
         params = [n for n, v in own if _kind(v.get("variability")) == "Parameter"]
         signals = [n for n, v in own if _kind(v.get("causality")) in ("Input", "Output")]
         comps[name] = Component(name, classes.get(name, ""), conns, params, signals)
-    return Structure(model, comps, _nets(flat, connectors))
+    outer = _joined_to_model(flat)
+    for name, (u, y) in _signal_blocks(flat, children, owners).items():
+        own = [n for n in variables if n.startswith(name + ".")]
+        params = [n for n in own if _kind(variables[n].get("variability")) == "Parameter"]
+        conns = [Connector(u, "input Real", (), ()), Connector(y, "output Real", (), ())]
+        ends = [f"{name}.{u}", f"{name}.{y}"]
+        comps[name] = Component(name, classes.get(name, ""), conns, params, ends, kind="signal",
+                                chain=any(e in outer for e in ends))
+    return Structure(model, dict(sorted(comps.items(), key=lambda kv: _natural(kv[0]))), _nets(flat, connectors))
+
+
+def _signal_blocks(flat: dict, children: dict, owners: dict) -> dict[str, tuple[str, str]]:
+    """Instances with exactly one scalar Real input and one scalar Real output of their own and
+    no parts and no derivative in its equations (a ``Gain``, a ``Limiter``, a user's block
+    ``y = f(u)``; not a filter), outside the physical components: {instance: (input, output)}."""
+    types = flat.get("variable_type_names", {}) or {}
+    dynamic = {(eq.get("origin") or {}).get("ComponentEquation", {}).get("component")
+               for eq in flat.get("equations", []) if _derivative_in(eq.get("residual"))}
+    physical = tuple(f"{o}." for o in owners)
+    composite = {".".join(split_name(c)[:-1]) for c in children}
+    out = {}
+    for inst, members in children.items():
+        if inst in owners or inst in composite or inst in dynamic or inst.startswith(physical):
+            continue
+        ins = [n for n, v in members if _kind(v.get("causality")) == "Input"]
+        outs = [n for n, v in members if _kind(v.get("causality")) == "Output"]
+        if (len(ins) == 1 and len(outs) == 1 and not any("[" in n for n in ins + outs)
+                and all(types.get(f"{inst}.{n}", "Real") == "Real" for n in ins + outs)):
+            out[inst] = (ins[0], outs[0])
+    return out
+
+
+def _joined_to_model(flat: dict) -> set[str]:
+    """Variables in a connection set with one of the model's own (top-level) variables: its
+    inputs and outputs."""
+    sets: dict[str, set] = {}
+    for eq in flat.get("equations", []):
+        joined = (eq.get("origin") or {}).get("Connection")
+        if joined:
+            a, b = joined.get("lhs", ""), joined.get("rhs", "")
+            merged = sets.get(a, {a}) | sets.get(b, {b})
+            for name in merged:
+                sets[name] = merged
+    return {n for group in map(frozenset, sets.values()) if any("." not in m for m in group) for n in group}
+
+
+def _derivative_in(node) -> bool:
+    """Whether rumoca's expression tree ``node`` calls der()."""
+    stack = [node]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, dict):
+            if n.get("function") == "Der":
+                return True
+            stack.extend(n.values())
+        elif isinstance(n, list):
+            stack.extend(n)
+    return False
 
 
 def _connector_class(pot, flow) -> str:

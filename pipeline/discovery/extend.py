@@ -62,7 +62,7 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     x_name, y_name = names[var], (wd.across if var == "i" else wd.flow)
     units = base.model.info.get("units", {})
     nominal_terms = set(best.get("nominal_form") or {})
-    new_terms = [shape_words(unscaled(t)[0]) if t != "1" else "a constant" for t, on in zip(best.get("terms", [])[1:], best["active"][1:])
+    new_terms = [shape_words(unscaled(t)[0], comp.signal) if t != "1" else "a constant" for t, on in zip(best.get("terms", [])[1:], best["active"][1:])
                  if on and t not in nominal_terms]
     effect = f"{comp.name} follows {law}" + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else "")
     if best.get("nominal_exact") is False:

@@ -119,16 +119,22 @@ def unit_of(x) -> float:
     return 1.0 if 0.3 <= s <= 3.0 else s
 
 
-def families(role: str, env: dict | None = None) -> list[dict]:
+def families(role: str, env: dict | None = None, signal: bool = False) -> list[dict]:
     """The template specs tried for a component of this role. A law in the rate also gets
     Coulomb-like friction terms tanh(dv/s), the dissipative element's classic non-polynomial
     part, at two fixed scales (a twentieth and a quarter of the rate's nominal span: the law
     stays linear in its parameters, and pruning keeps what the data need; the shape stage
     fits the scale itself), and a constant (the offset force of a positioning axis's friction,
     M q'' = tau - Fv q' - Fc sign(q') - offset: without it a law bends its other terms to mimic
-    one, and an open-loop position drifts)."""
-    out = [dict(f) for f in FAMILIES[role]]
+    one, and an open-loop position drifts). A signal block's law is static, its output in its
+    input, with saturation terms tanh(v/s) at the same two fixed scales of the input's span:
+    the effect a block diagram most often lacks (an amplifier's or a valve's limits, which a
+    cubic cannot follow beyond its knee)."""
+    out = [dict(f) for f in ([STATIC] if signal else FAMILIES[role])]
     span = float(np.max(np.abs(env["dv"]))) if env is not None and np.any(env["dv"]) else 1.0
+    if signal:
+        reach = float(np.max(np.abs(env["v"]))) if env is not None and np.any(env["v"]) else 1.0
+        out[0]["rhs"] = [*out[0]["rhs"], f"tanh(v/{0.05 * reach:.3g})", f"tanh(v/{0.25 * reach:.3g})"]
     for f in out:
         if f.get("family") == "rate":
             f["rhs"] = ["1", *f["rhs"], f"tanh(dv/{0.05 * span:.3g})", f"tanh(dv/{0.25 * span:.3g})"]
@@ -189,12 +195,13 @@ _SHAPE_WORDS = {"tanh({x}/{s})": "Coulomb-like friction or saturation", "sinh({x
                 _TORRICELLI: "a square root of the level above an opening (Torricelli)"}
 
 
-def shape_words(term: str) -> str:
+def shape_words(term: str, signal: bool = False) -> str:
     """``term`` (a basis term, its scale named s1, s2, ...) with what an engineer calls it:
-    "a dead zone: v - s1*tanh(v/s1)"; a term of no named shape as it is."""
+    "a dead zone: v - s1*tanh(v/s1)"; a term of no named shape as it is. In a signal block
+    (``signal``) a tanh is a saturation, not friction."""
     for pattern, said in _SHAPE_WORDS.items():
         if re.fullmatch(_pattern(pattern), term.replace(" ", "")):
-            return f"{said}: {term}"
+            return f"{'saturation' if signal and 'saturation' in said else said}: {term}"
     return term
 
 

@@ -148,19 +148,26 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
     """The new unknown D put at ``comp``'s terminals, and the law's variables as expressions:
     v (the across value the rest of the model sees), i (the flow into connector a), va and vb
     (the potentials of connectors a and b)."""
-    xa, xb = (dae.exprs[n] for n in comp.across())
-    fa, fb = (dae.exprs[n] for n in comp.flow())
-    for s, n in zip((xa, xb, fa, fb), (*comp.across(), *comp.flow())):
-        if not (s.is_symbolic() and s.numel() == 1):
+    names = [n for n in (*comp.across(), *comp.flow()) if n is not None]
+    for n in names:
+        s = dae.exprs.get(n)
+        if s is None or not (s.is_symbolic() and s.numel() == 1):
             raise ModelicaError(f"{n} is not a variable of the compiled model: {comp.name} cannot take a law")
+    # a signal block: its input is the law's v (against nought), its output the law's i
+    xa, xb, fa, fb = (dae.exprs[n] if n is not None else ca.SX(0) for n in (*comp.across(), *comp.flow()))
     D = ca.SX.sym(f"{comp.name}.{DEVIATION}")
     external = _external_rows(dae, comp)
     rows = ca.vertsplit(dae.residual) if dae.residual.numel() else []
     exprs = dict(dae.exprs)
-    if mode == "parallel":
+    if mode == "parallel" and comp.signal:      # what the rest of the model reads of its output
+        old, new, pick = fa, fa + D, external
+        exprs[comp.flow()[0]] = fa + D
+    elif mode == "parallel":
         old, new = ca.vertcat(fa, fb), ca.vertcat(fa + D, fb - D)
         pick = external
         exprs[comp.flow()[0]], exprs[comp.flow()[1]] = fa + D, fb - D
+    elif comp.signal:
+        raise UnsupportedConstruct(f"{comp.name} is a signal block: its law gives its output")
     else:
         old, new = xa, xa - D
         pick = [k for k in range(len(rows)) if k not in set(external)]
@@ -225,7 +232,7 @@ def rate_variables(dae: Dae, comps: list[Component], modes: dict[str, str]) -> d
     out = {}
     for c in comps:
         xa, xb = c.across()
-        out[c.name] = {"v": pure(e.exprs[xa] - e.exprs[xb]),
+        out[c.name] = {"v": pure(e.exprs[xa] - (e.exprs[xb] if xb is not None else 0)),
                        "i": pure(e.exprs[c.flow()[0]]) if modes.get(c.name) == "series" else None}
     return out
 

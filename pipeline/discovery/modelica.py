@@ -186,7 +186,7 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
     from ..templates import Monomial, scaled_power
 
     wd = words(comp)
-    local = lambda q: q.split(".", 1)[1] if not q.startswith("der(") else f"der({q[4:-1].split('.', 1)[1]})"
+    local = lambda q: q.split(".", 1)[-1] if not q.startswith("der(") else f"der({q[4:-1].split('.', 1)[-1]})"
     names = {"v": local(wd.across), "dv": local(wd.rate), "i": local(wd.flow),
              "va": local(wd.potentials[0]), "vb": local(wd.potentials[1])}
     if names["dv"] not in _declared(interface, lib):      # MCL's TwoFlange has s_rel, no v_rel
@@ -222,7 +222,7 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
     icon = icon_of(comp.cls, lib)
     doc = _documentation(cause, data)
     annotation = f"  annotation({icon + ', ' if icon else ''}Documentation(info=\"{doc}\"));"
-    return (f'model {cause["learned_class"]} "{comp.cls.split(".")[-1]} {comp.name} as learned by mcl: '
+    return (f'{"block" if comp.signal else "model"} {cause["learned_class"]} "{comp.cls.split(".")[-1]} {comp.name} as learned by mcl: '
             f'{html.escape(cause["law"]["equation"])}"\n  extends {interface};\n' + "\n".join(params)
             + f"\nequation\n  {law}\n{annotation}\nend {cause['learned_class']};\n")
 

@@ -58,9 +58,9 @@ def law_signals(model, states: np.ndarray, time: np.ndarray, inputs, components)
     probe = ode.probe(X, U, P, T)
     idx = {n: k for k, n in enumerate(ode.probe_names)}
     vals, pots = [], []
-    for (a, b, f), (xa, xb) in names:
+    for (a, b, f), (xa, xb) in names:       # a signal block: v is its input, against no b
         vals += [probe[idx[a]] - (probe[idx[b]] if b else 0), probe[idx[f]]]
-        pots += [probe[idx[xa]], probe[idx[xb]]]
+        pots += [probe[idx[xa]], probe[idx[xb]] if xb else ca.MX(0)]
     q = ca.vertcat(*vals) if vals else ca.MX(0, 1)
     xdot = ode.ode(X, U, P, T)
     dq = ca.jtimes(q, X, xdot) + ca.jacobian(q, T) + (ca.jtimes(q, U, Ud) if U.numel() else 0)

@@ -46,6 +46,8 @@ def balanced(base: Base, train: TimeSeries, comp) -> bool:
     (a one-port: resistor, spring, damper, capacitor); a mass or an inertia stores it."""
     from ..simulation import prepare_inputs
 
+    if comp.signal:               # a block's output is what its law gives: nothing stored
+        return True
     ode, res = base.model.ode, base.result
     fa, fb = comp.flow()
     idx = [ode.probe_names.index(n) for n in (fa, fb)]
@@ -366,9 +368,9 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
     if not comps:
         return Round([], [], [], {}, {}, None)
     signals = law_signals(base.model, base.result.states, base.result.time, train, comps)
-    roles = {c.name: role_of(signals[c.name].env()) for c in comps}
+    roles = {c.name: "static" if c.signal else role_of(signals[c.name].env()) for c in comps}
     items = [Item(c.name, k, t) for c in comps
-             for k, t in enumerate(spec.templates or families(roles[c.name], signals[c.name].env()))]
+             for k, t in enumerate(spec.templates or families(roles[c.name], signals[c.name].env(), c.signal))]
     templates = {it.key: reg.template(it.spec) for it in items}
     modes = {}
     for it in items:

@@ -43,6 +43,9 @@ class Words:
 
 def words(comp) -> Words:
     a, b = comp.connectors
+    if comp.signal:          # a block: its output in its input
+        u, y = (f"{comp.name}.{c.name}" for c in (a, b))
+        return Words(u, f"der({u})", y, False, f"{u} is the block's input, {y} its output", (u, "0"))
     x, f = a.potential[0], a.flow[0]
     across, rate, flow, flipped = DOMAINS.get(x, (f"d{x}", f"der(d{x})", f, False))
     first, second = (b, a) if flipped else (a, b)
