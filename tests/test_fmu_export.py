@@ -105,6 +105,19 @@ def test_a_model_without_variables_is_refused_in_one_line(tmp_path):
     assert not (tmp_path / "e.fmu").exists()
 
 
+def test_generated_code_too_large_for_gcc_is_refused_in_one_line(tmp_path, monkeypatch):
+    """Code beyond the limit (a filter chain's coefficients wrote 108 MB, and gcc passed 23 GB)
+    is refused before gcc runs, and no FMU is left."""
+    from mcl.compile.fmu import export
+    from mcl.errors import CompileError
+
+    monkeypatch.setattr(export, "C_LIMIT", 1000)
+    monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))    # no build of it kept from before
+    with pytest.raises(CompileError, match=r"generated C code is \d+ MB, too large to compile"):
+        build_fmu(compiled("MCL.Examples.MassSpringDamper"), tmp_path / "m.fmu")
+    assert not (tmp_path / "m.fmu").exists()
+
+
 def test_validation_names_what_fmpy_names(tmp_path, fmus):
     """A name FMPy's grammar refuses is reported (ours parses only names outside a plain pattern)."""
     from fmpy.validation import validate_fmu as fmpy_validate

@@ -402,8 +402,18 @@ def _gcc_version() -> str:
         return ""
 
 
+#: generated C beyond this is refused before gcc sees it: the largest MSL example's is 1.4 MB, and
+#: a filter chain's 108 MB (its coefficients' functions of f_cut written out in each function
+#: and derivative) took gcc past 23 GB at -O0 before it was killed
+C_LIMIT = 16_000_000
+
+
 def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: list[str], xml: str) -> Path:
     """gcc, then the archive (packed in the build directory: nothing half-written is left)."""
+    size = sum(f.stat().st_size for f in c_files)
+    if size > C_LIMIT:
+        raise CompileError(f"the FMU's generated C code is {size / 1e6:.0f} MB, too large to compile "
+                           f"(the limit is {C_LIMIT / 1e6:.0f} MB): the model runs in process, not as an FMU")
     so = build / f"{ident}.so"
     cmd = ["gcc", *_CFLAGS, f"-I{build}", *map(str, c_files), "-o", str(so), "-lm"]
     try:
