@@ -245,7 +245,7 @@ class _Plan:
         xa, fa = X, f
         if ns:
             S = ca.MX.sym("S", nx, ns)
-            f_p = ca.jacobian(f, P)[:, sel] + (ca.mtimes(ca.jacobian(f, Q), QP) if self.split is not None else 0)
+            f_p = self.split.d_dp(f, P, Q, QP, sel) if self.split is not None else ca.jacobian(f, P)[:, sel]
             dS = ca.mtimes(ca.jacobian(f, X), S) + ca.mtimes(f_p, ca.diag(_sens_scale(P[sel])))
             xa, fa = ca.vertcat(X, ca.vec(S)), ca.vertcat(f, ca.vec(dS))
         fa = ca.densify(fa)       # CVODES takes dense right-hand sides (a state held constant is a structural 0)
@@ -332,7 +332,7 @@ class _Plan:
             if self.split is not None:     # q and dq/dp (flattened) as the last arguments
                 Qs, QPs = ca.MX.sym("q", self.split.nq), ca.MX.sym("qp", self.split.nq, ns)
                 y = self.split.out(Xs, Us, Ps, Qs, Ts)
-                dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + ca.jacobian(y, Ps)[:, sel] + ca.jacobian(y, Qs) @ QPs
+                dy = ca.mtimes(ca.jacobian(y, Xs), Ss) + self.split.d_dp(y, Ps, Qs, QPs, sel)
                 self.sens = ca.Function("dy", [Xs, Ss, Us, Ps, Ts, Qs, ca.vec(QPs)], [dy]).map(N)
             else:
                 y = differentiable(ode, "out", p_cols=sel)(Xs, Us, Ps, Ts)
@@ -483,10 +483,12 @@ class _Plan:
         self.opts_max_steps = opts.max_steps
         self.bound = math.inf if opts.state_bound is None else float(opts.state_bound)
         # the integrators' parameters after p: the bound, and the parametric parts q(p), dq/dp
+        # (computed once for the run: the outputs and their sensitivities read them too)
         self.tail = np.array([self.bound])
         if self.split is not None:
-            qp = self.split.jacobian(p, self.sel) if self.ns else np.zeros((self.split.nq, 0))
-            self.tail = np.concatenate([self.tail, self.split.values(p), qp.ravel(order="F")])
+            self.q = self.split.values(p)
+            self.qp = (self.split.jacobian(p, self.sel) if self.ns else np.zeros((self.split.nq, 0))).ravel(order="F")
+            self.tail = np.concatenate([self.tail, self.q, self.qp])
         names = ode.y_names
 
         def fail(reason):
@@ -541,7 +543,7 @@ class _Plan:
         try:
             at = (X, self.u_out, P, t_out[None, :])
             if self.split is not None:
-                at = (*at[:3], np.repeat(self.split.values(p)[:, None], N, 1), at[3])
+                at = (*at[:3], np.repeat(self.q[:, None], N, 1), at[3])
             y, res, drift = (np.array(v) for v in self.checks(*at))
         except RuntimeError as exc:
             return fail(f"evaluating the outputs failed: {_last_line(exc)}")
@@ -559,8 +561,8 @@ class _Plan:
             # column k of traj holds vec(S(t_k)); the mapped function wants [S(t_1), ..., S(t_N)]
             S = np.hstack([traj[self.nx:, k].reshape(self.nx, self.ns, order="F") / self.scale(p)
                            for k in range(N)])
-            extra = ([np.repeat(self.tail[1:1 + self.split.nq, None], N, 1),
-                      np.repeat(self.tail[1 + self.split.nq:, None], N, 1)] if self.split is not None else [])
+            extra = ([np.repeat(self.q[:, None], N, 1), np.repeat(self.qp[:, None], N, 1)]
+                     if self.split is not None else [])
             dy = np.array(self.sens(X, S, self.u_out, P, t_out[None, :], *extra))
             result.sensitivities = dy.reshape(len(names), N, self.ns).transpose(1, 0, 2)
             result.sensitivity_names = [ode.p_names[i] for i in self.sel]

@@ -101,8 +101,8 @@ def _functions(ode, idx: list[int]):
         if split is not None:      # the parametric parts q(p) as arguments, and dq/dp (QP)
             Q, QP = ca.MX.sym("q", split.nq), ca.MX.sym("qp", split.nq, len(idx))
             f, y = split.ode(X, U, P, Q, T), split.out(X, U, P, Q, T)
-            jac = [ca.densify(J) for J in (ca.jacobian(f, X), ca.jacobian(f, P)[:, idx] + ca.jacobian(f, Q) @ QP,
-                                           ca.jacobian(y, X), ca.jacobian(y, P)[:, idx] + ca.jacobian(y, Q) @ QP)]
+            jac = [ca.densify(J) for J in (ca.jacobian(f, X), split.d_dp(f, P, Q, QP, idx),
+                                           ca.jacobian(y, X), split.d_dp(y, P, Q, QP, idx))]
             args += [Q, QP]
         elif getattr(ode, "given", None) is not None and all(n in where for n in ode.y_names):
             ZL = ca.MX.sym("zl", ode.given.size1_in(4))

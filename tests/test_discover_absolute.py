@@ -158,15 +158,12 @@ def test_a_law_at_the_affine_outlet_starts_as_the_nominal_model(tmp_path):
         assert np.max(np.abs(first.output(out) - nominal.output(out))) < 1e-6, out
 
 
-discover = discovered
-
-
 def test_a_tanks_free_outflow_follows_the_level_upstream(tmp_path):
     """The upper outlet is named and its law is a square root of its own upstream level
     (a.h), not of the difference between the two tanks."""
     h = tanks_data(tmp_path / "train.csv", 1, TORRICELLI)
     tanks_data(tmp_path / "validate.csv", 2, TORRICELLI)
-    report = discover(tmp_path, "Tanks.mo", "Tanks.Cascade", TANKS)
+    report = discovered(tmp_path, "Tanks.mo", "Tanks.Cascade", TANKS)
     assert report["roles"]["Outlet1"] == "absolute"
     cause = report["cause"]
     assert cause["component"] == "Outlet1", cause["effect"]
@@ -189,7 +186,7 @@ def test_the_linearised_outlet_that_is_right_gets_no_cause(tmp_path):
     """Data from the model's own (affine) outlet law with noise: nothing to explain."""
     assert tanks_data(tmp_path / "train.csv", 3, LINEARISED, 0.03).min() > 0     # levels a tank can have
     tanks_data(tmp_path / "validate.csv", 4, LINEARISED, 0.03)
-    report = discover(tmp_path, "Tanks.mo", "Tanks.Cascade", TANKS)
+    report = discovered(tmp_path, "Tanks.mo", "Tanks.Cascade", TANKS)
     assert not report["misfit"]["significant"], report["misfit"]["significance"]
     assert report["cause"] is None and report["causes"] == []
 
@@ -254,7 +251,7 @@ def test_radiation_between_two_bodies_whose_temperatures_both_vary(tmp_path):
     a law of the difference alone cannot explain heat flows that grow with the temperature."""
     bodies_data(tmp_path / "train.csv", 1)
     bodies_data(tmp_path / "validate.csv", 2)
-    report = discover(tmp_path, "TwoBodies.mo", "TwoBodies", BODIES)
+    report = discovered(tmp_path, "TwoBodies.mo", "TwoBodies", BODIES)
     cause = report["cause"]
     assert cause["component"] == "Rad", cause["effect"]
     law = cause["law"]
@@ -282,7 +279,7 @@ def test_an_opening_above_the_levels_datum_is_torricellis_law_with_its_height(tm
     above = lambda h: ORIFICE * np.sqrt(np.maximum(h - 0.1, 0.0))
     h = tanks_data(tmp_path / "train.csv", 1, above)
     tanks_data(tmp_path / "validate.csv", 2, above)
-    report = discover(tmp_path, "Tanks.mo", "Tanks.Cascade", TANKS)
+    report = discovered(tmp_path, "Tanks.mo", "Tanks.Cascade", TANKS)
     cause = report["cause"]
     assert cause["component"] == "Outlet1", cause["effect"]
     law = cause["law"]

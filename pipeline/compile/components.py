@@ -119,7 +119,7 @@ class Structure:
         """Two-connector components joining the same two nets as ``name`` (either way round):
         what flows through one cannot be told from what flows through the other."""
         mine = self.terminals(name)
-        if None in mine or self.components[name].signal:
+        if None in mine:      # (a signal block's input and output are in no net)
             return []
         return [c.name for c in self.candidates()
                 if c.name != name and set(self.terminals(c.name)) == set(mine) and len(set(mine)) == 2]
@@ -243,19 +243,25 @@ def structure_of(flat: dict, model: str, classes: dict[str, str] | None = None) 
         for inst in owners[name]:
             pot, flow = connectors[inst]
             conns.append(Connector(split_name(inst)[-1], _connector_class(pot, flow), pot, flow))
-        own = [(n, v) for n, v in variables.items() if n.startswith(name + ".")]
-        params = [n for n, v in own if _kind(v.get("variability")) == "Parameter"]
+        own = _own(variables, name)
         signals = [n for n, v in own if _kind(v.get("causality")) in ("Input", "Output")]
-        comps[name] = Component(name, classes.get(name, ""), conns, params, signals)
+        comps[name] = Component(name, classes.get(name, ""), conns, _parameters(own), signals)
     outer = _joined_to_model(flat)
     for name, (u, y) in _signal_blocks(flat, children, owners).items():
-        own = [n for n in variables if n.startswith(name + ".")]
-        params = [n for n in own if _kind(variables[n].get("variability")) == "Parameter"]
         conns = [Connector(u, "input Real", (), ()), Connector(y, "output Real", (), ())]
         ends = [f"{name}.{u}", f"{name}.{y}"]
-        comps[name] = Component(name, classes.get(name, ""), conns, params, ends, kind="signal",
-                                chain=any(e in outer for e in ends))
+        comps[name] = Component(name, classes.get(name, ""), conns, _parameters(_own(variables, name)), ends,
+                                kind="signal", chain=any(e in outer for e in ends))
     return Structure(model, dict(sorted(comps.items(), key=lambda kv: _natural(kv[0]))), _nets(flat, connectors))
+
+
+def _own(variables: dict, name: str) -> list[tuple[str, dict]]:
+    """The flat variables of instance ``name`` and its parts."""
+    return [(n, v) for n, v in variables.items() if n.startswith(name + ".")]
+
+
+def _parameters(own: list[tuple[str, dict]]) -> list[str]:
+    return [n for n, v in own if _kind(v.get("variability")) == "Parameter"]
 
 
 def _signal_blocks(flat: dict, children: dict, owners: dict) -> dict[str, tuple[str, str]]:

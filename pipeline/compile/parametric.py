@@ -37,6 +37,11 @@ class Split:
     def nq(self) -> int:
         return self.q.nnz_out(0)
 
+    @staticmethod
+    def d_dp(expr, P, Q, QP, cols):
+        """d expr / d p in the columns ``cols``: directly and through q (``QP`` = dq/dp there)."""
+        return ca.jacobian(expr, P)[:, cols] + ca.mtimes(ca.jacobian(expr, Q), QP)
+
     def values(self, p) -> np.ndarray:
         return np.asarray(self.q(np.asarray(p, float)), float).ravel()
 
