@@ -89,3 +89,24 @@ def test_the_linearised_sensitivities_read_the_coefficients_derivative(filtered,
     B = Linearisation(model, res.states, res.time, data, p, ["lowPass.f_cut"])._at(slice(0, 50))
     for a, b in zip(A, B):
         assert np.allclose(a, b, rtol=1e-9, atol=1e-12)
+
+
+def test_the_fmu_computes_the_coefficients_when_a_parameter_is_set(filtered, tmp_path):
+    """The FMU's functions read the coefficients after the parameters; they are computed from
+    the parameters once, when one is set (here a cut-off frequency, between two runs)."""
+    from mcl import simulate
+    from mcl.compile.fmu.export import build_fmu
+    from mcl.model import FmuModel
+
+    model, data = filtered
+    path = build_fmu(model, tmp_path / "filtered.fmu")
+    source = __import__("zipfile").ZipFile(path).read("sources/fmi2_model.c").decode()
+    assert "#define NQ 0" not in source          # the coefficients are computed apart
+    fmu = FmuModel.read(path)
+    opts = {"rtol": 1e-9, "atol": 1e-11}
+    for params in ({}, {"lowPass.f_cut": 8.0}, {}):
+        a, b = simulate(model, data, params, options=opts), simulate(fmu, data, params, options=opts)
+        assert a.ok and b.ok, (a.reason, b.reason)
+        assert np.max(np.abs(a.output("y") - b.output("y"))) < 1e-5 * np.max(np.abs(a.output("y")))
+    slow, fast = (simulate(fmu, data, p, options=opts).output("y") for p in ({}, {"lowPass.f_cut": 8.0}))
+    assert np.max(np.abs(slow - fast)) > 0.05 * np.max(np.abs(slow))     # the change took effect

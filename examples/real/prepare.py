@@ -4,7 +4,7 @@
 
 SOURCE_DIR holds the files as the benchmarks distribute them (the paths each README names):
 ``dataBenchmark.csv`` (cascaded tanks), ``SNLS80mV.csv`` (Silverbox), ``DATA_EMPS.mat`` and
-``DATA_EMPS_PULSES.mat`` (EMPS). OUT_DIR/<case>/ receives ``train.csv`` and one ``test*.csv`` per
+``DATA_EMPS_PULSES.mat`` (EMPS), ``WienerHammerBenchmark.csv`` (Wiener-Hammerstein). OUT_DIR/<case>/ receives ``train.csv`` and one ``test*.csv`` per
 test split of the benchmark's own protocol (the split in each case's README), each with a header
 ``time,u,y``: time in seconds from 0, u the measured input, y the measured output. Nothing is
 resampled; the Silverbox's test splits are the benchmark's index ranges. Files that are missing in
@@ -57,9 +57,20 @@ def emps(src: Path, out: Path) -> None:
         write(out / name, m["vir"][:, 0] * float(m["gtau"][0, 0]), m["qm"][:, 0], float(t[1] - t[0]))
 
 
+def wiener_hammerstein(src: Path, out: Path) -> None:
+    import pandas as pd
+
+    d = pd.read_csv(src / "WienerHammerBenchmark.csv")
+    u, y = d["uBenchMark"].to_numpy(float), d["yBenchMark"].to_numpy(float)
+    dt = 1.0 / float(d["fs"].iloc[0])                             # 51 200 Hz
+    write(out / "train.csv", u[:100000], y[:100000], dt)          # the benchmark's split
+    write(out / "test.csv", u[100000:188000], y[100000:188000], dt)
+
+
 CASES = {"cascaded_tanks": (cascaded_tanks, ["dataBenchmark.csv"]),
          "silverbox": (silverbox, ["SNLS80mV.csv"]),
-         "emps": (emps, ["DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"])}
+         "emps": (emps, ["DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"]),
+         "wh": (wiener_hammerstein, ["WienerHammerBenchmark.csv"])}
 
 
 def main(argv: list[str]) -> int:

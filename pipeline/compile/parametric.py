@@ -90,3 +90,46 @@ def _made(ode) -> Split | None:
     if made.ode.n_instructions() + made.out.n_instructions() > WORTH * before:
         return None
     return made
+
+
+def split_functions(funcs: dict, p_at: dict, n_p: int) -> tuple[dict, ca.Function | None]:
+    """Functions that read the parameters (``p_at[name]``: the argument that holds them), with
+    their purely parametric parts taken out together: ``(funcs', derived)``, where each
+    function of ``funcs'`` reads the parameters followed by q = derived(p) in that argument (an
+    FMU computes q when a parameter is set, not in every call). A function that does not expand
+    to SX keeps reading the parameters alone (the first ``n_p`` entries of the same argument).
+    ``derived`` is None where nothing worth taking out was found."""
+    sx = {}
+    for name, f in funcs.items():
+        try:
+            g = f.expand() if f is not None and not f.is_a("SXFunction") else f
+        except RuntimeError:       # holds a rootfinder: reads p as it is
+            continue
+        if g is not None and g.is_a("SXFunction"):
+            sx[name] = g
+    before = sum(g.n_instructions() for g in sx.values())
+    if before < 1000:
+        return funcs, None
+    P = ca.SX.sym("p", n_p)
+    calls = {}
+    for name, g in sx.items():
+        args = g.sx_in()
+        args[p_at[name]] = P
+        calls[name] = (args, g.call(args))
+    flat = [e for _, outs in calls.values() for e in outs]
+    exprs, symbols, parts = ca.extract_parametric(flat, P)
+    if not symbols:
+        return funcs, None
+    Q = ca.vertcat(*[ca.vec(s) for s in symbols])
+    PQ = ca.SX.sym("p", n_p + Q.numel())
+    exprs = ca.substitute(exprs, [ca.vertcat(P, Q)], [PQ])
+    made, k = dict(funcs), 0
+    for name, (args, outs) in calls.items():
+        args[p_at[name]] = PQ
+        g = sx[name]
+        made[name] = ca.Function(g.name(), args, exprs[k:k + len(outs)], g.name_in(), g.name_out())
+        k += len(outs)
+    if sum(made[n].n_instructions() for n in calls) > WORTH * before:
+        return funcs, None
+    q = ca.cse(ca.vertcat(*[ca.vec(e) for e in parts]))
+    return made, ca.Function("derived", [P], [q], ["p"], ["q"])

@@ -21,7 +21,7 @@ import numpy as np
 
 from . import tables
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, shaped
-from .dae import Dae, check_balance, fold_initial_parameters, resolve_parameters
+from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
@@ -1655,7 +1655,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             preferred.update(zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(value)))
     preferred = {n: e for n, e in preferred.items() if not ca.depends_on(e, ca.vertcat(x, z, u, t, d))}
 
-    return fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
+    return merge_common(fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
@@ -1664,7 +1664,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                d_start=d_start,
                d_pre=d_pre, x_pre=x_pre, z_pre=z_pre, flags=flags, d_update=d_update, x_reinit=x_reinit,
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
-               assert_info=assert_info, preferred=preferred))
+               assert_info=assert_info, preferred=preferred)))
 
 
 def _hysteresis(op: str, lhs: ca.SX, rhs: ca.SX, held: ca.SX) -> tuple[ca.SX, ca.SX]:

@@ -22,7 +22,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from .dae import Dae, read_through_steps
+from .dae import CSE_MIN, Dae, read_through_steps
 from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
@@ -972,9 +972,18 @@ def composed_checks(out: ca.Function, alg_res: ca.Function, drift: ca.Function) 
 
 def expanded(f: ca.Function) -> ca.Function:
     try:
-        return f.expand()
+        return merged(f.expand())
     except RuntimeError:  # holds a rootfinder or a run-time linear solver
         return f
+
+
+def merged(f: ca.Function) -> ca.Function:
+    """SX ``f`` with its repeated subexpressions computed once, where it is large (index
+    reduction and causalisation copy what the model's expressions share)."""
+    if not f.is_a("SXFunction") or f.n_instructions() < CSE_MIN:
+        return f
+    args = f.sx_in()
+    return ca.Function(f.name(), args, ca.cse(f.call(args)), f.name_in(), f.name_out())
 
 
 def compact(f: ca.Function) -> ca.Function:

@@ -33,12 +33,15 @@ import casadi as ca
 import numpy as np
 
 from .. import cache as compile_cache
+from .. import parametric
 from ...errors import CompileError, ConfigError, ModelicaError
 from ...model import CompiledModel
 from .experiment import Experiment, for_model
 
 _HERE = Path(__file__).parent
-FUNCTIONS = ("ode", "out", "alg_res", "init", "start", "probe", "zero", "step", "update", "asserts")
+FUNCTIONS = ("ode", "out", "alg_res", "init", "start", "probe", "zero", "step", "update", "asserts", "derived")
+#: the argument of each function that holds the parameters (the others: (x, u, p, t, ...))
+P_ARG = {"init": 1, "start": 0}
 
 
 def model_identifier(name: str) -> str:
@@ -161,13 +164,16 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     events = _events(o)
     if events["NA"]:
         funcs["asserts"] = o.asserts
+    present = {k: f for k, f in funcs.items() if f is not None}
+    split, derived = parametric.split_functions(present, {k: P_ARG.get(k, 2) for k in present}, len(o.p_names))
+    funcs.update(split, derived=derived)
     cg = ca.CodeGenerator("mcl_funcs.c", {"with_header": True})
     for key in FUNCTIONS:
         if funcs.get(key) is not None:      # update and asserts: hybrid models only
             cg.add(_renamed(funcs[key], prefix + key))
     cg.generate(str(build) + "/")
     template = (_HERE / "fmi2_model.c").read_text()
-    values = dict(NP=len(o.p_names), NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
+    values = dict(NP=len(o.p_names), NQ=derived.nnz_out(0) if derived is not None else 0, NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
                   NV=len(probe_vars), HAS_LOOP=int(o.nonlinear_blocks > 0),
                   RES_TOL=repr(residual_tol), TOL=repr(float(tolerance)), GUID=guid, PREFIX=prefix,
                   P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start),
@@ -406,6 +412,7 @@ def _gcc_version() -> str:
 #: a filter chain's 108 MB (its coefficients' functions of f_cut written out in each function
 #: and derivative) took gcc past 23 GB at -O0 before it was killed
 C_LIMIT = 16_000_000
+GCC_TIMEOUT = 600
 
 
 def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: list[str], xml: str) -> Path:
@@ -417,9 +424,12 @@ def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: lis
     so = build / f"{ident}.so"
     cmd = ["gcc", *_CFLAGS, f"-I{build}", *map(str, c_files), "-o", str(so), "-lm"]
     try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=GCC_TIMEOUT)
     except FileNotFoundError:
         raise CompileError("gcc not found: a C compiler is needed to build FMUs") from None
+    except subprocess.TimeoutExpired:
+        raise CompileError(f"gcc did not compile the FMU's {size / 1e6:.1f} MB of C within {GCC_TIMEOUT} s: "
+                           "the model runs in process, not as an FMU") from None
     if proc.returncode:
         raise CompileError(f"gcc failed: {proc.stderr.strip().splitlines()[-1] if proc.stderr else ''}")
     fmu = build / "model.fmu"

@@ -36,6 +36,7 @@
 #include "mcl_funcs.h"
 
 #define NP @NP@
+#define NQ @NQ@       /* what the parameters alone determine, computed when they are set */
 #define NU @NU@
 #define NY @NY@
 #define NX @NX@          /* the model's state vector: continuous states, then discrete values */
@@ -100,7 +101,7 @@ static const double RGAMMA[NS] = {0.25, -0.1043, 0.1035, -0.0362, 0.0, 0.0};
 /* what fmi2GetFMUstate saves: everything that changes after instantiation */
 typedef struct {
     double t;
-    double p[NP + 1], u[NU + 1], ue[NU + 1], x[NX + 1];
+    double p[NP + NQ + 1], u[NU + 1], ue[NU + 1], x[NX + 1];
     double s_user[NX + 1];
     int s_set[NX + 1];
     int x_valid, in_init, initialised;
@@ -418,12 +419,26 @@ static void work_size(casadi_int* sz_arg, casadi_int* sz_res, casadi_int* sz_iw,
 #if NA
     GROW(asserts)
 #endif
+#if NQ
+    GROW(derived)
+#endif
 #undef GROW
+}
+
+/* q = derived(p), after the parameters p (every function reads both) */
+static int derive(Model* m) {
+#if NQ
+    return call(m, F(derived), m->st.p, NULL, NULL, NULL, m->st.p + NP);
+#else
+    (void)m;
+    return 0;
+#endif
 }
 
 static void reset_state(Model* m) {
     memset(&m->st, 0, sizeof m->st);
-    memcpy(m->st.p, P_DEFAULT, sizeof m->st.p);
+    memcpy(m->st.p, P_DEFAULT, sizeof P_DEFAULT);
+    derive(m);
     memcpy(m->st.u, U_START, sizeof m->st.u);
     memcpy(m->st.ue, U_START, sizeof m->st.ue);
     m->rtol = DEFAULT_TOL;
@@ -553,9 +568,10 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
     Model* m = (Model*)c;
     State* s = &m->st;
+    int set_p = 0;
     for (size_t k = 0; k < nvr; k++) {
         fmi2ValueReference r = vr[k];
-        if (r < VR_U) { s->p[r] = value[k]; if (!s->initialised) s->x_valid = 0; }
+        if (r < VR_U) { s->p[r] = value[k]; set_p = 1; if (!s->initialised) s->x_valid = 0; }
         else if (r < VR_Y) {
             s->u[r - VR_U] = value[k]; s->ue[r - VR_U] = value[k];
             if (s->in_init) s->x_valid = 0;     /* the initial state depends on the inputs */
@@ -565,9 +581,17 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
              * initialisation */
             s->s_user[x_index(r)] = value[k]; s->s_set[x_index(r)] = 1; s->x_valid = 0;
         }
-        else { logmsg(m, fmi2Error, "variable %u cannot be set now", (unsigned)r); return fmi2Error; }
+        else {
+            logmsg(m, fmi2Error, "variable %u cannot be set now", (unsigned)r);
+            if (set_p) derive(m);
+            return fmi2Error;
+        }
     }
     m->dirty = 1;
+    if (set_p && derive(m)) {
+        logmsg(m, fmi2Error, "what the parameters determine could not be evaluated");
+        return fmi2Error;
+    }
     return fmi2OK;
 }
 
