@@ -2,6 +2,9 @@
 Chebyshev and Butterworth poles of f_cut and the ripple), with the purely parametric parts split
 out of the right-hand side (:mod:`mcl.compile.parametric`) and, as the baseline measured in the
 same run, without: plain runs, runs with forward sensitivities in f_cut, and a linearisation.
+A second baseline is the model compiled without merging its repeated subexpressions (as the
+flat model writes them: each use of a coefficient function inlined), split nowhere; and the
+compile's CPU seconds with and without the merge.
 
     python benchmarks/parametric.py [--msl DIR] [--repeat 3] [--json PATH]
 """
@@ -58,9 +61,26 @@ def main() -> None:
     from mcl.data import TimeSeries
     from mcl.sensitivity import Linearisation
 
-    with tempfile.TemporaryDirectory() as d:
-        (Path(d) / "Chain.mo").write_text(MODEL)
-        model = compile_model([Path(d) / "Chain.mo"], "Chain", libraries=[args.msl])
+    import os
+
+    from mcl.compile import dae, structure
+
+    def compiled(merge: bool):
+        """The model and its compile's CPU seconds (cold: a cache of its own)."""
+        with tempfile.TemporaryDirectory() as d:
+            (Path(d) / "Chain.mo").write_text(MODEL)
+            os.environ["MCL_CACHE_DIR"] = str(Path(d) / "cache")
+            saved = dae.CSE_MIN, structure.CSE_MIN
+            if not merge:
+                dae.CSE_MIN = structure.CSE_MIN = float("inf")
+            t0 = time.process_time()
+            try:
+                return compile_model([Path(d) / "Chain.mo"], "Chain", libraries=[args.msl]), time.process_time() - t0
+            finally:
+                dae.CSE_MIN, structure.CSE_MIN = saved
+
+    model, compile_s = compiled(True)
+    unmerged, unmerged_compile_s = compiled(False)
     t = np.linspace(0, 2, 2001)
     data = TimeSeries(t, (np.sin(2 * np.pi * 3 * t) + 0.5 * np.sin(2 * np.pi * 13 * t))[:, None], ["u"])
     split = parametric.split(model.ode)
@@ -73,7 +93,9 @@ def main() -> None:
             "run with sensitivities in f_cut": lambda: simulate(model, data, sensitivities=["first.f_cut"]),
             "linearisation (f_cut)": lambda: Linearisation(model, res.states, res.time, data, p,
                                                            ["first.f_cut"])._at(slice(None))}
-    rows = {}
+    print(f"compile: {compile_s:.2f} CPU-s, without the merge {unmerged_compile_s:.2f} CPU-s "
+          f"({unmerged.ode.ode.n_instructions()} instructions)")
+    rows = {"compile": {"cpu_s": compile_s, "unmerged_cpu_s": unmerged_compile_s}}
     for label, job in jobs.items():
         fast = cpu(job, args.repeat)
         original = parametric.split
@@ -82,13 +104,18 @@ def main() -> None:
             import mcl.sensitivity as sens
             sens._FUNCTIONS.clear()
             slow = cpu(job, 1)
+            if label == "plain run":    # the unmerged whole function (its sensitivities take minutes)
+                raw = cpu(lambda: simulate(unmerged, data), 1)
         finally:
             parametric.split = original
             sens._FUNCTIONS.clear()
         rows[label] = {"split_cpu_s": fast, "whole_cpu_s": slow, "ratio": slow / max(fast, 1e-9)}
         print(f"{label:34s} split {fast:8.3f} CPU-s   whole {slow:8.3f} CPU-s   {slow / max(fast, 1e-9):7.1f}x")
+    rows["plain run"].update(unmerged_whole_cpu_s=raw, unmerged_ratio=raw / max(rows["plain run"]["split_cpu_s"], 1e-9))
+    print(f"{'plain run, unmerged and whole':34s} {raw:8.3f} CPU-s   {rows['plain run']['unmerged_ratio']:7.1f}x the split")
     if args.json:
-        Path(args.json).write_text(json.dumps({"instructions": {"whole": whole, "split": split.ode.n_instructions()},
+        Path(args.json).write_text(json.dumps({"instructions": {"whole": whole, "split": split.ode.n_instructions(),
+                                                               "unmerged": unmerged.ode.ode.n_instructions()},
                                                "rows": rows}, indent=1))
 
 

@@ -257,3 +257,21 @@ def test_a_fit_reads_only_the_waves_before_its_own(tmp_path):
     publish(tmp_path, lead, 0.0200, k=2, dictionary=3, wave="w1")
     assert not dataclasses.replace(ctx, wave="w1").give_up(0.0300, 0.0301, behind, k=2, dictionary=3)
     assert dataclasses.replace(ctx, wave="w2").give_up(0.0300, 0.0301, behind, k=2, dictionary=3)
+
+
+def test_a_failed_law_of_the_cause_s_own_component_leaves_the_cause_decided():
+    """Only another component that could not be evaluated puts the cause in doubt; a second
+    law of the named component that failed to fit is a question of which law, not which part."""
+    from types import SimpleNamespace
+
+    from mcl.discovery.verdict import weigh_unevaluated
+
+    best = {"component": "nl", "score": -70000.0}
+    spec = SimpleNamespace(criterion="bic")
+    own = [{"component": "nl", "template": {"name": "polynomial"}, "failed": "FitError"}]
+    evidence = {"strength": "decisive"}
+    weigh_unevaluated(evidence, best, own, [], spec, 8192)
+    assert evidence == {"strength": "decisive"}
+    other = [{"component": "C", "template": {"name": "polynomial"}, "failed": "FitError"}]
+    weigh_unevaluated(evidence, best, other, [], spec, 8192)
+    assert evidence["strength"] == "undecided: C could not be evaluated" and evidence["unevaluated"] == ["C"]

@@ -159,10 +159,11 @@ def failures(screening: list, cands: list) -> list[dict]:
 def weigh_unevaluated(evidence: dict, best: dict, cands: list, screening: list, spec, n_obs: int) -> None:
     """A contender that failed in fitting can only be excluded by its screening prediction:
     its predicted score (one linearised step) must lose by the criterion's 'decisive' margin;
-    otherwise the cause is at most 'undecided'."""
+    otherwise the cause is at most 'undecided'. Another law of the cause's own component that
+    failed does not contest which component it is (only which law: the report lists it)."""
     score_of = criterion_of(spec.criterion).score
     open_ = []
-    for c in (c for c in cands if c.get("failed")):
+    for c in (c for c in cands if c.get("failed") and c["component"] != best["component"]):
         pred = next((s for s in screening if s["component"] == c["component"] and s["template"] == c["template"]), {})
         k = pred.get("n_params", 3)
         if pred.get("predicted_rss") is None or score_of(pred["predicted_rss"], n_obs, k - 1) - best["score"] <= 10:
