@@ -167,9 +167,15 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         # hardly better than where it started: a law far from the nominal one moves resonances,
         # and a fit to the whole record falls into the local minima phase drift makes; fitted
         # first to its first eighth, quarter and half, each start is close enough for the next
-        w_c = w0
+        # (a window's fit that cannot start, from where the last one ended, ends the ladder:
+        # the fit to the whole record stands)
+        w_c, rss_c = w0, np.inf
         for window in windows:
-            w_c, rss_c, problem_c, res_c = fit(active, w_c, window, max(budget - sims, 5))
+            try:
+                w_c, rss_c, problem_c, res_c = fit(active, w_c, window, max(budget - sims, 5))
+            except MclError:
+                rss_c = np.inf
+                break
             record(problem_c, active)
             sims += res_c.simulations
         if rss_c < rss:
