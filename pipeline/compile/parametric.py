@@ -105,7 +105,7 @@ def split_functions(funcs: dict, p_at: dict, n_p: int) -> tuple[dict, ca.Functio
             g = f.expand() if f is not None and not f.is_a("SXFunction") else f
         except RuntimeError:       # holds a rootfinder: reads p as it is
             continue
-        if g is not None and g.is_a("SXFunction"):
+        if g is not None and g.is_a("SXFunction") and g.nnz_in(p_at[name]) == n_p:
             sx[name] = g
     before = sum(g.n_instructions() for g in sx.values())
     if before < 1000:

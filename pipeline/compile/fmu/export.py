@@ -173,7 +173,8 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
             cg.add(_renamed(funcs[key], prefix + key))
     cg.generate(str(build) + "/")
     template = (_HERE / "fmi2_model.c").read_text()
-    values = dict(NP=len(o.p_names), NQ=derived.nnz_out(0) if derived is not None else 0, NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
+    nq = derived.nnz_out(0) if derived is not None else 0
+    values = dict(NP=len(o.p_names), NQ=nq, NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
                   NV=len(probe_vars), HAS_LOOP=int(o.nonlinear_blocks > 0),
                   RES_TOL=repr(residual_tol), TOL=repr(float(tolerance)), GUID=guid, PREFIX=prefix,
                   P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start),
