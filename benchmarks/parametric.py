@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import tempfile
 import time
@@ -61,23 +62,25 @@ def main() -> None:
     from mcl.data import TimeSeries
     from mcl.sensitivity import Linearisation
 
-    import os
-
     from mcl.compile import dae, structure
 
     def compiled(merge: bool):
         """The model and its compile's CPU seconds (cold: a cache of its own)."""
         with tempfile.TemporaryDirectory() as d:
             (Path(d) / "Chain.mo").write_text(MODEL)
+            saved = dae.CSE_MIN, structure.CSE_MIN, os.environ.get("MCL_CACHE_DIR")
             os.environ["MCL_CACHE_DIR"] = str(Path(d) / "cache")
-            saved = dae.CSE_MIN, structure.CSE_MIN
             if not merge:
                 dae.CSE_MIN = structure.CSE_MIN = float("inf")
             t0 = time.process_time()
             try:
                 return compile_model([Path(d) / "Chain.mo"], "Chain", libraries=[args.msl]), time.process_time() - t0
             finally:
-                dae.CSE_MIN, structure.CSE_MIN = saved
+                dae.CSE_MIN, structure.CSE_MIN, cache = saved
+                if cache is None:
+                    os.environ.pop("MCL_CACHE_DIR", None)
+                else:
+                    os.environ["MCL_CACHE_DIR"] = cache
 
     model, compile_s = compiled(True)
     unmerged, unmerged_compile_s = compiled(False)

@@ -20,6 +20,8 @@ import numpy as np
 #: split only where the states' part is at most this share of the whole (else the extra
 #: arguments are not worth it)
 WORTH = 0.5
+#: functions of fewer instructions in all have nothing worth taking out
+SMALL = 1000
 _SPLITS: OrderedDict = OrderedDict()
 _KEEP = 16
 
@@ -76,7 +78,7 @@ def _made(ode) -> Split | None:
     X, U, P, T = ode.ode.sx_in()
     exprs = [ode.ode(X, U, P, T), ode.out(X, U, P, T), *ode.checks(X, U, P, T)]
     before = ca.Function("whole", [X, U, P, T], exprs).n_instructions()
-    if before < 1000:           # nothing to gain on a small model
+    if before < SMALL:
         return None
     split_exprs, symbols, parts = ca.extract_parametric(exprs, P)
     if not symbols:
@@ -108,7 +110,7 @@ def split_functions(funcs: dict, p_at: dict, n_p: int) -> tuple[dict, ca.Functio
         if g is not None and g.is_a("SXFunction") and g.nnz_in(p_at[name]) == n_p:
             sx[name] = g
     before = sum(g.n_instructions() for g in sx.values())
-    if before < 1000:
+    if before < SMALL:
         return funcs, None
     P = ca.SX.sym("p", n_p)
     calls = {}
