@@ -54,6 +54,10 @@ BISECTIONS = 80              # ... and the interval then halved (1e9 down to 1e-
 #: a hybrid model's function holding loops stays SX up to this many instructions (a loop's
 #: solve unrolled, with its fallbacks, is 5 000-50 000: MX then evaluates only what it needs)
 COMPACT_SX_MAX = 20000
+#: ... and is not even expanded where :func:`expanded_size` estimates more than this (the
+#: estimate is within a factor of 5 or so: HeatingRectifier 1e5 for 2e4; a fluid model's loops,
+#: 2e8, took 130 s a function to expand)
+EXPAND_TRY_MAX = 50 * COMPACT_SX_MAX
 #: hold a loop of one unknown with branches on the branch its last solution was on (see
 #: causalise): an op-amp relaxation oscillator then swings with its textbook period, where
 #: solved anew at each call it chatters at a threshold. Off by default: the comparisons' events
@@ -991,8 +995,55 @@ def compact(f: ca.Function) -> ca.Function:
     outputs), else as it is: expanded, a loop's Newton solve is unrolled, every iteration and
     fallback evaluated at every call, into each function that reads it (a pump's one loop: a
     4 MB C function each, 15x the simulation time of the MX call graph)."""
+    if expanded_size(f) > EXPAND_TRY_MAX:      # (expanding to find out took minutes on a fluid model)
+        return f
     e = expanded(f)
     return e if e.is_a("SXFunction") and e.n_instructions() <= COMPACT_SX_MAX else f
+
+
+def expanded_size(f: ca.Function, memo: dict | None = None) -> float:
+    """About how many SX instructions ``f`` expands to, from its call graph: each call inlines
+    its callee (a conditional, each branch), an elementwise operation costs one per entry."""
+    memo = {} if memo is None else memo
+    key = id(f), f.name()
+    if key in memo:
+        return memo[key]
+    if f.is_a("SXFunction"):
+        size = float(f.n_instructions())
+    elif f.is_a("MXFunction"):
+        size = 0.0
+        for k in range(f.n_instructions()):
+            size += _node_size(f, k, memo)
+            if size > EXPAND_TRY_MAX:
+                break
+    elif f.class_name() == "FastNewton":       # (SX calls it: not inlined)
+        size = 1.0
+    elif f.class_name() == "Switch":         # (a short-circuit conditional: every branch inlined)
+        size = sum(expanded_size(g, memo) for g in f.find_functions(1) if g.name().startswith("f_"))
+    else:       # (another solver or an external: called, not inlined)
+        size = 1.0
+    memo[key] = size
+    return size
+
+
+#: MX operations that move entries without computing (no SX instruction)
+_MOVES = {getattr(ca, f"OP_{op}") for op in ("VERTCAT", "HORZCAT", "DIAGCAT", "VERTSPLIT", "HORZSPLIT",
+                                             "DIAGSPLIT", "GETNONZEROS", "GETNONZEROS_PARAM",
+                                             "RESHAPE", "SUBREF", "INPUT", "OUTPUT", "CONST",
+                                             "PARAMETER", "TRANSPOSE", "PROJECT", "GET_ELEMENTS")
+          if hasattr(ca, f"OP_{op}")}
+
+
+def _node_size(f: ca.Function, k: int, memo: dict) -> float:
+    op = f.instruction_id(k)
+    if op == ca.OP_CALL:
+        return expanded_size(f.instruction_MX(k).which_function(), memo)
+    if op in _MOVES:
+        return 0
+    try:
+        return max(1, f.instruction_MX(k).nnz())
+    except RuntimeError:        # (no node to ask)
+        return 1
 
 
 def invariants_in(invariants: ca.SX, dae: Dae, x_impl, z_orig):
