@@ -204,3 +204,24 @@ def test_a_model_that_cannot_be_evaluated_at_its_start_is_a_failed_run(tmp_path)
     t = np.linspace(0, 0.002, 21)
     res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
     assert not res.ok and "evaluation failed" in res.reason, res.reason
+
+
+def test_expansion_size_is_estimated_before_expanding():
+    """A hybrid model's function holding loops is expanded to SX only where that stays small;
+    the size is estimated from the call graph first (each call inlines its callee), so one that
+    would expand to millions of instructions is left as MX without expanding it."""
+    import casadi as ca
+    from mcl.compile import structure
+
+    z, q = ca.SX.sym("z"), ca.SX.sym("q")
+    resid = ca.Function("r", [z, q], [z ** 3 + q * z - 1])
+    Q = ca.MX.sym("q")
+    f = ca.Function("f", [Q], [structure._loop_solve("l", resid, np.array([0.5]), Q)])
+    estimate, actual = structure.expanded_size(f), f.expand().n_instructions()
+    assert actual / 5 < estimate < actual * 5
+
+    big = ca.Function("big", [z], [sum(ca.sin(z * k) for k in range(2000))])      # 4000 instructions
+    calls = ca.Function("calls", [Q], [sum(big(Q + k) for k in range(500))])       # ~2e6 expanded
+    assert structure.expanded_size(calls) > structure.EXPAND_TRY_MAX
+    assert structure.compact(calls) is calls            # left as it is, not expanded
+    assert structure.compact(f).is_a("SXFunction")      # a small one still is

@@ -800,19 +800,43 @@ class _Translator:
         stack = [(root, False)]
         spans: dict = {}     # node -> (first, end) of the function asserts its subtree added
         while stack:
-            k, ready = stack.pop()
+            k, state = stack.pop()
             if k in done:
                 continue
-            if not ready:
+            if state is False:
                 spans[k] = (len(self.fn_asserts), None)
+                if self._kind(k) == "conditional":       # its conditions first, then its branches
+                    stack.append((k, "branches"))
+                    stack.extend((c, False) for c in self.operands(k)[0:-1:2] if c not in done)
+                else:
+                    stack.append((k, True))
+                    stack.extend((c, False) for c in self.children(k) if c not in done)
+                continue
+            if state == "branches":
                 stack.append((k, True))
-                stack.extend((c, False) for c in self.children(k) if c not in done)
+                stack.extend((c, False) for _, c in self.live_branches(k, done) if c not in done)
                 continue
             done[k] = self.build(k, done, bound)
             spans[k] = (spans[k][0], len(self.fn_asserts))
             if self.fn_asserts and self._kind(k) == "conditional":
                 self.gate_asserts(self.operands(k), spans, done)
         return done[root]
+
+    def live_branches(self, k: int, done: dict) -> list:
+        """(condition, branch) of conditional ``k`` that a constant condition does not rule
+        out (the else branch's condition None): a branch ruled out is never translated, as a
+        recursive function's call in the branch its argument rules out
+        (Polyphase's numberOfSymmetricBaseSystems(m) calls itself for even m)."""
+        ops = self.operands(k)
+        live = []
+        for j in range(0, len(ops) - 1, 2):
+            cond = done[ops[j]]
+            if cond.is_constant() and cond.numel() == 1:
+                if float(cond) != 0:
+                    return [*live, (None, ops[j + 1])]
+                continue
+            live.append((cond, ops[j + 1]))
+        return [*live, (None, ops[-1])]
 
     def _kind(self, k: int) -> str:
         node = self.nodes[k]
@@ -897,11 +921,11 @@ class _Translator:
                 self.relations.append(ca.sin(np.pi * a / b))
                 self.relation_ops.append(None)
             return self.call_builtin(body["builtin"], [a, b])
-        if kind == "conditional":
-            ops = [done[o] for o in self.operands(k)]
-            out = ops[-1]   # if c1 then a1 elseif c2 then a2 ... else b
-            for j in range(len(ops) - 3, -1, -2):
-                out = ca.if_else(ops[j], *alike(ops[j + 1], out))
+        if kind == "conditional":       # if c1 then a1 elseif c2 then a2 ... else b
+            live = self.live_branches(k, done)
+            out = done[live[-1][1]]
+            for cond, branch in reversed(live[:-1]):
+                out = ca.if_else(cond, *alike(done[branch], out))
             return out
         if kind == "builtin":
             n = self.strings_size(k)
@@ -1499,6 +1523,16 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             if i in always:          # never changed at an event: pre() is the value
                 return tr.live_sx(always[i])
             tr.refuse(f"pre() of {variables[i]['name']}")
+        if i in structural and i not in resolving:
+            # an Integer, Boolean or enumeration parameter bound to a constant is its value
+            # (see the parameters below), here already: a recursive function it is passed to
+            # then picks its branches by it (numberOfSymmetricBaseSystems(m) calls itself for even m)
+            resolving.add(i)
+            value = tr.sx(attrs[i]["binding"] if attrs[i]["binding"] is not None else attrs[i]["start"])
+            resolving.discard(i)
+            if value.is_constant():
+                return shaped(flat(value), dims[i])
+            structural.discard(i)
         if i in slot:
             return shaped(slot[i], dims[i])
         if i in always:
@@ -1508,6 +1542,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             return shaped(flat(value), dims[i])
         tr.refuse(f"variable {variables[i]['name']} ({kind})")
 
+    structural = {i for i, v in enumerate(variables) if role[i] == "parameter" and i not in init_params
+                  and st["value_types"][v["value_type"]].get("scalar") in ("integer", "boolean", "enumeration")
+                  and (attrs[i]["binding"] is not None or attrs[i]["start"] is not None)}
+    resolving: set = set()
     tr.coord = coord
     events = _Events(st, tr, conditions, memory, d, d_pre, flags, located, model)
     tr.table_records = _table_records(ir, variables, objects, attrs, tr)
