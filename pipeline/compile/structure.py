@@ -55,8 +55,8 @@ BISECTIONS = 80              # ... and the interval then halved (1e9 down to 1e-
 #: solve unrolled, with its fallbacks, is 5 000-50 000: MX then evaluates only what it needs)
 COMPACT_SX_MAX = 20000
 #: ... and is not even expanded where :func:`expanded_size` estimates more than this (the
-#: estimate is within a factor of 5 or so: HeatingRectifier 1e5 for 2e4; a fluid model's loops,
-#: 2e8, took 130 s a function to expand)
+#: estimate is within a factor of 6 or so: HeatingRectifier 1.2e5 for 2e4; a fluid model's loops,
+#: 6e8, took 130 s a function to expand)
 EXPAND_TRY_MAX = 50 * COMPACT_SX_MAX
 #: hold a loop of one unknown with branches on the branch its last solution was on (see
 #: causalise): an op-amp relaxation oscillator then swings with its textbook period, where
@@ -1005,7 +1005,7 @@ def expanded_size(f: ca.Function, memo: dict | None = None) -> float:
     """About how many SX instructions ``f`` expands to, from its call graph: each call inlines
     its callee (a conditional, each branch), an elementwise operation costs one per entry."""
     memo = {} if memo is None else memo
-    key = id(f), f.name()
+    key = hash(f)     # the function itself (each which_function() is a new Python wrapper of it)
     if key in memo:
         return memo[key]
     if f.is_a("SXFunction"):
