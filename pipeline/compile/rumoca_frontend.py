@@ -1429,6 +1429,15 @@ def _whole_arena(st: dict):
     ex["nodes"], ex["provenance"], ex["whole"] = nodes, prov, True
 
 
+def _evaluated(ir: dict) -> set[str]:
+    """The parameters rumoca's flat model marks evaluated: annotation(Evaluate = true), or
+    final and bound to such a one (a circuit's capacitances all set from one CapVal = 0). Their
+    values are the model's structure, as in other tools: a zero capacitance's C*der(v) is no
+    term at all, and its voltage no state."""
+    flat = ir.get("flat", {}).get("variables", {}) or {}
+    return {re.sub(r"\[[^\]]*\]$", "", n) for n, v in flat.items() if v.get("evaluate")}
+
+
 def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     st = ir["storage"]
     _whole_arena(st)
@@ -1542,8 +1551,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             return shaped(flat(value), dims[i])
         tr.refuse(f"variable {variables[i]['name']} ({kind})")
 
+    evaluated = _evaluated(ir)
     structural = {i for i, v in enumerate(variables) if role[i] == "parameter" and i not in init_params
-                  and st["value_types"][v["value_type"]].get("scalar") in ("integer", "boolean", "enumeration")
+                  and (st["value_types"][v["value_type"]].get("scalar") in ("integer", "boolean", "enumeration")
+                       or v["name"] in evaluated)
                   and (attrs[i]["binding"] is not None or attrs[i]["start"] is not None)}
     resolving: set = set()
     tr.coord = coord
@@ -1592,7 +1603,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     # a branch: a filter's order and kind) and stays at its value, as other tools evaluate it
     values = ca.vertcat(*[value_of(i) for i in index["p"]]) if index["p"] else ca.SX(0, 1)
     elements = ca.vertsplit(values)
+    # (a Real parameter the model evaluates, Evaluate = true or final and bound to one, is a
+    # constant of it: not a parameter to set or fit)
     real = [st["value_types"][variables[i]["value_type"]].get("scalar") == "real"
+            and not (i in structural and variables[i]["name"] in evaluated)
             for i in index["p"] for _ in range(size[i])]
     free = [j for j, v in enumerate(elements) if v.is_constant() and real[j]]
     p_names = [names["p"][j] for j in free]
@@ -1915,6 +1929,18 @@ class _Events:
         at_init = edge if ca.depends_on(now, self.flags[0]) else ca.SX(0)
         return ca.if_else(self.flags[0], at_init, edge)
 
+    def holds(self, trigger: int, guard: int) -> ca.SX:
+        """Whether a when-clause's condition holds now (its level, not its rising edge)."""
+        node = self.conds[trigger]["node"]
+        if node == "always":
+            now = ca.SX(1)
+        elif isinstance(node, dict) and "any_rise" in node:
+            rise = node["any_rise"]
+            now = ca.logic_or(self.holds(rise["lhs"], rise["lhs"]), self.holds(rise["rhs"], rise["rhs"]))
+        else:
+            now = self.value(trigger)
+        return now if guard == trigger else ca.logic_and(now, self.value(guard))
+
     def active(self, activation) -> ca.SX:
         if activation == "always":
             return ca.SX(1)
@@ -2033,6 +2059,10 @@ class _Events:
                 level, violated = "error", self.active({"when": {"trigger": a["trigger"], "guard": a["guard"]}})
             elif kind == "warning":
                 level, violated = "warning", ca.logic_not(self.tr.sx(body["condition"]))
+            elif kind == "terminate":
+                # checked where a run's points are, between events (pre(c) = c there, so not
+                # as an edge): the run ends at the first point its when-condition holds
+                level, violated = "terminate", self.holds(a["trigger"], a["guard"])
             else:
                 self.tr.refuse(f"event action '{kind}'")
             out.append(flat(violated)[0])
@@ -2040,8 +2070,15 @@ class _Events:
         return (ca.vertcat(*out) if out else ca.SX(0, 1)), info
 
     def _message(self, node, action) -> str:
-        nodes = self.st["expressions"]["nodes"]
+        nodes, variables = self.st["expressions"]["nodes"], self.st["variables"]
         lit = nodes[node] if node is not None else None
+        for _ in range(8):      # a String parameter (TerminateSimulation's terminationText): its binding
+            ref = lit.get("coordinate") if isinstance(lit, dict) else None
+            if not isinstance(ref, dict) or len(ref) != 1:
+                break
+            i = next(iter(ref.values()))
+            binding = variables[i]["attributes"].get("binding") if isinstance(i, int) and i < len(variables) else None
+            lit = nodes[binding] if binding is not None else None
         text = lit.get("literal", {}).get("string") if isinstance(lit, dict) else None
         where = self.where(action.get("provenance"))
         text = text or "assert"
