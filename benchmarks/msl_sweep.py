@@ -110,6 +110,9 @@ ONE = textwrap.dedent("""
     row["simulate_s"] = time.process_time() - t1
     if not res.ok:
         done(stage="simulate", error=str(res.reason)[:300])
+    if res.terminated:      # the model ended the run (terminate()): compared up to there
+        row["terminated"] = res.terminated[:120]
+        grid = grid[:len(res.time)]
     if ref is None:
         done(stage="ok", compared=0)
     worst, compared = 0.0, 0

@@ -524,15 +524,21 @@ class _Plan:
                 hybrid.reset()
                 xa = hybrid.initial(self, xa, p, t_int[0])
             traj[:, 0] = xa
+            ended = None            # (the last point, why) where the model called terminate()
             for idx in self.chunks:
                 if hybrid is None:
                     self.advance(traj[:, idx[0] - 1], t_int[idx[0] - 1], idx, p, budget, traj)
                 else:
                     hybrid.advance(self, idx, p, budget, traj)
+                    ended = hybrid.terminated(self, traj, idx, p)
+                    if ended is not None:
+                        break
         except _Stop as stop:
             return fail(str(stop))
         except RuntimeError as exc:
             return fail(f"solver error: {_last_line(exc)}")
+        if ended is not None:       # (the points after it: its state, for the mapped functions)
+            traj[:, ended[0] + 1:] = traj[:, ended[0]:ended[0] + 1]
         traj = traj[:, self.out_idx]
         X = traj[: self.nx]
         P = np.repeat(p[:, None], N, axis=1)
@@ -547,16 +553,21 @@ class _Plan:
             y, res, drift = (np.array(v) for v in self.checks(*at))
         except RuntimeError as exc:
             return fail(f"evaluating the outputs failed: {_last_line(exc)}")
-        result = SimulationResult(t_out.copy(), y.T, list(names), seconds=clock.elapsed,
-                                  engine="casadi", states=X.T)
+        # the run ends where the model called terminate(), as in other tools: its points so far
+        n = N if ended is None else int(np.searchsorted(self.out_idx, ended[0], side="right"))
+        result = SimulationResult(t_out[:n].copy(), y.T[:n], list(names), seconds=clock.elapsed,
+                                  engine="casadi", states=X.T[:n])
         result.steps = budget.steps
         scale = 1.0 + (np.max(np.abs(X)) if X.size else 0.0)
         # a failed assert first: the model's own words for what went wrong (sqrt of a negative
         # argument asserted >= 0 is also a non-finite output)
-        reason = hybrid.asserts(X, self.u_out, P, t_out) if hybrid is not None else None
-        reason = reason or _check(y, res.ravel(), drift.ravel(), t_out, scale, opts)
+        reason = hybrid.asserts(X[:, :n], self.u_out[:, :n], P[:, :n], t_out[:n]) if hybrid is not None else None
+        reason = reason or _check(y[:, :n], res.ravel()[:n], drift.ravel()[:n], t_out[:n], scale, opts)
         if reason:
             result.ok, result.reason = False, reason
+        elif ended is not None:
+            result.terminated = ended[1]
+            log.info("the model terminated the run at %s", ended[1])
         if self.ns:
             # column k of traj holds vec(S(t_k)); the mapped function wants [S(t_1), ..., S(t_N)]
             S = np.hstack([traj[self.nx:, k].reshape(self.nx, self.ns, order="F") / self.scale(p)
@@ -564,7 +575,7 @@ class _Plan:
             extra = ([np.repeat(self.q[:, None], N, 1), np.repeat(self.qp[:, None], N, 1)]
                      if self.split is not None else [])
             dy = np.array(self.sens(X, S, self.u_out, P, t_out[None, :], *extra))
-            result.sensitivities = dy.reshape(len(names), N, self.ns).transpose(1, 0, 2)
+            result.sensitivities = dy.reshape(len(names), N, self.ns).transpose(1, 0, 2)[:n]
             result.sensitivity_names = [ode.p_names[i] for i in self.sel]
         return result
 
@@ -686,13 +697,22 @@ class _Hybrid:
             return x
         nx = plan.nx
         u = plan.u_at(t0)
+        seen = set()
         for _ in range(MAX_EVENT_ITERATIONS):
             x0 = np.array(init_d(u, p, t0, x[nx - self.nd:nx])).ravel()
             new = x.copy()
             new[:nx - self.nd] = x0
             new = self.iterate(plan, new, p, t0, self.flags(initial=True))
+            d = (new[nx - self.nd:nx] + 0.0).tobytes()
             if np.array_equal(new[nx - self.nd:nx], x[nx - self.nd:nx]):
                 return new
+            if d in seen:
+                # the values alternate: a relation on a quantity the initial system leaves at 0
+                # within its tolerance (a friction's w = +-6e-9: forward, then backward, ...);
+                # the run starts from this one, its first event settles the rest
+                log.info("the discrete initial values alternate at t = %g; the run starts from the last", t0)
+                return new
+            seen.add(d)
             x = new
         raise _Stop("initialisation did not settle: discrete and continuous initial values keep changing")
 
@@ -954,13 +974,28 @@ class _Hybrid:
         V = self.assert_values(X, U, P, t)
         for i, (level, message) in enumerate(self.assert_info):
             bad = np.flatnonzero(V[i] > 0.5)
-            if not bad.size:
+            if not bad.size or level == "terminate":
                 continue
             if level == "warning":
                 log.warning("assert at t = %g: %s", t[bad[0]], message)
                 continue
             return f"assertion failed at t = {t[bad[0]]:g}: {message}"
         return None
+
+    def terminated(self, plan, traj, idx, p) -> tuple[int, str] | None:
+        """(the first point of ``idx`` where a terminate() is called, "t = ...: its message"),
+        or None."""
+        ends = [i for i, (level, _) in enumerate(self.assert_info) if level == "terminate"]
+        if not ends or self.assert_fun is None:
+            return None
+        t = plan.t_int[idx]
+        U = np.column_stack([plan.u_at(tc) for tc in t]) if plan.u.names else np.zeros((0, len(t)))
+        V = self.assert_values(traj[: plan.nx, idx], U, p, t)[ends]
+        hits = np.flatnonzero((V > 0.5).any(axis=0))
+        if not hits.size:
+            return None
+        k = hits[0]
+        return int(idx[k]), f"t = {t[k]:g}: {self.assert_info[ends[int(np.argmax(V[:, k] > 0.5))]][1]}"
 
     def assert_values(self, X, U, P, t) -> np.ndarray:
         """(asserts, points): 1 where an assert is violated; ``P`` one column or one per point."""

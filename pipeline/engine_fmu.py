@@ -52,9 +52,9 @@ class FmuEngine(Engine):
         seconds = time.perf_counter() - t0
         if status != "ok":
             return SimulationResult.failed(payload, t_out, model.output_names, "fmu", seconds)
-        y = payload
-        result = SimulationResult(t_out.copy(), y, list(model.output_names), seconds=seconds,
-                                  engine="fmu")
+        y, ended = payload
+        result = SimulationResult(t_out[:len(y)].copy(), y, list(model.output_names), seconds=seconds,
+                                  engine="fmu", terminated=ended)
         if not np.all(np.isfinite(y)):
             k = int(np.argmax(~np.all(np.isfinite(y), axis=1)))
             result.ok, result.reason = False, f"non-finite output at t = {t_out[k]:g}"
@@ -105,16 +105,23 @@ def _child(job: dict, conn) -> None:
         conn.close()
 
 
-def _simulate(job: dict, messages: list[str]) -> np.ndarray:
+def _simulate(job: dict, messages: list[str]) -> tuple[np.ndarray, str | None]:
+    """(the outputs at the output times, "t = ...: message" where the model called terminate():
+    the outputs then end at the last output time before it)."""
     import tempfile
 
     from fmpy import read_model_description
 
     from .compile.fmu.archive import safe_extract
 
+    ended: list[str] = []
+
     def logger(_env, _name, status, _category, message):
+        text = message.decode("utf-8", "replace")
         if status >= 2:  # discard, error, fatal
-            messages.append(message.decode("utf-8", "replace"))
+            messages.append(text)
+        elif text.startswith(_TERMINATED):
+            ended.append(text[len(_TERMINATED):])
 
     with tempfile.TemporaryDirectory(prefix="mcl-fmu-run-") as tmp:   # removed after use
         unzipdir = safe_extract(job["path"], tmp)
@@ -123,10 +130,16 @@ def _simulate(job: dict, messages: list[str]) -> np.ndarray:
         cs = md.coSimulation
         if (md.fmiVersion == "2.0" and cs is not None and cs.canInterpolateInputs
                 and cs.canHandleVariableCommunicationStepSize):
-            return _simulate_cs2(job, md, logger)
-        if md.fmiVersion == "2.0" and md.modelExchange is not None and not md.numberOfEventIndicators:
-            return _simulate_me2(job, md, logger)
-        return _simulate_fmpy(job, logger)
+            y = _simulate_cs2(job, md, logger)
+        elif md.fmiVersion == "2.0" and md.modelExchange is not None and not md.numberOfEventIndicators:
+            y = _simulate_me2(job, md, logger)
+        else:
+            y = _simulate_fmpy(job, logger)
+    return y, (ended[0] if ended and len(y) < len(job["t_out"]) else None)
+
+
+#: how the FMU's log message of a terminate() call begins (fmi2_model.c's check_asserts)
+_TERMINATED = "terminated at "
 
 
 def _simulate_cs2(job: dict, md, logger) -> np.ndarray:
@@ -135,6 +148,8 @@ def _simulate_cs2(job: dict, md, logger) -> np.ndarray:
     from ctypes import c_double, c_int, c_uint
 
     from fmpy import instantiate_fmu
+    from fmpy.fmi1 import FMICallException
+    from fmpy.fmi2 import fmi2Discard, fmi2Terminated
 
     vr = {v.name: v.valueReference for v in md.modelVariables}
     t_out, u_t, u_v = job["t_out"], job["u_time"], job["u_values"]
@@ -173,7 +188,13 @@ def _simulate_cs2(job: dict, md, logger) -> np.ndarray:
                 u_val[:], du_val[:] = u_grid[k], slopes[k]
                 fmu.fmi2SetReal(fmu.component, u_vr, nu, u_val)
                 fmu.fmi2SetRealInputDerivatives(fmu.component, u_vr, nu, order, du_val)
-            fmu.fmi2DoStep(fmu.component, float(grid[k]), float(grid[k + 1] - grid[k]), 1)
+            try:
+                fmu.fmi2DoStep(fmu.component, float(grid[k]), float(grid[k + 1] - grid[k]), 1)
+            except FMICallException as exc:     # the model called terminate(): its points so far
+                if exc.status != fmi2Discard or not fmu.getBooleanStatus(fmi2Terminated):
+                    raise
+                y = y[:k_out]
+                break
         fmu.terminate()
     finally:
         fmu.freeInstance()

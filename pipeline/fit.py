@@ -171,7 +171,7 @@ class FitProblem:
             return self._linearised(w)
         return self.engine.simulate(self.model, self.inputs, self.params(w), t_out=self.time,
                                     options=self.options,
-                                    sensitivities=self.parameters if gradient else None)
+                                    sensitivities=self.parameters if gradient else None).through(self.time)
 
     @property
     def linearised(self) -> bool:
@@ -189,7 +189,7 @@ class FitProblem:
         params = self.params(w)
         while True:
             fine, at = fine_grid(self.time, self.substeps)
-            res = self.engine.simulate(self.model, self.inputs, params, t_out=fine, options=self.options)
+            res = self.engine.simulate(self.model, self.inputs, params, t_out=fine, options=self.options).through(fine)
             if not res.ok:
                 return dataclasses.replace(res, time=self.time, outputs=np.full((len(self.time), len(res.output_names)), np.nan))
             lin = Linearisation(self.model, res.states, fine, self.inputs, self.model.parameter_vector(params),

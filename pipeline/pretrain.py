@@ -124,7 +124,7 @@ def _label_task(context, item):
     models, u, names, options = context
     k, w = item
     res = CasadiEngine().simulate(models[k], u, dict(zip(names, w)), options=options)
-    return bool(res.ok)
+    return bool(res.through(u.time).ok)
 
 
 @dataclass

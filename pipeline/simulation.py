@@ -88,6 +88,8 @@ class SimulationResult:
     sensitivity_names: list[str] = field(default_factory=list)
     states: np.ndarray | None = None
     steps: int = 0                  # solver steps taken (the work done; summed over all calls)
+    #: where the model called terminate() ("t = ...: its message"): the run ends at that point
+    terminated: str | None = None
 
     def output(self, name: str) -> np.ndarray:
         return self.outputs[:, self.output_names.index(name)]
@@ -114,6 +116,15 @@ class SimulationResult:
                        f"<td>{np.nanmax(self.outputs[:, k]):.4g}</td><td>{self.outputs[-1, k]:.4g}</td></tr>"
                        for k, n in enumerate(self.output_names)) if self.ok and len(self.time) else ""
         return (f"<div>{head}<table><tr><th>output</th><th>min</th><th>max</th><th>last</th></tr>{rows}</table></div>")
+
+    def through(self, time) -> SimulationResult:
+        """This result, or a failed one where the model ended the run (terminate()) before the
+        last of ``time``: a fit compares every point."""
+        if not self.ok or len(self.time) >= len(time):
+            return self
+        return SimulationResult.failed(f"the model terminated the run at {self.terminated}, before the "
+                                       f"data's end (t = {time[-1]:g})", time, self.output_names,
+                                       self.engine, self.seconds)
 
     @classmethod
     def failed(cls, reason, time, output_names, engine, seconds=0.0):

@@ -174,6 +174,39 @@ def test_an_assert_that_fires_fails_the_run_with_its_message(tmp_path):
     assert "x left its range" in res.reason and "t = 0.5" in res.reason and "A.mo:5" in res.reason
 
 
+STOPPING = """
+model Stopping "a tank that fills at 2 per second; the run ends once it holds 1.1"
+  parameter Real q = 2 "inflow";
+  parameter String why = "the tank is full";
+  Real v(start = 0, fixed = true, unit = "m3");
+  output Real level = v;
+equation
+  der(v) = q;
+  when v >= 1.1 then
+    terminate(why);
+  end when;
+end Stopping;
+"""
+
+
+def test_terminate_ends_the_run_where_its_condition_is_met(tmp_path):
+    """terminate() ends the run there, as in other tools: a result (not a failure) with the
+    points up to that instant and the model's words; a fit over the whole data, which needs
+    every point, takes such a run as failed."""
+    (tmp_path / "Stopping.mo").write_text(STOPPING)
+    model = compile_model([tmp_path / "Stopping.mo"], "Stopping")
+    t = np.linspace(0, 1, 11)
+    inputs = TimeSeries(t, np.zeros((len(t), 0)), [])
+    res = CasadiEngine().simulate(model, inputs, options=None)
+    assert res.ok and res.time[-1] == pytest.approx(0.5) and len(res.outputs) == 6
+    assert np.allclose(res.output("level"), 2 * res.time, atol=1e-8)
+    assert "the tank is full" in res.terminated and "t = 0.55" in res.terminated
+    slow = CasadiEngine().simulate(model, inputs, {"q": 1.0}, options=None)   # full at 1.1: never
+    assert slow.ok and slow.terminated is None and len(slow.time) == 11
+    failed = res.through(t)
+    assert not failed.ok and "terminated the run at t = 0.55" in failed.reason and failed.outputs.shape == (11, 1)
+
+
 def test_an_assert_on_parameters_only_is_checked_once_and_still_fires(tmp_path):
     """An assert that reads no state, input or time (the MSL's range checks) is evaluated at one
     point, not at every output point: the same verdict, without the model's loops solved n times."""

@@ -15,7 +15,7 @@ from mcl.compile.fmu.export import build_fmu, validate_fmu
 from mcl.engine_casadi import CasadiEngine
 from mcl.model import FmuModel
 from mcl.simulation import SimulationOptions
-from test_events import BALL, HYSTERESIS, _ball_truth
+from test_events import BALL, HYSTERESIS, STOPPING, _ball_truth
 
 SAMPLED = """
 model Sampled "a sampled PI controller holding its output between ticks, on a first-order plant"
@@ -53,7 +53,8 @@ end Limited;
 def fmus(tmp_path_factory):
     d = tmp_path_factory.mktemp("hybrid")
     out = {}
-    for name, text in (("Ball", BALL), ("Hysteresis", HYSTERESIS), ("Sampled", SAMPLED), ("Limited", LIMITED)):
+    for name, text in (("Ball", BALL), ("Hysteresis", HYSTERESIS), ("Sampled", SAMPLED), ("Limited", LIMITED),
+                       ("Stopping", STOPPING)):
         (d / f"{name}.mo").write_text(text)
         model = compile_model([d / f"{name}.mo"], name)
         out[name] = (model, build_fmu(model, d / f"{name}.fmu"))
@@ -171,6 +172,21 @@ def test_an_assert_of_level_error_fails_with_its_message(fmus, capsys):
     t = np.linspace(0, 1, 11)
     res = simulate(FmuModel.read(path), series(t))
     assert not res.ok and "x left its range" in res.reason and "Limited.mo:6" in res.reason
+
+
+def test_terminate_ends_the_fmus_run_in_both_kinds(fmus, capsys):
+    """terminate() in the FMU: Co-Simulation's step returns fmi2Discard with fmi2Terminated
+    true, Model Exchange's completed step and event update ask the importer to stop; FMPy ends
+    each run there, and mcl's FMU engine gives the points up to it, as its own engine does."""
+    _, path = fmus["Stopping"]
+    for kind in ("CoSimulation", "ModelExchange"):
+        res = simulate_fmu(str(path), stop_time=1.0, fmi_type=kind, output=["level"])
+        assert 0.549 <= res["time"][-1] <= 0.5501 and np.isclose(res["level"][-1], 2 * res["time"][-1], atol=1e-6), kind
+        assert "terminated at t = 0.55" in capsys.readouterr().out, kind
+    t = np.linspace(0, 1, 11)
+    res = simulate(FmuModel.read(path), series(t))
+    assert res.ok and len(res.time) == 6 and res.time[-1] == pytest.approx(0.5)
+    assert "the tank is full" in res.terminated
 
 
 def test_discrete_start_values_are_settable_and_the_state_restorable(fmus):

@@ -78,7 +78,7 @@ static const double EVENTS[@N_EVENTS@ + 1] = {@EVENTS@};
 /* sample(start, period) clocks */
 static const double CLOCK_START[NCLOCK + 1] = {@CLOCK_START@};
 static const double CLOCK_PERIOD[NCLOCK + 1] = {@CLOCK_PERIOD@};
-/* asserts: level (1 error, 0 warning) and message */
+/* asserts: level (1 error, 0 warning, 2 a terminate() call) and message */
 static const int ASSERT_ERROR[NA + 1] = {@ASSERT_ERROR@};
 static const char* const ASSERT_MSG[NA + 1] = {@ASSERT_MSG@};
 
@@ -115,6 +115,7 @@ typedef struct {
     int warned[NA + 1];                /* asserts of level warning already logged */
     double stop;                       /* the stop time, when the importer gave one */
     int stop_defined, terminal_done;
+    int terminated;                    /* the model called terminate(): the run ends here */
 } State;
 
 typedef struct {
@@ -133,7 +134,7 @@ typedef struct {
     double z0[NZ + 1], z1[NZ + 1], zi[NZ + 1];
     int piv[NX + 1];
     /* event iteration work */
-    double sv[NX + 1], cur[NX + 1], pre[NX + 1], nw[NX + 1], reinit[NX + 1], keep[NX + 1];
+    double sv[NX + 1], cur[NX + 1], pre[NX + 1], nw[NX + 1], reinit[NX + 1], keep[NX + 1], back[NX + 1];
     double seen[MAX_EVENT_ITERATIONS * ND + 1];   /* discrete values met since pre() changed */
     double flags[NF + 1], av[NA + 1];
     int due[NCLOCK + 1];
@@ -346,6 +347,11 @@ static fmi2Status check_asserts(Model* m, double t, const double* x, const doubl
     }
     for (int i = 0; i < NA; i++) {
         if (!(m->av[i] > 0.5)) continue;
+        if (ASSERT_ERROR[i] == 2) {
+            if (!s->terminated) logmsg(m, fmi2OK, "terminated at t = %g: %s", t, ASSERT_MSG[i]);
+            s->terminated = 1;
+            continue;
+        }
         if (ASSERT_ERROR[i]) {
             logmsg(m, fmi2Error, "assertion failed at t = %g: %s", t, ASSERT_MSG[i]);
             return fmi2Error;
@@ -372,6 +378,7 @@ static fmi2Status initial_events(Model* m) {
     {
         int it;
         for (it = 0; it < MAX_EVENT_ITERATIONS; it++) {
+            if (it) memcpy(m->back, m->keep, ND * sizeof(double));
             memcpy(m->keep, s->x + NC, ND * sizeof(double));
             memcpy(m->sv + NC, s->x + NC, ND * sizeof(double));   /* the starts, with these discrete values */
             if (call(m, F(init), s->ue, s->p, &s->t, m->sv, m->nw)) {
@@ -382,6 +389,12 @@ static fmi2Status initial_events(Model* m) {
             set_flags(m, 1, 0, NULL);
             if (iterate(m, t, s->ue, NULL) != fmi2OK) return fmi2Error;
             if (same(s->x + NC, m->keep, ND)) break;
+            if (it && same(s->x + NC, m->back, ND)) {
+                /* the values alternate (a friction's w within the initial system's tolerance
+                 * of 0: forward, backward, ...): the run starts from these, as mcl's own engine */
+                logmsg(m, fmi2OK, "the discrete initial values alternate at t = %g; starting from the last", t);
+                break;
+            }
         }
         if (it == MAX_EVENT_ITERATIONS) {
             logmsg(m, fmi2Error, "initialisation did not settle: discrete and continuous initial values keep changing");
@@ -717,6 +730,7 @@ fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo* info) {
         } else if (event_at(m, s->t, s->ue, &changed) != fmi2OK) return fmi2Error;
         if (changed & 2) info->valuesOfContinuousStatesChanged = fmi2True;
         if (check_asserts(m, s->t, s->x, s->ue) != fmi2OK) return fmi2Error;
+        info->terminateSimulation = s->terminated ? fmi2True : fmi2False;
     }
     next = next_event_time(s, s->t);
     if (isfinite(next)) {
@@ -732,9 +746,11 @@ fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noPrior, fmi
                                        fmi2Boolean* terminateSimulation) {
     Model* m = (Model*)c;
     (void)noPrior;
+    fmi2Status status;
     *enterEventMode = fmi2False;
-    *terminateSimulation = fmi2False;
-    return check_asserts(m, m->st.t, m->st.x, m->st.ue);
+    status = check_asserts(m, m->st.t, m->st.x, m->st.ue);
+    *terminateSimulation = m->st.terminated ? fmi2True : fmi2False;
+    return status;
 }
 
 fmi2Status fmi2SetTime(fmi2Component c, fmi2Real t) {
@@ -1165,7 +1181,8 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     s->t = t_end;
     memcpy(s->ue, input_at(m, t_end), sizeof s->ue);
     m->dirty = 1;
-    return update(m);
+    if (update(m) != fmi2OK) return fmi2Error;
+    return s->terminated ? fmi2Discard : fmi2OK;    /* (fmi2Terminated tells why) */
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Error; }
@@ -1208,9 +1225,8 @@ fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Int
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean* value) {
-    (void)c;
     if (s != fmi2Terminated) return fmi2Discard;
-    *value = fmi2False;
+    *value = ((Model*)c)->st.terminated ? fmi2True : fmi2False;
     return fmi2OK;
 }
 
