@@ -116,10 +116,37 @@ def _step_function(o, nd: int = 0) -> ca.Function:
     XC, D = ca.MX.sym("xc", nc), ca.MX.sym("d", nd)
     X = ca.vertcat(XC, D) if nd else XC
     DU = ca.MX.sym("du", U.numel())
-    f = o.ode(X, U, P, T)[:nc] if nd else o.ode(X, U, P, T)
+    ode = o.ode
+    dirs = jacobian_directions(ode)
+    if dirs < 64:       # (CasADi's default: a wrapper's option sets it for the calls through it)
+        args = ode.mx_in()
+        ode = ca.Function("ode_dirs", args, ode.call(args), {"max_num_dir": dirs})
+    f = ode(X, U, P, T)[:nc] if nd else ode(X, U, P, T)
     ft = ca.jacobian(f, T) + (ca.mtimes(ca.jacobian(f, U), DU) if U.numel() else 0)
     return ca.Function("step", [X, U, P, T, DU], [f, ca.densify(ca.jacobian(f, XC)), ca.densify(ft)],
                        ["x", "u", "p", "t", "du"], ["f", "J", "ft"])
+
+
+#: about the C code per SX instruction and forward direction of the Jacobian, and the most the
+#: Jacobian's derivative functions may take: PlanarFourbar's right-hand side (5 349
+#: instructions, 203 states, 109 directions) written out for 64 directions at once and for the 45
+#: left was 25 MB of C, past C_LIMIT
+C_PER_DIRECTION = 45
+JACOBIAN_C_BUDGET = 6_000_000
+
+
+def jacobian_directions(ode: ca.Function) -> int:
+    """How many forward directions each derivative call of ``ode`` in the FMU's Jacobian takes:
+    CasADi's 64 unless its code (twice that many copies at most: a full call and the rest)
+    would pass :data:`JACOBIAN_C_BUDGET`; then fewer, more calls of smaller code (at 8, a
+    Jacobian costs about 10 % more: each call evaluates the function itself again)."""
+    from ..structure import expanded_size
+
+    per = expanded_size(ode) * C_PER_DIRECTION
+    dirs = 64
+    while dirs > 1 and 2 * dirs * per > JACOBIAN_C_BUDGET:
+        dirs //= 2
+    return dirs
 
 
 def _c_string(text: str) -> str:
@@ -131,13 +158,16 @@ def _c_string(text: str) -> str:
     return '"' + "".join(out) + '"'
 
 
+_ASSERT_LEVELS = {"warning": 0, "error": 1, "terminate": 2}     # ASSERT_ERROR in the C template
+
+
 def _events(o) -> dict:
     """The template values of a hybrid model's clocks and asserts."""
     info = getattr(o, "events", None) or {}
     clocks = [(float(a), float(b)) for a, b in info.get("clocks", [])]
     asserts = info.get("asserts", []) if getattr(o, "asserts", None) is not None else []
     return dict(NCLOCK=len(clocks), CLOCK_START=_fmt(c[0] for c in clocks), CLOCK_PERIOD=_fmt(c[1] for c in clocks),
-                NA=len(asserts), ASSERT_ERROR=", ".join("0" if a[0] == "warning" else "1" for a in asserts) or "0",
+                NA=len(asserts), ASSERT_ERROR=", ".join(str(_ASSERT_LEVELS[a[0]]) for a in asserts) or "0",
                 ASSERT_MSG=", ".join(_c_string(str(a[1])) for a in asserts) or '""')
 
 
