@@ -318,3 +318,21 @@ def test_a_vessel_starts_from_its_preferred_pressure_and_temperature(msl_path, t
     p_ref = np.array([pressure(m, U)[0] for m, U in ref.y.T])
     assert abs(res.output("p_out")[0] - 3e5) < 1e-3
     assert np.max(np.abs(res.output("p_out") - p_ref)) < 1e-4 * 3e5
+
+
+def test_a_robot_axis_starts_at_rest_and_ends_where_it_terminates(msl_path):
+    """RobotR3.OneAxis: its bearing friction at rest starts neither forward nor backward (the
+    initial system leaves the motor's speed at +-6e-9, and the friction's discrete values
+    alternate with its sign: the run starts from the last), the axis moves through its
+    120 degrees, and TerminateSimulation ends the run swingTime after the path's end, with its
+    text, before the 1.6 s stop time."""
+    from mcl import compile_model, simulate
+    from mcl.data import TimeSeries
+
+    model = compile_model([], "Modelica.Mechanics.MultiBody.Examples.Systems.RobotR3.OneAxis")
+    t = np.linspace(0, 1.6, 321)
+    res = simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    assert "End condition reached" in res.terminated and 1.45 < res.time[-1] < 1.55 < 1.6
+    phi = res.states[:, model.ode.x_names.index("load.phi")]
+    assert abs(phi[0]) < 1e-6 and abs(phi[-1] - np.radians(120)) < 2e-3
