@@ -125,14 +125,22 @@ def test_a_relaxation_oscillator_keeps_its_amplifier_on_its_branch(tmp_path, mon
     between its thresholds +-15 R1/(R1 + R2) it has three solutions, and solved anew it flips
     back to the branch just left (the solver chatters there). Held on the branch it is on
     (``HOLD_BRANCHES``), the capacitor swings between the thresholds with the textbook period
-    2 R C ln((1 + k)/(1 - k)), k = R1/(R1 + R2)."""
-    from mcl.compile import structure
-
+    2 R C ln((1 + k)/(1 - k)), k = R1/(R1 + R2). The loop is held because its residual falls
+    on one branch and rises on another (several solutions); with the amplifier's inputs swapped
+    (negative feedback: one solution) it is solved anew at each call, as held loops cost."""
     monkeypatch.setenv("MODELICAPATH", str(msl_path()))
-    monkeypatch.setattr(structure, "HOLD_BRANCHES", True)       # (off by default: its cost)
     monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))
     (tmp_path / "RelaxationOscillator.mo").write_text(OSCILLATOR)
+    (tmp_path / "Follower.mo").write_text(OSCILLATOR.replace("RelaxationOscillator", "Follower")
+                                          .replace("opAmp.in_n, c.p", "opAmp.in_p, c.p")
+                                          .replace("r2.n, opAmp.in_p", "r2.n, opAmp.in_n")
+                                          .replace("r1.p, opAmp.in_p", "r1.p, opAmp.in_n"))
+    def held(m):    # the comparisons of held loops (events of a run: the ODE with guesses)
+        return ((m.ode.warm or m.ode).events or {}).get("branches", 0)
+
+    assert held(compile_model([tmp_path / "Follower.mo"], "Follower")) == 0
     model = compile_model([tmp_path / "RelaxationOscillator.mo"], "RelaxationOscillator")
+    assert held(model) >= 1
     t = np.linspace(0, 0.15, 3001)
     res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []))
     assert res.ok, res.reason
@@ -145,6 +153,33 @@ def test_a_relaxation_oscillator_keeps_its_amplifier_on_its_branch(tmp_path, mon
     assert len(up) >= 5
     assert np.abs(np.diff(up) - period).max() < 1e-3 * period
 
+
+
+@needs_msl()
+def test_a_loop_newton_cannot_start_is_solved_branch_by_branch(tmp_path, monkeypatch):
+    """The MSL's DifferentialAmplifier: its op-amp's loop has six tearing variables and two
+    comparisons (the output limits, which move with the op-amp's floating ground). From the
+    start values the amplifier is saturated, and Newton's method goes from one limit to the
+    other, never trying the linear branch the solution is on (the run failed at its first
+    call). Solved on each combination of branches in turn, it runs, and the instrument reads
+    the amplified difference: 1/k of the sources' with the op-amp's finite gain."""
+    from mcl.compile import structure
+
+    monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))
+    model = compile_model([], "Modelica.Electrical.Analog.Examples.OpAmps.DifferentialAmplifier",
+                          libraries=[msl_path()])
+    t = np.linspace(0, 0.04, 401)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    o = model.ode
+    P = np.array(o.probe(res.states.T, np.zeros((0, len(t))), np.repeat(o.p_values[:, None], len(t), 1), t[None, :]))
+    read, want = (P[o.probe_names.index(n)] for n in ("voltageSensor.v", "gain.y"))
+    assert np.ptp(want) > 10 and np.max(np.abs(read - want)) < 5e-3 * np.ptp(want)
+    monkeypatch.setattr(structure, "BRANCHES_MAX", 0)          # without it: the first call fails
+    monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache0"))
+    model = compile_model([], "Modelica.Electrical.Analog.Examples.OpAmps.DifferentialAmplifier",
+                          libraries=[msl_path()])
+    assert not CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None).ok
 
 
 @needs_msl()

@@ -14,7 +14,9 @@ DAE -> ODE in three steps (../shared/DESIGN.md, sections 2-3):
 """
 from __future__ import annotations
 
+import itertools
 import logging
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -60,10 +62,16 @@ COMPACT_SX_MAX = 20000
 EXPAND_TRY_MAX = 50 * COMPACT_SX_MAX
 #: hold a loop of one unknown with branches on the branch its last solution was on (see
 #: causalise): an op-amp relaxation oscillator then swings with its textbook period, where
-#: solved anew at each call it chatters at a threshold. Off by default: the comparisons' events
-#: and crossing functions hold a loop solve each, and cost 5-70x on diode and amplifier
-#: circuits that need none (HeatingRectifier 0.4 -> 27 s of simulation)
-HOLD_BRANCHES = False
+#: solved anew at each call it stays at a threshold. True: every such loop; None: only a loop
+#: with several solutions (:func:`_several_solutions`: positive feedback). Not every loop: the
+#: comparisons' events and crossing functions hold a loop solve each, and cost 5-70x on diode
+#: and amplifier circuits that need none (HeatingRectifier 0.4 -> 27 s of simulation)
+HOLD_BRANCHES: bool | None = None
+#: ... a loop with more comparisons than this is not looked at (2^n branches to compare)
+HOLD_COMPARISONS_MAX = 6
+#: a loop of several unknowns with at most this many comparisons that Newton's method and its
+#: fallback do not solve is solved on each combination of its branches (:func:`_branchwise`)
+BRANCHES_MAX = 2
 
 
 @dataclass
@@ -175,7 +183,7 @@ def _blocks(sp: ca.Sparsity, nz: int):
 
 
 def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes: ca.SX | None = None,
-              guess: ca.SX | None = None):
+              guess: ca.SX | None = None, nominal: list[np.ndarray] | None = None):
     """Solve 0 = g(z, args) for z block by block; returns (Function args -> z, #nonlinear blocks,
     the Newton form or None). ``guess`` (a symbol like z): the loops' Newton methods start
     there, an argument after ``args`` (a run passes the last solution), instead of ``z_guess``;
@@ -193,6 +201,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     (-J^-1 dg/dargs) and zero in zl: a Jacobian along a run is then one Newton solve per point
     and SX algebra, instead of the solver's own derivatives through the MX graph (30x slower).
     None when there is no loop, or a block is too large to solve symbolically.
+
+    ``nominal``: values of ``args`` (start values, parameters) where a loop's branches are
+    compared (see :data:`HOLD_BRANCHES`).
     """
     sp = ca.jacobian_sparsity(g, z)     # structural: an unknown read in a condition counts
     blocks = _blocks(sp, z.numel())
@@ -261,7 +272,10 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 t_sol = _loop_solve(name, resid, first, ca.vertcat(pv, *mx_args, *extra),
                                     start=None if guess is None else z_guess[at])
                 return spread(t_sol, pv, *mx_args), t_sol
-            cmps = _replay(resid, [tears, par])[1] if guess is not None and len(torn) == 1 and HOLD_BRANCHES else []
+            cmps = _replay(resid, [tears, par])[1] if guess is not None and len(torn) == 1 and HOLD_BRANCHES is not False else []
+            if cmps and HOLD_BRANCHES is None and (nominal is None or not _several_solutions(
+                    resid, [tears, par], cmps, z_guess[at], _nominal_par(nominal, z_guess, prev))):
+                cmps = []
             if cmps:
                 # a law with branches (an amplifier's limits) is held on the branch its last
                 # solution was on, its comparisons' values an argument (as a relation is held
@@ -319,6 +333,34 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     zfree = ca.vertcat(*[free[c] for c in range(nz)]) if nz else ca.MX(0, 1)
     fun = ca.Function("zsol", [*mx_args, H], [zsol, zfree, ca.vertcat(*now) if now else ca.MX(0, 1), cross])
     return fun, n_nonlinear, form, ops
+
+
+def _several_solutions(resid: ca.Function, inputs: list, cmps: list, t0, par0) -> bool:
+    """Whether a loop of one unknown t with branches may have several solutions: its residual
+    rises in t on one branch and falls on another, at the start values and parameters. An
+    amplifier with positive feedback (a Schmitt trigger: 1 - k V0 where linear, 1 where
+    saturated) has, and is held on its branch; a diode's or a limiter's in negative feedback
+    rises on every branch, and its one solution is sought anew at each call."""
+    if len(cmps) > HOLD_COMPARISONS_MAX:
+        return False
+    h = ca.SX.sym("h", len(cmps))
+    out = _replay(resid, inputs, h)[0][0]
+    slope = ca.Function("slope", [*inputs, h], [ca.jacobian(out, inputs[0])])
+    signs = set()
+    for combo in itertools.product((0.0, 1.0), repeat=len(cmps)):
+        try:
+            v = float(slope(t0, par0, ca.DM(combo)))
+        except RuntimeError:
+            continue
+        if math.isfinite(v) and abs(v) > 0:
+            signs.add(v > 0)
+    return len(signs) > 1
+
+
+def _nominal_par(nominal: list[np.ndarray], z_guess: np.ndarray, prev: list[int]) -> np.ndarray:
+    """A loop's parameter vector (the unknowns solved before it, the args, the guesses) at the
+    start values."""
+    return np.concatenate([np.asarray(z_guess)[prev], *[np.ravel(a) for a in nominal], z_guess])
 
 
 def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None):
@@ -497,10 +539,36 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         # one unknown: a sign change, then the root inside it (a Newton method with a line
         # search stops at a local minimum of |r|, where an amplifier's branch has just ended)
         z2 = ca.if_else(met(z2, par, INIT_TOL), z2, polish(_bracketed(resid, z0, par), par), True)
+    else:
+        z2 = ca.if_else(met(z2, par, INIT_TOL), z2, _branchwise(name, resid, zf, par, met), True)
     # NaN, not an exception, where no solution is found: in a run the integrator then retries
     # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
     z2 = ca.if_else(met(z2, par, INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
     return ca.if_else(ok, z1, z2, True)
+
+
+def _branchwise(name: str, resid: ca.Function, z0, par: ca.MX, met) -> ca.MX:
+    """A solution of a loop with a few branches (comparisons), found on each combination of
+    them in turn: Newton's method on the law with its comparisons fixed, from ``z0``, until
+    one meets the loop's own residual (the branches it was solved on are then the ones it is
+    on). A differential amplifier's loop (six tearing variables, its output limits moving with
+    a floating ground) sends Newton's method from saturated to saturated, never trying the
+    linear branch its solution is on. NaN where none does, or the loop has none or too many."""
+    nan = np.nan * ca.DM.ones(resid.size1_in(0))
+    if not resid.is_a("SXFunction"):
+        return nan
+    T, P = ca.SX.sym("t", resid.sparsity_in(0)), ca.SX.sym("p", resid.sparsity_in(1))
+    cmps = _replay(resid, [T, P])[1]
+    if not 0 < len(cmps) <= BRANCHES_MAX:
+        return nan
+    H = ca.SX.sym("h", len(cmps))
+    out = _replay(resid, [T, P], H)[0][0]
+    z = ca.MX(nan)
+    for j, combo in enumerate(itertools.product((0.0, 1.0), repeat=len(cmps))):
+        fixed = ca.Function(f"{name}_branch{j}", [T, P], [ca.substitute(out, H, ca.DM(combo))])
+        solve = ca.rootfinder(f"{name}_on{j}", "fast_newton", fixed, {**NEWTON_OPTS, "error_on_fail": False})
+        z = ca.if_else(met(z, par, INIT_TOL), z, solve(z0, par), True)
+    return z
 
 
 def _bracketed(resid: ca.Function, z0: ca.MX, par: ca.MX) -> ca.MX:
@@ -615,8 +683,11 @@ def _build(dae: Dae, name: str = "model") -> Ode:
 
     t = semi["t"]
     modes = ca.vertcat(*[dae.p[i] for i, n in enumerate(dae.p_names) if n.startswith("$")])
+    u0, p0 = np.asarray(dae.u_start, float).ravel(), np.asarray(dae.p_values, float)
+    xs0 = np.array([to_orig.get(str(s), 0.0) for s in ca.vertsplit(xs)])
     zfun, n_nl, newton, cross_ops = causalise(semi["alg"], zs, [xs, up, t], z_guess, modes,
-                                              guess=ca.SX.sym("g", zs.numel()))
+                                              guess=ca.SX.sym("g", zs.numel()),
+                                              nominal=[xs0, np.concatenate([u0, p0]), np.zeros(1)])
     X, U, P0, T = (ca.MX.sym(n, k) for n, k in
                    (("x", xs.numel()), ("u", nu), ("p", dae.p.numel()), ("t", 1)))
     # a model with loops: a run's functions take the loops' guesses and the comparisons their
