@@ -305,6 +305,42 @@ def test_if_equation_branches_follow_their_conditions(tmp_path):
     np.testing.assert_allclose(res.output("y"), ref, atol=2e-3 * np.ptp(ref))
 
 
+WINDING = """
+package Windings
+  model Winding "a three-phase winding's star or delta connection, picked by its letter as the
+    MSL's transformers pick theirs from the vector group"
+    parameter String connection = "Y";
+    parameter String tag = "three-phase";
+    parameter Real R = 2;
+    input Real u "phase-to-phase voltage";
+    output Real i "line current";
+  equation
+    if connection == "D" or connection == "d" then
+      i = sqrt(3)*u/R;
+    elseif tag + "/" + connection <> "three-phase/Y" then
+      i = -1;
+    else
+      i = u/(sqrt(3)*R);
+    end if;
+  end Winding;
+  model Delta = Winding(connection = "D");
+end Windings;
+"""
+
+
+def test_string_comparisons_pick_the_branch_of_constant_strings(tmp_path):
+    """An if-equation on constant strings (a String parameter, literals, + joining them) picks
+    its branch when the model is compiled, as other tools do; strings were refused."""
+    src = tmp_path / "Windings.mo"
+    src.write_text(WINDING)
+    t = np.linspace(0, 1, 11)
+    inputs = TimeSeries(t, 3 * np.ones((len(t), 1)), ["u"])
+    star = CasadiEngine().simulate(compile_model([src], "Windings.Winding"), inputs, options=None)
+    delta = CasadiEngine().simulate(compile_model([src], "Windings.Delta"), inputs, options=None)
+    assert star.ok and delta.ok
+    assert np.allclose(star.output("i"), 3 / (np.sqrt(3) * 2)) and np.allclose(delta.output("i"), np.sqrt(3) * 3 / 2)
+
+
 NANO = """
 model Nano "an RC of 1 ns charged by a pulse train; the period count starts from time, as the MSL's Trapezoid"
   parameter Real startTime = 2e-9, period = 4e-9, width = 2e-9, tau = 1e-9;

@@ -29,6 +29,8 @@ EXAMPLES = {
     "Modelica.Thermal.FluidHeatFlow.Examples.ParallelCooling": 1.0,
     # filters whose coefficients come from multi-output functions and mod(order, 2)
     "Modelica.Blocks.Examples.FilterWithRiseTime": 4.0,
+    # a Dy01 transformer: its windings' connections picked by comparing its vector group's letters
+    "Modelica.Electrical.Machines.Examples.Transformers.TransformerTestbench": 0.1,
 }
 
 

@@ -805,6 +805,10 @@ class _Translator:
                 continue
             if state is False:
                 spans[k] = (len(self.fn_asserts), None)
+                compared = self.string_comparison(k)
+                if compared is not None:
+                    done[k] = compared
+                    continue
                 if self._kind(k) == "conditional":       # its conditions first, then its branches
                     stack.append((k, "branches"))
                     stack.extend((c, False) for c in self.operands(k)[0:-1:2] if c not in done)
@@ -821,6 +825,49 @@ class _Translator:
             if self.fn_asserts and self._kind(k) == "conditional":
                 self.gate_asserts(self.operands(k), spans, done)
         return done[root]
+
+    def string_comparison(self, k: int) -> ca.SX | None:
+        """``a == b`` or ``a <> b`` of two constant strings, as 1 or 0 (None for anything else):
+        a transformer's connections are picked by its vector group's letters, C1 = "D"."""
+        node = self.nodes[k]
+        body = node.get("binary") if isinstance(node, dict) else None
+        if not body or body.get("operator") not in ("equal", "not_equal"):
+            return None
+        a, b = self.string_value(body["lhs"]), self.string_value(body["rhs"])
+        if a is None or b is None:
+            return None
+        return ca.SX(float((a == b) == (body["operator"] == "equal")))
+
+    def string_value(self, k: int, depth: int = 0) -> str | None:
+        """Node ``k``'s value where it is a constant string: a literal, a String variable bound
+        to one, substring() of one, or two joined with +; else None."""
+        node = self.nodes[k]
+        if depth > 16 or not isinstance(node, dict):
+            return None
+        kind = next(iter(node))
+        body = node[kind]
+        if kind == "literal":
+            return body.get("string")
+        if kind == "coordinate" and isinstance(body, dict) and len(body) == 1:
+            i = next(iter(body.values()))
+            variables = self.st["variables"]
+            if not isinstance(i, int) or i >= len(variables) or \
+                    self.st["value_types"][variables[i]["value_type"]].get("scalar") != "string":
+                return None
+            binding = variables[i]["attributes"].get("binding")
+            return None if binding is None else self.string_value(binding, depth + 1)
+        if kind == "binary" and body.get("operator") == "add":
+            a, b = self.string_value(body["lhs"], depth + 1), self.string_value(body["rhs"], depth + 1)
+            return None if a is None or b is None else a + b
+        if kind == "call" and isinstance(body.get("function"), int):
+            name = self.functions[body["function"]].get("name", "")
+            args = self.call_operands(k)
+            if name.endswith("Strings.substring") and len(args) == 3:
+                text = self.string_value(args[0], depth + 1)
+                ends = [self.sx(a) for a in args[1:]]
+                if text is not None and all(e.is_constant() and e.numel() == 1 for e in ends):
+                    return text[int(float(ends[0])) - 1:int(float(ends[1]))]
+        return None
 
     def live_branches(self, k: int, done: dict) -> list:
         """(condition, branch) of conditional ``k`` that a constant condition does not rule
