@@ -390,10 +390,17 @@ def declared_classes(names, model: str, texts: dict[str, str], libraries=(), lib
 
 
 class _Texts:
-    """Source texts without comments, strings and annotations, stripped when first needed."""
+    """Source texts without comments, strings and annotations, stripped when first needed; the
+    classes they define indexed once (where each first begins), and the answers kept: a robot
+    of six axes asked for 773 class bodies, each a regular expression over each of 1 660 MSL
+    files (64 s of a 107 s compile)."""
 
     def __init__(self, texts: dict[str, str]):
         self.raw, self.done = dict(texts), {}
+        self._starts: dict[str, tuple[str, int]] = {}     # of the texts indexed so far, in order
+        self._unindexed = iter(self)
+        self._bodies: dict[str, str | None] = {}
+        self._declared: dict[str, str | None] = {}
 
     def __iter__(self):
         from .classes import _strip
@@ -404,20 +411,31 @@ class _Texts:
             yield self.done[path]
 
     def class_body(self, short: str) -> str | None:
-        return next((b for t in self if (b := _class_text(t, short)) is not None), None)
+        if short not in self._bodies:
+            while short not in self._starts:      # (the texts in order: the first defines it)
+                text = next(self._unindexed, None)
+                if text is None:
+                    break
+                for m in _CLASS_HEAD.finditer(text):
+                    self._starts.setdefault(m.group(1), (text, m.end()))
+            at = self._starts.get(short)
+            self._bodies[short] = _class_text_from(at[0], short, at[1]) if at else None
+        return self._bodies[short]
 
     def declaring(self, inst: str) -> str | None:
-        return next((d for t in self if (d := _declared_type(t, inst)) is not None), None)
+        if inst not in self._declared:
+            self._declared[inst] = next((d for t in self if inst in t and (d := _declared_type(t, inst)) is not None), None)
+        return self._declared[inst]
 
 
-def _class_text(text: str, short: str) -> str | None:
-    """The body of the class called ``short`` in ``text`` (with its imports), or None."""
-    m = re.search(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|expandable|operator)\s+)*"
-                  rf"(?:model|block|class|connector|record)\s+{re.escape(short)}\b(?!\s*=)", text)
-    if not m:
-        return None
-    end = re.search(rf"\bend\s+{re.escape(short)}\s*;", text[m.end():])
-    return text[m.end(): m.end() + end.start()] if end else text[m.end():]
+_CLASS_HEAD = re.compile(r"(?:^|[\s;])(?:(?:partial|encapsulated|final|expandable|operator)\s+)*"
+                         r"(?:model|block|class|connector|record)\s+([A-Za-z_]\w*)\b(?!\s*=)")
+
+
+def _class_text_from(text: str, short: str, start: int) -> str:
+    """The body of class ``short`` whose header ends at ``start`` of ``text``."""
+    end = re.search(rf"\bend\s+{re.escape(short)}\s*;", text[start:])
+    return text[start: start + end.start()] if end else text[start:]
 
 
 def _declared_type(body: str, inst: str) -> str | None:
