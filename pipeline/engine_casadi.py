@@ -697,11 +697,12 @@ class _Hybrid:
             return x
         nx = plan.nx
         u = plan.u_at(t0)
-        seen = set()
+        seen, first = set(), None
         for _ in range(MAX_EVENT_ITERATIONS):
             x0 = np.array(init_d(u, p, t0, x[nx - self.nd:nx])).ravel()
             new = x.copy()
             new[:nx - self.nd] = x0
+            first = new.copy() if first is None else first
             new = self.iterate(plan, new, p, t0, self.flags(initial=True))
             d = (new[nx - self.nd:nx] + 0.0).tobytes()
             if np.array_equal(new[nx - self.nd:nx], x[nx - self.nd:nx]):
@@ -709,9 +710,10 @@ class _Hybrid:
             if d in seen:
                 # the values alternate: a relation on a quantity the initial system leaves at 0
                 # within its tolerance (a friction's w = +-6e-9: forward, then backward, ...);
-                # the run starts from this one, its first event settles the rest
-                log.info("the discrete initial values alternate at t = %g; the run starts from the last", t0)
-                return new
+                # the run starts from the first iteration's values (found from the start
+                # values, where that quantity is exactly 0) with the states solved for them
+                log.info("the discrete initial values alternate at t = %g; the run starts from the first", t0)
+                return first
             seen.add(d)
             x = new
         raise _Stop("initialisation did not settle: discrete and continuous initial values keep changing")

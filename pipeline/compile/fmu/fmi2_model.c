@@ -135,6 +135,7 @@ typedef struct {
     int piv[NX + 1];
     /* event iteration work */
     double sv[NX + 1], cur[NX + 1], pre[NX + 1], nw[NX + 1], reinit[NX + 1], keep[NX + 1], back[NX + 1];
+    double first[NX + 1];              /* the initial iteration's first state (see initial_events) */
     double seen[MAX_EVENT_ITERATIONS * ND + 1];   /* discrete values met since pre() changed */
     double flags[NF + 1], av[NA + 1];
     int due[NCLOCK + 1];
@@ -386,13 +387,16 @@ static fmi2Status initial_events(Model* m) {
                 return fmi2Error;
             }
             memcpy(s->x, m->nw, NC * sizeof(double));
+            if (!it) memcpy(m->first, s->x, NX * sizeof(double));
             set_flags(m, 1, 0, NULL);
             if (iterate(m, t, s->ue, NULL) != fmi2OK) return fmi2Error;
             if (same(s->x + NC, m->keep, ND)) break;
             if (it && same(s->x + NC, m->back, ND)) {
                 /* the values alternate (a friction's w within the initial system's tolerance
-                 * of 0: forward, backward, ...): the run starts from these, as mcl's own engine */
-                logmsg(m, fmi2OK, "the discrete initial values alternate at t = %g; starting from the last", t);
+                 * of 0: forward, backward, ...): the run starts from the first iteration's
+                 * values, with the states solved for them, as mcl's own engine */
+                memcpy(s->x, m->first, NX * sizeof(double));
+                logmsg(m, fmi2OK, "the discrete initial values alternate at t = %g; starting from the first", t);
                 break;
             }
         }
