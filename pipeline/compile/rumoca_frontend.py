@@ -2117,16 +2117,8 @@ class _Events:
         return (ca.vertcat(*out) if out else ca.SX(0, 1)), info
 
     def _message(self, node, action) -> str:
-        nodes, variables = self.st["expressions"]["nodes"], self.st["variables"]
-        lit = nodes[node] if node is not None else None
-        for _ in range(8):      # a String parameter (TerminateSimulation's terminationText): its binding
-            ref = lit.get("coordinate") if isinstance(lit, dict) else None
-            if not isinstance(ref, dict) or len(ref) != 1:
-                break
-            i = next(iter(ref.values()))
-            binding = variables[i]["attributes"].get("binding") if isinstance(i, int) and i < len(variables) else None
-            lit = nodes[binding] if binding is not None else None
-        text = lit.get("literal", {}).get("string") if isinstance(lit, dict) else None
+        # (a literal, or a String parameter: TerminateSimulation's terminationText)
+        text = self.tr.string_value(node) if node is not None else None
         where = self.where(action.get("provenance"))
         text = text or "assert"
         return f"{text} ({where})" if where else text
