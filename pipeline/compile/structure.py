@@ -343,18 +343,23 @@ def _several_solutions(resid: ca.Function, inputs: list, cmps: list, t0, par0) -
     rises on every branch, and its one solution is sought anew at each call."""
     if len(cmps) > HOLD_COMPARISONS_MAX:
         return False
-    h = ca.SX.sym("h", len(cmps))
-    out = _replay(resid, inputs, h)[0][0]
-    slope = ca.Function("slope", [*inputs, h], [ca.jacobian(out, inputs[0])])
     signs = set()
-    for combo in itertools.product((0.0, 1.0), repeat=len(cmps)):
+    for law in _branch_laws(resid, inputs, len(cmps)):
         try:
-            v = float(slope(t0, par0, ca.DM(combo)))
+            v = float(ca.Function("slope", inputs, [ca.jacobian(law, inputs[0])])(t0, par0))
         except RuntimeError:
             continue
         if math.isfinite(v) and abs(v) > 0:
             signs.add(v > 0)
     return len(signs) > 1
+
+
+def _branch_laws(resid: ca.Function, inputs: list, n: int) -> list:
+    """The loop's residual on ``inputs`` with its ``n`` comparisons fixed, one expression for
+    each combination of their values (all false first)."""
+    h = ca.SX.sym("h", n)
+    out = _replay(resid, inputs, h)[0][0]
+    return [ca.substitute(out, h, ca.DM(combo)) for combo in itertools.product((0.0, 1.0), repeat=n)]
 
 
 def _nominal_par(nominal: list[np.ndarray], z_guess: np.ndarray, prev: list[int]) -> np.ndarray:
@@ -561,11 +566,9 @@ def _branchwise(name: str, resid: ca.Function, z0, par: ca.MX, met) -> ca.MX:
     cmps = _replay(resid, [T, P])[1]
     if not 0 < len(cmps) <= BRANCHES_MAX:
         return nan
-    H = ca.SX.sym("h", len(cmps))
-    out = _replay(resid, [T, P], H)[0][0]
     z = ca.MX(nan)
-    for j, combo in enumerate(itertools.product((0.0, 1.0), repeat=len(cmps))):
-        fixed = ca.Function(f"{name}_branch{j}", [T, P], [ca.substitute(out, H, ca.DM(combo))])
+    for j, law in enumerate(_branch_laws(resid, [T, P], len(cmps))):
+        fixed = ca.Function(f"{name}_branch{j}", [T, P], [law])
         solve = ca.rootfinder(f"{name}_on{j}", "fast_newton", fixed, {**NEWTON_OPTS, "error_on_fail": False})
         z = ca.if_else(met(z, par, INIT_TOL), z, solve(z0, par), True)
     return z

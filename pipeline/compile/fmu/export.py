@@ -138,8 +138,9 @@ JACOBIAN_C_BUDGET = 6_000_000
 def jacobian_directions(ode: ca.Function) -> int:
     """How many forward directions each derivative call of ``ode`` in the FMU's Jacobian takes:
     CasADi's 64 unless its code (twice that many copies at most: a full call and the rest)
-    would pass :data:`JACOBIAN_C_BUDGET`; then fewer, more calls of smaller code (at 8, a
-    Jacobian costs about 10 % more: each call evaluates the function itself again)."""
+    would pass :data:`JACOBIAN_C_BUDGET`; then fewer, more calls of smaller code (each call
+    evaluates the function itself again: at 8, a Jacobian does about an eighth more work; not
+    measured)."""
     from ..structure import expanded_size
 
     per = expanded_size(ode) * C_PER_DIRECTION
