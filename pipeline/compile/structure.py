@@ -749,12 +749,10 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     wish_sx = wish(x_impl, z_orig, dae.u, dae.p, t, dxi_sx)
     joint = (zs, semi["alg"], ca.vertcat(invariants_in(invariants, dae, x_impl, z_orig), init_sx, wish_sx),
              xs, up, t)
-    if ng:      # the initial system's loops from the start values
-        UP0 = ca.vertcat(U, P0)
-        Z0 = zfun(X, UP0, T, ca.DM(z_guess), -ca.DM.ones(nh))[0]
-        (XI, ZI), dXI, inv = orig_fun(X, Z0), dxi_fun(X, Z0, UP0, T), sx_fun(X, Z0, UP0, T)[2]
-    start, init_start = _initialiser(dae, xs, X, U, P0, T, XI, ZI, inv, x_names, dXI, joint,
-                                     wish(XI, ZI, U, P0, T, dXI))
+    # (the initial system's loops from the start values)
+    zargs = [X, ca.vertcat(U, P0), T, *((ca.DM(z_guess), -ca.DM.ones(nh)) if ng else (G, H))]
+    start, init_start = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
+                                     joint[2].numel() - wish_sx.numel(), x_names, joint)
     init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
     if ng:
         init, start, init_start = (_guesses_ignored(f, ng) for f in (init, start, init_start))
@@ -1141,17 +1139,29 @@ def _preferred(dae) -> ca.Function:
     return ca.Function("preferred", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [value])
 
 
-def _initialiser(dae, xs, X, U, P, T, XI, ZI, inv, x_names, dXI, joint, wish):
+def _initial_rows(joint, zfun, zargs) -> ca.MX:
+    """The initial system's rows (``joint``'s: invariants, initial equations, wishes) in the
+    ODE's arguments ``zargs[:3]`` (x, (u, p), t), with the algebraic unknowns they read from
+    ``zfun`` inlined: the blocks no row reads are then not in their graph. A robot's 375
+    accelerations and forces, solved by QR at run time, kept its whole initial system in MX,
+    each Newton step a dense Jacobian through that solve (seconds); its rows read positions
+    and velocities alone, and expand to SX."""
+    zs, _, rows, xs, up, t = joint
+    used = sorted(set(ca.jacobian_sparsity(rows, zs).get_col())) if zs.numel() else []
+    Z = zfun.call(zargs, True, False)[0]
+    zu = ca.vertcat(*[zs[i] for i in used]) if used else ca.SX(0, 1)
+    f = ca.Function("rows", [xs, zu, up, t], [rows])
+    return f(zargs[0], ca.vertcat(*[Z[i] for i in used]) if used else ca.MX(0, 1), zargs[1], zargs[2])
+
+
+def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
     """(p -> start values s, (u, p, t, s) -> consistent x0): invariants + initial equations
     (der() of a state is its right-hand side) + chosen start values (s is an argument, so an FMU
     can take a state's start value from its user), those of the variables declared ``stateSelect
-    = prefer`` first (``wish``: each less its start value). ``joint``: (z, g, the same equations
-    and wishes, x, (u, p), t) in SX, with the algebraic unknowns z not solved for."""
+    = prefer`` first (wishes: each less its start value). ``hard``: the equations (the first
+    ``nh`` rows) and the wishes in (X, U, P, T); ``joint``: (z, g, the same rows, x, (u, p), t)
+    in SX, with the algebraic unknowns z not solved for."""
     nx = xs.numel()
-    init_res = ca.Function("ires", [dae.x, dae.dx, dae.z, dae.u, dae.p, dae.t], [dae.init_residual])
-    hard = ca.vertcat(inv, init_res(XI, dXI, ZI, U, P, T)) if dae.init_residual.numel() else inv
-    nh = hard.numel()       # the equations; the wishes follow them in H
-    hard = ca.vertcat(hard, wish)
     semi_start = ca.Function("sst", [dae.p], [_starts_of(xs, dae)])(P)
 
     # the system in SX where it expands (its Jacobian is then sparse and cheap: 10 s in MX for
