@@ -256,6 +256,24 @@ def test_an_equation_that_looks_dependent_at_the_start_values_is_still_met(msl_p
     assert drift < 1e-6
 
 
+
+def test_a_mechanism_whose_frames_start_at_zero_is_initialised_down_its_chains(msl_path):
+    """PlanarLoops_analytic: three analytically solved loops, 417 states with no state
+    selection, every orientation started at 0. A rod's direction (its vector over its length)
+    was then 0/0 and the initial system had no solve. The starts are carried down the chains of
+    frames, each state after the ones its equation reads, and the equations chosen again
+    there. (Its run still fails: it leaves the invariants at the first step, a separate fault.)"""
+    import mcl
+
+    model = mcl.compile_model([], "Modelica.Mechanics.MultiBody.Examples.Loops.PlanarLoops_analytic")
+    ode = model.ode
+    x0 = np.array(ode.init(ode.u_start, ode.p_values, 0.0)).ravel()
+    assert np.all(np.isfinite(x0))
+    assert np.array(ode.drift(x0, ode.u_start, ode.p_values, 0.0)).item() < 1e-8
+    # the loops closed: the joints' frames moved off their start values of 0
+    r0 = [x0[k] for k, n in enumerate(ode.x_names) if n.endswith("jointUSR.frame_b.r_0[1]")]
+    assert len(r0) == 3 and min(map(abs, r0)) > 1e-3
+
 VESSEL = """
 model Vessel "a heated gas vessel: the balances integrate mass and energy; pressure and
   temperature, declared preferred, carry the start values"

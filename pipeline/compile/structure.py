@@ -1268,6 +1268,21 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
         return start, init_start, x0
 
     start, init_start, x0 = square(J)
+    if x0 is None:
+        # no solve: the equations chosen again where the relaxed starts leave them all finite
+        # (the rows and pins chosen at rotation matrices of 0 are not those of a mechanism)
+        moved = _relaxed(xs0, H, jac_s, at, fixed, dae, x_names, lambda x: _finite(at, x) is not None)
+        if moved is not None:
+            kept = semi_start, xs0
+            semi_start, xs0 = _moved_starts(semi_start, xs0, moved), moved
+            try:
+                other = square(_finite(at, moved))
+            except ModelicaError:
+                other = (None, None, None)
+            if other[2] is not None:
+                start, init_start, x0 = other
+            else:
+                semi_start, xs0 = kept
     # equations independent elsewhere may look dependent at the start values (a rotation's
     # invariant at angle 0): where the solve leaves one of them unmet, the equations are
     # chosen again next to the start, and that choice kept if it meets them all better
@@ -1391,6 +1406,19 @@ def _unit_entries(jac_s, at, start):
         yield r, c, float(looks[0][r, c])
 
 
+def _constant_entries(at, start):
+    """(row, column, value) where the initial system's Jacobian is the same nonzero number at
+    two points no model is special at (a coefficient of the parameters alone)."""
+    pattern = np.sin(1.0 + 2.0 * np.arange(start.size))
+    try:
+        looks = [at(start + scale * pattern * (1.0 + np.abs(start))) for scale in (1e-3, 1e-2)]
+    except RuntimeError:
+        return
+    same = np.isfinite(looks[0]) & (looks[0] != 0) & (looks[0] == looks[1])
+    for c, r in zip(*np.nonzero(same.T)):
+        yield r, c, float(looks[0][r, c])
+
+
 def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8):
     """Start values moved by Jacobi sweeps over the initial equations that give a state
     explicitly (coefficient +-1 wherever the equations are looked at; the states the user
@@ -1406,10 +1434,11 @@ def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8)
     if not pairs:
         return None
     r_idx, c_idx, coef = (np.array(v) for v in zip(*pairs))
+    residual = (lambda x: np.array(H(x, dae.u_start, dae.p_values, 0.0)).ravel())     # noqa: E731
     x = np.array(start, float)
     for _ in range(sweeps):
         try:
-            res = np.array(H(x, dae.u_start, dae.p_values, 0.0)).ravel()
+            res = residual(x)
         except RuntimeError:          # a loop inside cannot be solved there
             return None
         step = res[r_idx] / coef
@@ -1418,7 +1447,47 @@ def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8)
         x[c_idx[finite]] -= step[finite]
         if ok(x):
             return x
+    # Jacobi sweeps move every state from the others' old values: along a mechanism's chain of
+    # frames a wrong (0) orientation travels as far as the right one, and a rod's direction
+    # from them stays 0/0 (PlanarLoops_analytic). The states one at a time instead, each after
+    # the ones its equation reads (Gauss-Seidel in dependency order): one sweep carries the
+    # joints' values down the whole chain
+    # (here also a state its row gives with another constant coefficient: a rod's direction,
+    # its vector over its length, which Jacobi sweeps leave at 0)
+    for r, c, coef in _constant_entries(at, start):
+        if r not in rows_taken and c not in cols_taken and x_names[c] not in fixed:
+            pairs.append((r, c, coef))
+            rows_taken.add(r)
+            cols_taken.add(c)
+    x = np.array(start, float)
+    order = _in_dependency_order(pairs, jac_s.sparsity())
+    for _ in range(sweeps):
+        try:
+            for r, c, k in order:
+                step = residual(x)[r] / k
+                if np.isfinite(step):
+                    x[c] -= step
+        except RuntimeError:
+            return None
+        if ok(x):
+            return x
     return None
+
+
+def _in_dependency_order(pairs: list, sparsity: ca.Sparsity) -> list:
+    """``pairs`` (row, column, coefficient: the row gives the column's state) ordered so that
+    a state comes after those its row reads (cycles in any order among themselves)."""
+    import networkx as nx
+
+    given_by = {r: c for r, c, _ in pairs}
+    graph = nx.DiGraph()
+    graph.add_nodes_from(range(len(pairs)))
+    at = {c: i for i, (_, c, _) in enumerate(pairs)}
+    for r, c in zip(*sparsity.get_triplet()):
+        if r in given_by and c in at and c != given_by[r]:
+            graph.add_edge(at[c], at[given_by[r]])
+    condensed = nx.condensation(graph)
+    return [pairs[i] for scc in nx.topological_sort(condensed) for i in sorted(condensed.nodes[scc]["members"])]
 
 
 def _starts_of(syms: ca.SX, dae: Dae) -> ca.SX:
