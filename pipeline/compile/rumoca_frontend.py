@@ -1674,6 +1674,14 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         return bind(ca.vertcat(*[value_of(i, ("start",)) for i in index[k]])) if index[k] else ca.SX(0, 1)
 
     residual, init_residual = bind(residual), bind(init_residual, 1.0)
+    # an Integer or Boolean initialisation parameter is a state the solver holds constant up to
+    # its rounding, and a condition reads 1e-26 as true (JointRRR's positiveBranch flipped its
+    # branch at the first step): the equations read it rounded to its whole value
+    whole = [i for i in sorted(init_params)
+             if st["value_types"][variables[i]["value_type"]].get("scalar") in ("integer", "boolean", "enumeration")]
+    if whole:
+        held_whole = ca.vertcat(*[flat(slot[i]) for i in whole])
+        residual = ca.substitute(residual, held_whole, ca.floor(held_whole + 0.5))
     if ca.depends_on(ca.vertcat(residual, init_residual), tr.unbound):
         tr.span = tr.unbound_span
         tr.refuse("a for-loop index outside its loop")

@@ -1289,8 +1289,11 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
     worst = _unmet(H, x0, dae, nh)
     if worst > INIT_TOL:
         pattern = np.sin(1.0 + 2.0 * np.arange(nx))
-        for scale in (1e-3, 1e-2):
-            Jn = _finite(at, xs0 + scale * pattern * (1.0 + np.abs(xs0)))
+        # next to the start, and at the solution found (where the starts were no place to
+        # look: a mechanism's rotations started at 0, EngineV6_analytic)
+        near = [xs0 + scale * pattern * (1.0 + np.abs(xs0)) for scale in (1e-3, 1e-2)]
+        for point in near + ([x0 + 1e-3 * pattern * (1.0 + np.abs(x0))] if x0 is not None else []):
+            Jn = _finite(at, point)
             if Jn is None:
                 continue
             try:
