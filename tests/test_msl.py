@@ -256,7 +256,6 @@ def test_an_equation_that_looks_dependent_at_the_start_values_is_still_met(msl_p
     assert drift < 1e-6
 
 
-
 def test_a_mechanism_whose_frames_start_at_zero_is_initialised_down_its_chains(msl_path):
     """PlanarLoops_analytic: three analytically solved loops, 417 states with no state
     selection, every orientation started at 0. A rod's direction (its vector over its length)
@@ -282,6 +281,7 @@ def test_a_mechanism_whose_frames_start_at_zero_is_initialised_down_its_chains(m
     phi = res.states[:, ode.x_names.index("rev.phi")]
     assert np.interp(0.25, t, phi) == pytest.approx(0.7, abs=2e-3)
     assert np.interp(0.75, t, phi) == pytest.approx(-0.7, abs=2e-3)
+
 
 VESSEL = """
 model Vessel "a heated gas vessel: the balances integrate mass and energy; pressure and

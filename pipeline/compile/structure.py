@@ -1288,11 +1288,10 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
     # chosen again next to the start, and that choice kept if it meets them all better
     worst = _unmet(H, x0, dae, nh)
     if worst > INIT_TOL:
-        pattern = np.sin(1.0 + 2.0 * np.arange(nx))
         # next to the start, and at the solution found (where the starts were no place to
         # look: a mechanism's rotations started at 0, EngineV6_analytic)
-        near = [xs0 + scale * pattern * (1.0 + np.abs(xs0)) for scale in (1e-3, 1e-2)]
-        for point in near + ([x0 + 1e-3 * pattern * (1.0 + np.abs(x0))] if x0 is not None else []):
+        near = [_beside(xs0, scale) for scale in (1e-3, 1e-2)]
+        for point in near + ([_beside(x0, 1e-3)] if x0 is not None else []):
             Jn = _finite(at, point)
             if Jn is None:
                 continue
@@ -1399,23 +1398,34 @@ def _unit_entries(jac_s, at, start):
             if coef.is_constant() and abs(float(coef)) == 1.0:
                 yield r, c, float(coef)
         return
-    pattern = np.sin(1.0 + 2.0 * np.arange(start.size))
-    try:
-        looks = [at(start + scale * pattern * (1.0 + np.abs(start))) for scale in (1e-3, 1e-2)]
-    except RuntimeError:
+    looks = _two_looks(at, start)
+    if looks is None:
         return
     unit = np.isclose(np.abs(looks[0]), 1.0, rtol=0, atol=1e-12) & (looks[0] == looks[1])
     for c, r in zip(*np.nonzero(unit.T)):          # state by state, as the SX triplets
         yield r, c, float(looks[0][r, c])
 
 
+def _beside(x: np.ndarray, scale: float) -> np.ndarray:
+    """``x`` moved by ``scale`` of each entry's size (at least 1) in a pattern no model is
+    special at (no entry 0, no two alike)."""
+    return x + scale * np.sin(1.0 + 2.0 * np.arange(x.size)) * (1.0 + np.abs(x))
+
+
+def _two_looks(at, start):
+    """The Jacobian ``at`` two points beside ``start`` (see :func:`_beside`), None where it
+    cannot be evaluated there."""
+    try:
+        return [at(_beside(start, scale)) for scale in (1e-3, 1e-2)]
+    except RuntimeError:
+        return None
+
+
 def _constant_entries(at, start):
     """(row, column, value) where the initial system's Jacobian is the same nonzero number at
     two points no model is special at (a coefficient of the parameters alone)."""
-    pattern = np.sin(1.0 + 2.0 * np.arange(start.size))
-    try:
-        looks = [at(start + scale * pattern * (1.0 + np.abs(start))) for scale in (1e-3, 1e-2)]
-    except RuntimeError:
+    looks = _two_looks(at, start)
+    if looks is None:
         return
     same = np.isfinite(looks[0]) & (looks[0] != 0) & (looks[0] == looks[1])
     for c, r in zip(*np.nonzero(same.T)):
@@ -1463,13 +1473,15 @@ def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8)
             rows_taken.add(r)
             cols_taken.add(c)
     x = np.array(start, float)
-    order = _in_dependency_order(pairs, jac_s.sparsity())
+    levels = _in_dependency_order(pairs, jac_s.sparsity())
     for _ in range(sweeps):
         try:
-            for r, c, k in order:
-                step = residual(x)[r] / k
-                if np.isfinite(step):
-                    x[c] -= step
+            for level in levels:
+                res = residual(x)
+                for r, c, k in level:
+                    step = res[r] / k
+                    if np.isfinite(step):
+                        x[c] -= step
         except RuntimeError:
             return None
         if ok(x):
@@ -1477,9 +1489,11 @@ def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8)
     return None
 
 
-def _in_dependency_order(pairs: list, sparsity: ca.Sparsity) -> list:
-    """``pairs`` (row, column, coefficient: the row gives the column's state) ordered so that
-    a state comes after those its row reads (cycles in any order among themselves)."""
+def _in_dependency_order(pairs: list, sparsity: ca.Sparsity) -> list[list]:
+    """``pairs`` (row, column, coefficient: the row gives the column's state) in levels, each
+    level's states reading only those of the levels before it: one evaluation of the rows
+    serves a whole level (a chain's depth of them a sweep, not one per state). The members of
+    a cycle are levels of one each, in order."""
     import networkx as nx
 
     given_by = {r: c for r, c, _ in pairs}
@@ -1490,7 +1504,12 @@ def _in_dependency_order(pairs: list, sparsity: ca.Sparsity) -> list:
         if r in given_by and c in at and c != given_by[r]:
             graph.add_edge(at[c], at[given_by[r]])
     condensed = nx.condensation(graph)
-    return [pairs[i] for scc in nx.topological_sort(condensed) for i in sorted(condensed.nodes[scc]["members"])]
+    levels = []
+    for generation in nx.topological_generations(condensed):
+        members = [sorted(condensed.nodes[scc]["members"]) for scc in generation]
+        levels.append([pairs[m[0]] for m in members if len(m) == 1])
+        levels += [[pairs[i]] for m in members if len(m) > 1 for i in m]
+    return [level for level in levels if level]
 
 
 def _starts_of(syms: ca.SX, dae: Dae) -> ca.SX:
