@@ -14,6 +14,7 @@ DAE -> ODE in three steps (../shared/DESIGN.md, sections 2-3):
 """
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import math
@@ -38,6 +39,9 @@ TEAR_LINEAR_MIN = 8
 #: NaN where it is singular (a rotation matrix started at 0): sparse QR raises there and takes
 #: the whole evaluation down, so the initial system cannot even look next to that start
 DENSE_SOLVE_MAX = 400
+#: ... through LAPACK, which CasADi writes no C for: an FMU's model is built again with sparse QR
+#: (:func:`for_code`), whose generated C gives NaN at a singular point as LAPACK's does
+_dense_qr = "lapackqr"
 #: a block whose coefficients change with the model's mode is solved symbolically only this
 #: small (by minors; see causalise)
 MODED_SYMBOLIC_MAX = 3
@@ -160,6 +164,17 @@ def reduce_index(dae: Dae):
     return semi, state_to_orig, red["I"], int(stats["index"])
 
 
+@contextlib.contextmanager
+def for_code():
+    """ODEs built within solve every linear block by a solver CasADi generates C for."""
+    global _dense_qr
+    _dense_qr = "qr"
+    try:
+        yield
+    finally:
+        _dense_qr = "lapackqr"
+
+
 def _blocks(sp: ca.Sparsity, nz: int):
     """BTF blocks of the algebraic Jacobian's sparsity ``sp`` in solving order: [(rows, cols)]."""
     if ca.sprank(sp) < nz:
@@ -252,7 +267,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 fa = ca.Function(f"blk{k}", [zprev, *args], [A, b])
                 # (a switch's block of a few unknowns, solved here for its modes: sparse, 20 % faster;
                 # dense QR there changed a lossy gear's rounding enough that its modes chattered)
-                how = "lapackqr" if SYMBOLIC_SOLVE_MAX < len(cols) <= DENSE_SOLVE_MAX else "qr"
+                how = _dense_qr if SYMBOLIC_SOLVE_MAX < len(cols) <= DENSE_SOLVE_MAX else "qr"
                 block = (lambda pv, fa=fa, how=how: -ca.solve(*fa(pv, *mx_args), how))
                 newton = None
         elif not torn:      # explicit in order (a step read an unknown known by then): no loop

@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 
 from .. import cache as compile_cache
-from .. import parametric
+from .. import parametric, structure
 from ...errors import CompileError, ConfigError, ModelicaError
 from ...model import CompiledModel
 from .experiment import Experiment, for_model
@@ -173,7 +173,8 @@ def _events(o) -> dict:
 
 
 def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
-                     residual_tol: float = 1e-6, tolerance: float = 1e-6, settable=None) -> list[Path]:
+                     residual_tol: float = 1e-6, tolerance: float = 1e-6, settable=None,
+                     rebuilt: bool = False) -> list[Path]:
     """Write the C sources of the FMU into ``build``; returns the files to compile. ``settable``:
     the states whose start value can be set (default: :func:`settable_starts`)."""
     o = model.ode
@@ -203,6 +204,8 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
         if funcs.get(key) is not None:      # update and asserts: hybrid models only
             cg.add(_renamed(funcs[key], prefix + key))
     cg.generate(str(build) + "/")
+    if _NO_CODE in (build / "mcl_funcs.c").read_text() and model.dae is not None and not rebuilt:
+        return generate_sources(for_code(model), build, ident, guid, residual_tol, tolerance, settable, True)
     template = (_HERE / "fmi2_model.c").read_text()
     nq = derived.nnz_out(0) if derived is not None else 0
     values = dict(NP=len(o.p_names), NQ=nq, NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
@@ -217,6 +220,27 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
         shutil.copy(_fmi_headers() / h, build / h)
     return [build / "fmi2_model.c", build / "mcl_funcs.c"]
+
+
+#: what CasADi writes in place of a solve it has no C for (a large linear block's dense QR)
+_NO_CODE = "does not support code generation"
+
+
+def for_code(model: CompiledModel) -> CompiledModel:
+    """``model`` built again from its DAE with solvers CasADi writes C for (sparse QR for the
+    large linear blocks the in-process model solves by LAPACK), with the same outputs."""
+    from ..dae import eliminate_aliases
+
+    with structure.for_code():
+        ode = structure.build_ode(eliminate_aliases(model.dae), model.name)
+    try:        # sparse QR has no answer where the block is singular (ideal switches all open)
+        x0 = ode.init(ode.u_start, ode.p_values, 0.0)
+        ode.ode(x0, ode.u_start, ode.p_values, 0.0)
+    except RuntimeError:
+        raise CompileError(f"{model.name} solves a linear block of more than {structure.SYMBOLIC_SOLVE_MAX} "
+                           "unknowns that is singular at its start: CasADi writes C only for a sparse solver, "
+                           "which fails there (the model runs in process, not as an FMU)") from None
+    return CompiledModel(model.name, ode, model.info, model.dae, model.structure).with_outputs(model.ode.y_names)
 
 
 def n_indicators(model: CompiledModel) -> int:
@@ -292,15 +316,25 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
     for n, v in zip(o.u_names, o.u_start):
         var(n, 'causality="input" variability="continuous"', f'<Real start="{float(v)!r}"/>')
     discrete_out = _changes_at_events_only(o.out, nc) if nd else [False] * len(o.y_names)
+    # an output that is a state (output Real y; der(y) = ...) is one variable: the state's, an output
+    state_outputs, exact_outputs = set(o.y_names) & set(o.x_names), []
     for n, disc in zip(o.y_names, discrete_out):
+        if n in state_outputs:
+            next(vr)            # (its value reference as an output stays unused)
+            continue
         kind = "discrete" if disc else "continuous"
         outputs.append(var(n, f'causality="output" variability="{kind}" initial="calculated"'))
     settable, s0 = starts or settable_starts(model)
 
     def state(n, exact, v, kind="continuous"):
-        attrs = f'causality="local" variability="{kind}"'
-        return (var(n, f'{attrs} initial="exact"', f'<Real start="{float(v)!r}"/>') if exact
-                else var(n, f'{attrs} initial="calculated"'))
+        attrs = f'causality="{"output" if n in state_outputs else "local"}" variability="{kind}"'
+        i = (var(n, f'{attrs} initial="exact"', f'<Real start="{float(v)!r}"/>') if exact
+             else var(n, f'{attrs} initial="calculated"'))
+        if n in state_outputs:
+            outputs.append(i)
+            if exact:
+                exact_outputs.append(i)
+        return i
 
     states = [state(n, exact, v) for n, exact, v in zip(o.x_names[:nc], settable[:nc], s0[:nc])]
     for n, s in zip(o.x_names[:nc], states):
@@ -311,7 +345,8 @@ def model_description(model: CompiledModel, ident: str, guid: str, sources: list
         state(n, exact, v, "discrete")
     for _, n in _probe_variables(model):
         var(n, f'{local} initial="calculated"')
-    initial = sorted(outputs + [i for i, exact in zip(states, settable) if not exact] + derivs)
+    outputs.sort()
+    initial = sorted({*outputs, *(i for i, exact in zip(states, settable) if not exact), *derivs} - {*exact_outputs})
 
     def section(tag, idx):  # an empty section is invalid FMI 2.0: leave it out
         if not idx:
