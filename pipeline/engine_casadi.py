@@ -969,7 +969,9 @@ class _Hybrid:
             if not changed.size:
                 if end >= hi:          # not seen again (the crossing was at the solver's error level)
                     return (hi, x_hi) if x_hi is not None else (hi, X[:, -1])
-                lo, x_lo, g_lo, even = end, X[:, -1], G[:, -1], False     # the estimate was early
+                # the estimate was early: evenly next (a secant from a curved relation's far
+                # end keeps falling short: 3600 restarts for one of a machine's crossings)
+                lo, x_lo, g_lo, even = end, X[:, -1], G[:, -1], True
                 continue
             j = changed[0]
             if j > 0:
@@ -978,7 +980,7 @@ class _Hybrid:
             first = first or hi - lo
             if hi - lo <= tol:
                 return hi, x_hi
-            even = not even and (hi - lo) > width / ZOOM_POINTS
+            even = not even and (hi - lo) > width / (ZOOM_POINTS // 2)
 
     # -- asserts ---------------------------------------------------------------------------------
     def asserts(self, X, U, P, t) -> str | None:
@@ -1024,11 +1026,13 @@ class _Hybrid:
 
 
 def hop_grid(points: int, to_end: bool = False) -> np.ndarray:
-    """The output times of a hop on [0, 1]: equally spaced, or ``to_end``: 1 - 4^-k closing in
-    on 1 (down to 4^-(points-1): 1e-18 of the interval at 32 points) and 1 itself."""
+    """The output times of a hop on [0, 1]: equally spaced, or ``to_end``: half of them equally
+    spaced, the other half closing in on 1 from the last of those (1 - 4^-k/h, down to 1e-11
+    of the interval at 32 points), and 1 itself."""
     if not to_end:
         return np.arange(1, points + 1) / points
-    return np.r_[1.0 - 4.0 ** -np.arange(1, points), 1.0]
+    h = points // 2
+    return np.r_[np.arange(1, h) / h, 1.0 - 4.0 ** -np.arange(1, points - h + 1) / h, 1.0]
 
 
 def _past_estimate(lo, hi, g_lo, g_hi, margin) -> float:
