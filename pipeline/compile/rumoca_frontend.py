@@ -1626,8 +1626,12 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     # the relations of state events are held between events: discrete variables, each set to
     # its relation at an event (the solver then integrates a smooth right-hand side, and a
     # diode's switching costs it a restart, not a fight with a jump it cannot step over); the
-    # others (on time alone, in asserts or parameters) are evaluated where they are read
-    keep = _held(tr, met, ca.vertcat(x, dx, z, d, d_pre), residual)
+    # others (on time alone, in asserts, parameters or when-conditions) are evaluated where
+    # they are read. Those a discrete variable reads outside a when are held too: held, they
+    # change past a band, where an arc's quenched = abs(i) <= abs(v)*Goff or pre(quenched),
+    # equal up to rounding once quenched, crossed at every step (SMEE_LoadDump: 45 000 a second)
+    n_d = len(names["d"])
+    keep = _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d], d_update[n_d:])
     live = _Live(tr, keep)
     residual, init_residual, d_update, x_reinit, asserts = map(
         live, (residual, init_residual, d_update, x_reinit, asserts))
@@ -1787,16 +1791,21 @@ def _hysteresis(op: str, lhs: ca.SX, rhs: ca.SX, held: ca.SX) -> tuple[ca.SX, ca
     return g > band, g - band
 
 
-def _held(tr, met: int, unknowns: ca.SX, residual: ca.SX) -> list:
-    """(index, symbol, value at an event, crossing) of the relations held between events: those the continuous
-    equations read (not asserts, nor when-conditions alone: an event's iteration reads them
-    there anyway) that read an unknown."""
-    if not tr.held or not residual.numel():
+def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX, discrete: ca.SX,
+          whens: ca.SX) -> list:
+    """(index, symbol, value at an event, crossing) of the relations held between events: those
+    the continuous equations read that read an unknown, and those the discrete equations read
+    outside when-conditions that read a continuous one (not asserts, nor when-conditions
+    alone, nor time against a discrete variable: an event's iteration reads them there anyway)."""
+    if not tr.held or not (residual.numel() or discrete.numel()):
         return []
     syms = ca.vertcat(*[h[1] for h in tr.held])
-    read = set(ca.jacobian_sparsity(residual, syms).get_triplet()[1])
-    return [(k, h, e, cross) for j, (k, h, _, e, cross) in enumerate(tr.held)
-            if j in read and k < met and ca.depends_on(tr.relations[k], unknowns)]
+    read_by = lambda e: set(ca.jacobian_sparsity(e, syms).get_triplet()[1]) if e.numel() else set()
+    by_residual, by_discrete = read_by(residual), read_by(discrete) - read_by(whens)
+    unknowns = ca.vertcat(continuous, discrete_vars)
+    return [(k, h, e, cross) for j, (k, h, _, e, cross) in enumerate(tr.held) if k < met and (
+            j in by_residual and ca.depends_on(tr.relations[k], unknowns)
+            or j in by_discrete and ca.depends_on(tr.relations[k], continuous))]
 
 
 class _Live:
