@@ -195,6 +195,42 @@ def test_a_drive_train_without_inertia_is_no_division_by_zero(msl_path, tmp_path
     np.testing.assert_allclose(res.output("f"), 100 * a, atol=1e-6)
 
 
+CONVEYOR = """
+model Conveyor "A belt pushed back and forth against a regularised Coulomb force"
+  import Modelica.Mechanics.Translational;
+  Translational.Components.Mass belt(m = 2, s(fixed = true, start = 0), v(fixed = true, start = 0));
+  Translational.Sources.SignForce friction(f_nominal = -5, v0 = 0.01);
+  Translational.Sources.Force drive;
+  Modelica.Blocks.Sources.Sine push(amplitude = 40, f = 0.5);
+  output Real v = belt.v;
+equation
+  connect(push.y, drive.f);
+  connect(drive.flange, belt.flange_a);
+  connect(belt.flange_b, friction.flange);
+end Conveyor;
+"""
+
+
+def test_a_regularised_sign_force_runs_backwards(msl_path, tmp_path):
+    """SignForce's 2/(1 + exp(-v/(0.01 v0))) - 1: once the belt runs backwards faster than 0.7 m/s
+    exp overflows, and its derivative inf/inf stopped the solver (CV_CONV_FAILURE: IMC_Conveyor).
+    The speed follows m v' = 40 sin(pi t) - 5 tanh(v/(0.02 v0)), integrated here by SciPy."""
+    from scipy.integrate import solve_ivp
+
+    import mcl
+    from mcl.data import TimeSeries
+
+    (tmp_path / "Conveyor.mo").write_text(CONVEYOR)
+    model = mcl.compile_model([tmp_path / "Conveyor.mo"], "Conveyor")
+    t = np.linspace(0.0, 4.0, 401)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    ref = solve_ivp(lambda _t, v: (40 * np.sin(np.pi * _t) - 5 * np.tanh(v / 2e-4)) / 2, (0, 4), [0.0],
+                    method="Radau", t_eval=t, rtol=1e-8, atol=1e-10)
+    assert res.output("v").min() < -4
+    np.testing.assert_allclose(res.output("v"), ref.y[0], atol=1e-3)
+
+
 def test_a_hysteresis_core_starts_between_its_branches_and_stays_there(msl_path):
     """The Tellinen hysteresis: its branches h_R(H), h_F(H) are states (the model takes their
     der()) with no start value of their own, and its slope divides by h_F - h_R, 0 at those
