@@ -949,8 +949,8 @@ class _Hybrid:
         17 restarts an event). The first call spreads ``ZOOM_POINTS`` evenly; the next close in
         on the crossing estimated from the bracket's relation values (a secant, a little past
         it), which narrows a smooth crossing ~1000x a call instead of 32x (a rectifier's 600
-        crossings a second: 6.5 restarts each before). A call that narrowed less than the even
-        spread would have is followed by an even one (a relation that jumps)."""
+        crossings a second: 6.5 restarts each before). A call that narrowed less than 16x, or
+        whose estimate fell short, is followed by an even one (a relation that jumps)."""
         rels = np.asarray(rels)
         lo, x_lo, hi, x_hi = ta, np.asarray(xa, float), tb, None
         s_lo, g_lo, g_hi, even, first = None, None, None, True, None
