@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 
 from .errors import DataError, MclError
-from .compile.structure import Ode, expanded, with_start_guesses
+from .compile.structure import Ode, build_ode, expanded, with_start_guesses
 
 _FUNCTIONS = ("ode", "out", "alg_res", "drift", "init", "probe", "checks", "zero", "start", "init_start",
               "update", "init_discrete", "asserts",   # these three: a hybrid model's
@@ -34,6 +34,15 @@ class CompiledModel:
     #: from a file saved without them
     dae: object = None
     structure: object = None
+
+    @classmethod
+    def from_dae(cls, dae, name: str, outputs=(), info: dict | None = None, structure=None) -> "CompiledModel":
+        """``dae`` compiled (alias elimination, index reduction, causalisation), with ``outputs``
+        (any variables of the model) appended to its outputs."""
+        from .compile.dae import eliminate_aliases
+
+        ode = build_ode(eliminate_aliases(dae), name)
+        return cls(name, ode, dict(info or {}), dae, structure).with_outputs(outputs)
 
     @property
     def input_names(self) -> list[str]:

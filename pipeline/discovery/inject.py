@@ -260,10 +260,7 @@ def with_injections(dae: Dae, comps: list[Component], modes: dict[str, str]) -> 
 
 
 def compiled(dae: Dae, name: str, outputs=(), info: dict | None = None, structure=None):
-    """A :class:`mcl.model.CompiledModel` of ``dae`` (alias elimination, index reduction,
-    causalisation), with ``outputs`` (any variables of the model) appended to its outputs."""
-    from ..compile.structure import build_ode
+    """A :class:`mcl.model.CompiledModel` of ``dae`` with ``outputs`` appended to its outputs."""
     from ..model import CompiledModel
 
-    ode = build_ode(eliminate_aliases(dae), name)
-    return CompiledModel(name, ode, dict(info or {}), dae, structure).with_outputs(outputs)
+    return CompiledModel.from_dae(dae, name, outputs, info, structure)

@@ -229,10 +229,9 @@ _NO_CODE = "does not support code generation"
 def for_code(model: CompiledModel) -> CompiledModel:
     """``model`` built again from its DAE with solvers CasADi writes C for (sparse QR for the
     large linear blocks the in-process model solves by LAPACK), with the same outputs."""
-    from ..dae import eliminate_aliases
-
     with structure.for_code():
-        ode = structure.build_ode(eliminate_aliases(model.dae), model.name)
+        rebuilt = CompiledModel.from_dae(model.dae, model.name, model.ode.y_names, model.info, model.structure)
+    ode = rebuilt.ode
     try:        # sparse QR has no answer where the block is singular (ideal switches all open)
         x0 = ode.init(ode.u_start, ode.p_values, 0.0)
         ode.ode(x0, ode.u_start, ode.p_values, 0.0)
@@ -240,7 +239,7 @@ def for_code(model: CompiledModel) -> CompiledModel:
         raise CompileError(f"{model.name} solves a linear block of more than {structure.SYMBOLIC_SOLVE_MAX} "
                            "unknowns that is singular at its start: CasADi writes C only for a sparse solver, "
                            "which fails there (the model runs in process, not as an FMU)") from None
-    return CompiledModel(model.name, ode, model.info, model.dae, model.structure).with_outputs(model.ode.y_names)
+    return rebuilt
 
 
 def n_indicators(model: CompiledModel) -> int:
