@@ -24,6 +24,7 @@ from collections import OrderedDict
 import casadi as ca
 import numpy as np
 
+from .calls import Call
 from .data import TimeSeries
 from .errors import DataError
 from .compile import parametric
@@ -45,6 +46,8 @@ SENS_SCALE = 1e-6
 DETECTION_POINTS = 400    # at least this many points over the horizon where relations are checked
 MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
+EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
+ZOOM_TOL = 1e-7           # a crossing located to this fraction of the interval it was seen in
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
 FOLLOW_POINTS = 32        # points of a call where the loops' solutions are checked to follow on
@@ -355,6 +358,26 @@ class _Plan:
         self._integrators.move_to_end(key)
         return self._integrators[key]
 
+    def hop_integrator(self, steps: int, points: int, to_end: bool):
+        """An integrator in time scaled to its call (parameters: its start and length), its
+        output times :func:`hop_grid`'s: one serves every call of that many points, where one
+        created for each call's times costs 0.6 ms (a rectifier's 1 300 calls a second)."""
+        key = ("hop", steps, points, to_end)
+        if key not in self._integrators:
+            self._integrators[key] = ca.integrator("hop", "cvodes", self.hop_oracle, 0.0, hop_grid(points, to_end).tolist(),
+                                                   {**self.iopts, "max_num_steps": steps})
+        self._integrators.move_to_end(key)
+        return self._integrators[key]
+
+    def call_for(self, t0: float, sub, steps: int):
+        """(integrator, the parameters it takes after the model's) over the grid points ``sub``
+        from ``t0``: a hop's where they are equally spaced from ``t0`` in a model with events
+        (each event a call from its own instant: a new integrator each, otherwise)."""
+        times = self.t_int[sub]
+        if self.hybrid is not None and _even(t0, times):
+            return self.hop_integrator(steps, len(sub), False), [t0, times[-1] - t0]
+        return self.integrator(t0, times, steps), []
+
     def refresh(self, x, t, p) -> None:
         """The loops' guesses, the tail of ``p`` (changed in place: the event handling holds
         it too), set to their solution at ``x``, ``t`` where it is found."""
@@ -375,11 +398,7 @@ class _Plan:
         if tb <= ta:
             return np.asarray(x, float) if points == 1 else np.repeat(np.asarray(x, float)[:, None], points, 1)
         steps = steps or budget.call_size(1, 1.0)[1]
-        key = ("hop", steps, points, to_end)
-        if key not in self._integrators:
-            self._integrators[key] = ca.integrator("hop", "cvodes", self.hop_oracle, 0.0, hop_grid(points, to_end).tolist(),
-                                                   {**self.iopts, "max_num_steps": steps})
-        integ = self._integrators[key]
+        integ = self.hop_integrator(steps, points, to_end)
         self.refresh(x, ta, p)
         clock = Stopwatch(0)
         try:
@@ -406,11 +425,14 @@ class _Plan:
             if failed is not None and steps <= failed:
                 raise _Stop(budget.reason(bound, t0))
             sub = idx[pos:pos + n]
-            integ = self.integrator(t0, self.t_int[sub], steps)
+            if self.hybrid is not None and len(sub) > 1 and not _even(t0, self.t_int[sub]) and _even(
+                    self.t_int[sub[0]], self.t_int[sub[1:]]):
+                sub = sub[:1]        # (from an event's instant: to the next point, then evenly on)
+            integ, extra = self.call_for(t0, sub, steps)
             self.refresh(x, t0, p)
             clock = Stopwatch(0)
             try:
-                xf = np.array(integ(x0=x, p=np.concatenate([p, self.tail]))["xf"])
+                xf = np.array(integ(x0=x, p=np.concatenate([p, self.tail, extra]))["xf"])
             except RuntimeError as exc:
                 budget.record(_nsteps(integ) or steps, clock.elapsed)   # its steps, the rate measured
                 if bound is not None and "TOO_MUCH_WORK" in str(exc):
@@ -453,7 +475,7 @@ class _Plan:
 
     def _solved_map(self, m: int):
         if m not in self.follow_maps:
-            self.follow_maps[m] = self.ode.solved.map(m)
+            self.follow_maps[m] = Call(self.ode.solved.map(m))
         return self.follow_maps[m]
 
     def within_bound(self, x: np.ndarray, times) -> None:
@@ -609,19 +631,22 @@ class _Hybrid:
         self.ode = ode
         self.zero = ode.zero
         self.nd = getattr(ode, "discrete", 0) or 0
-        self.update = getattr(ode, "update", None)
+        self.update = Call(ode.update) if getattr(ode, "update", None) is not None else None
+        self.zero_call = Call(self.zero) if self.zero is not None else None
         info = getattr(ode, "events", None) or {}
         self.clocks = [tuple(c) for c in info.get("clocks", [])]
         self.flag_names = info.get("flags", ["initial", "terminal"])
         self.assert_info = info.get("asserts", [])
         self.assert_fun = getattr(ode, "asserts", None)
         self.ops = info.get("relation_ops")
-        self.count = 0
+        self.reset()
         self.maps: dict = {}
         self._free = None
 
     def reset(self):
         self.count = 0
+        self.span = None          # how far past its start a call goes: EVENT_SPAN x the events' spacing
+        self.last_event = None
 
     def ticks(self, t0, t1) -> dict:
         """Clock tick instants in [t0, t1] -> the clocks ticking there."""
@@ -658,7 +683,7 @@ class _Hybrid:
         reinit = None         # the states a reinit() sets, applied once the iteration settles
         seen = set()          # the values met since pre() last changed: meeting one again is a cycle
         for _ in range(MAX_EVENT_ITERATIONS):
-            new = np.array(self.update(cur, u, p, t, pre, flags)).ravel()
+            new = self.update(cur, u, p, t, pre, flags).ravel()
             if not np.all(np.isfinite(new)):
                 raise _Stop(f"event iteration gave non-finite values at t = {t:g}")
             if not np.array_equal(new[:nc], cur[:nc]):
@@ -721,15 +746,15 @@ class _Hybrid:
 
     # -- integration with events ---------------------------------------------------------------
     def g(self, plan, x, p, t):
-        return np.array(self.zero(x[: plan.nx], plan.u_at(t), p, t)).ravel()
+        return self.zero_call(x[: plan.nx], plan.u_at(t), p, t).ravel()
 
     def values(self, plan, X, t, p) -> np.ndarray:
         """The relations (rows) at the state columns ``X`` and times ``t``, in one mapped call."""
         n = len(t)
         if n not in self.maps:
-            self.maps[n] = self.zero.map(n)
+            self.maps[n] = Call(self.zero.map(n))
         U = np.column_stack([plan.u_at(tc) for tc in t]) if plan.u.names else np.zeros((0, n))
-        return np.array(self.maps[n](X, U, np.repeat(np.asarray(p)[:, None], n, 1), np.asarray(t)[None]))
+        return self.maps[n](X, U, np.repeat(np.asarray(p)[:, None], n, 1), np.asarray(t)[None])
 
     def changes(self, G) -> np.ndarray:
         """(relations, intervals): where a relation changes between the columns of ``G``, the
@@ -754,6 +779,10 @@ class _Hybrid:
                 ahead = 1        # other relations may change first: this interval as any other
             if ahead:                              # up to the interval of a foreseen crossing
                 rest = rest[:ahead]
+            if ahead != 0 and self.span is not None:
+                # events come every so often: a call far past the next one is thrown away (an
+                # arc's every 5 ms, calls to the end of a 1 s chunk: 160 steps an event)
+                rest = rest[:max(1, int(np.searchsorted(t_int[rest], t0 + self.span, side="right")))]
             if ahead != 0:
                 try:
                     rest = rest[:plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched)]
@@ -767,6 +796,8 @@ class _Hybrid:
             if crossing is None and self.zero is not None:
                 crossing = self.first_flip(plan, x0, t0, rest, p, traj)
             if crossing is None:
+                if self.span is not None:
+                    self.span *= 2                 # (no event in it: the next goes further)
                 self.at_point(plan, rest[-1], p, traj)
                 pos += len(rest)
                 t0, x0 = t_int[rest[-1]], traj[:, rest[-1]]
@@ -774,6 +805,7 @@ class _Hybrid:
             j, ta, xa, rels, g_a, tb = crossing
             self.count += 1
             t_star, x_star = self.locate(plan, xa, ta, tb, p, rels, g_a, budget)
+            self.spaced(t_star)
             x_star = self.iterate(plan, x_star, p, t_star, self.flags())
             if t_star >= t_int[rest[j]]:          # located at the grid point itself
                 traj[:, rest[j]] = x_star
@@ -783,6 +815,13 @@ class _Hybrid:
             else:
                 pos += j
                 t0, x0 = t_star, x_star
+
+    def spaced(self, t: float) -> None:
+        """An event at ``t``: the span of the next calls from the events' spacing so far."""
+        if self.last_event is not None and t > self.last_event:
+            gap = t - self.last_event
+            self.span = EVENT_SPAN * gap if self.span is None else 0.5 * (self.span + EVENT_SPAN * gap)
+        self.last_event = t
 
     def crossing_ahead(self, plan, x0, t0, t1, p):
         """The crossing in (t0, t1] of relations on time alone, as :meth:`advance` takes it."""
@@ -954,7 +993,9 @@ class _Hybrid:
         rels = np.asarray(rels)
         lo, x_lo, hi, x_hi = ta, np.asarray(xa, float), tb, None
         s_lo, g_lo, g_hi, even, first = None, None, None, True, None
-        tol = 1e-12 * max(1.0, abs(tb))
+        # to 1e-7 of the interval it was seen in, below the solver's own error there (rtol
+        # 1e-6): the last digits cost a rectifier a restart per crossing and changed nothing
+        tol = max(1e-12 * max(1.0, abs(tb)), ZOOM_TOL * (tb - ta))
         while True:
             end = hi if even else _past_estimate(lo, hi, g_lo, g_hi, max(tol, 1e-3 * (hi - lo) ** 2 / first))
             X = plan.hop(x_lo, p, lo, end, budget, points=ZOOM_POINTS, to_end=not even)
@@ -1023,6 +1064,12 @@ class _Hybrid:
             return np.array(_mapped(fun, n)(X, U, P if P.shape[1] == n else np.repeat(P[:, :1], n, 1), t[None, :]))
         # on parameters only (the MSL's range checks): one point tells, no loop solved n times
         return np.repeat(np.array(fun(X[:, :1], U[:, :1], P[:, :1], t[:1])), n, axis=1)
+
+
+def _even(t0: float, times: np.ndarray) -> bool:
+    """Whether ``times`` are equally spaced from ``t0`` on (as :func:`hop_grid` spaces them)."""
+    h = times[-1] - t0
+    return h > 0 and np.allclose(times - t0, h * hop_grid(len(times)), rtol=0.0, atol=1e-10 * h)
 
 
 def hop_grid(points: int, to_end: bool = False) -> np.ndarray:

@@ -35,6 +35,9 @@ log = logging.getLogger(__name__)
 SYMBOLIC_SOLVE_MAX = 40
 #: a linear block of more unknowns is torn before it is solved symbolically (:func:`_linear_solution`)
 TEAR_LINEAR_MIN = 8
+#: a function with more pieces of run-time work (solves, loops) than this is left as it is by
+#: :func:`fused`
+FUSE_STAGES_MAX = 8
 #: Largest linear block (above SYMBOLIC_SOLVE_MAX) solved at run time by dense QR, which gives
 #: NaN where it is singular (a rotation matrix started at 0): sparse QR raises there and takes
 #: the whole evaluation down, so the initial system cannot even look next to that start
@@ -344,9 +347,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         form = (ca.Function("loops", mx_args if guess is None else [*mx_args, H], [zl_sol]),
                 ca.Function("z_newton", [*args, ZL], [ca.vertcat(*[newton[c] for c in range(nz)])]))
     if guess is None:
-        return ca.Function("zsol", mx_args, [zsol]), n_nonlinear, form
+        return fused(ca.Function("zsol", mx_args, [zsol])), n_nonlinear, form
     zfree = ca.vertcat(*[free[c] for c in range(nz)]) if nz else ca.MX(0, 1)
-    fun = ca.Function("zsol", [*mx_args, H], [zsol, zfree, ca.vertcat(*now) if now else ca.MX(0, 1), cross])
+    fun = fused(ca.Function("zsol", [*mx_args, H], [zsol, zfree, ca.vertcat(*now) if now else ca.MX(0, 1), cross]))
     return fun, n_nonlinear, form, ops
 
 
@@ -1065,7 +1068,7 @@ def expanded(f: ca.Function) -> ca.Function:
     try:
         return merged(f.expand())
     except RuntimeError:  # holds a rootfinder or a run-time linear solver
-        return f
+        return fused(f)
 
 
 def merged(f: ca.Function) -> ca.Function:
@@ -1077,15 +1080,82 @@ def merged(f: ca.Function) -> ca.Function:
     return ca.Function(f.name(), args, ca.cse(f.call(args)), f.name_in(), f.name_out())
 
 
+def fused(f: ca.Function) -> ca.Function:
+    """``f`` (MX: SX functions around what SX cannot hold, in functions it calls) as a few SX
+    functions around the same run-time work: each run-time linear solve, loop's Newton solve
+    or short-circuit conditional is fed by one SX function of the inputs and the work before it,
+    and the outputs come from one more. Called block by block, a thyristor bridge's 45 blocks
+    and its one 15x15 solve took 17 us an evaluation of its right-hand side, nearly all of it the
+    calls (5 us fused). ``f`` as it is where nothing or more than FUSE_STAGES_MAX pieces of such
+    work are found (each stage recomputes what those before it did), or CasADi cannot redo one."""
+    if not f.is_a("MXFunction"):
+        return f
+    ins, outs = _inlined(f)
+    if outs is None:
+        return f
+    g = ca.Function("flat", ins, outs)
+    work = [g.instruction_MX(k) for k in range(g.n_instructions())
+            if g.instruction_id(k) == ca.OP_SOLVE or (g.instruction_id(k) == ca.OP_CALL and not
+                                                    g.instruction_MX(k).which_function().is_a("SXFunction"))]
+    if not work or len(work) > FUSE_STAGES_MAX:
+        return f
+    # what the rest reads of each piece: a solve's value, a call's outputs
+    read = [[n.get_output(i) for i in range(n.which_function().n_out())] if n.is_call() else [n] for n in work]
+    syms = [[ca.MX.sym(f"s{k}_{i}", r.sparsity()) for i, r in enumerate(rs)] for k, rs in enumerate(read)]
+    flat = lambda lists: [x for xs in lists for x in xs]       # noqa: E731
+    try:
+        stages = []
+        for k, n in enumerate(work):
+            deps = [n.dep(j) for j in range(n.n_dep())]
+            before, known = flat(read[:k]), flat(syms[:k])
+            stage = ca.Function(f"stage{k}", [*ins, *known], ca.graph_substitute(deps, before, known) if k else deps)
+            stages.append((n, deps, merged(stage.expand())))
+        last = merged(ca.Function("stages_out", [*ins, *flat(syms)], ca.graph_substitute(outs, flat(read), flat(syms))).expand())
+    except RuntimeError:         # (something else SX does not hold)
+        return f
+    args, done = f.mx_in(), []
+    for n, deps, stage in stages:
+        values = stage.call([*args, *done])
+        try:    # (a solve again on the stage's values: CasADi cannot redo some of its derivatives')
+            done += n.which_function().call(values) if n.is_call() else [ca.graph_substitute(n, deps, values)]
+        except RuntimeError:
+            return f
+    return ca.Function(f.name(), args, last.call([*args, *done]), f.name_in(), f.name_out())
+
+
+def _inlined(f: ca.Function, rounds: int = 20):
+    """(inputs, outputs) of MX ``f`` with every MX function it calls inlined, at any depth (the
+    solves' nodes then the ones in the outputs' graph); outputs None past ``rounds`` levels."""
+    ins = f.mx_in()
+    outs = f.call(ins, True, False)
+    for _ in range(rounds):
+        g = ca.Function("flat", ins, outs)
+        calls = [g.instruction_MX(k) for k in range(g.n_instructions()) if g.instruction_id(k) == ca.OP_CALL
+                 and g.instruction_MX(k).which_function().is_a("MXFunction")]
+        if not calls:
+            return ins, outs
+        old, new = [], []
+        for n in calls:
+            h = n.which_function()
+            res = h.call([n.dep(j) for j in range(n.n_dep())], True, False)
+            old += [n.get_output(i) for i in range(h.n_out())]
+            new += res
+        outs = ca.graph_substitute(outs, old, new)
+    return ins, None
+
+
 def compact(f: ca.Function) -> ca.Function:
     """``f`` expanded to SX where that stays small (a loop it holds does not reach its
-    outputs), else as it is: expanded, a loop's Newton solve is unrolled, every iteration and
-    fallback evaluated at every call, into each function that reads it (a pump's one loop: a
-    4 MB C function each, 15x the simulation time of the MX call graph)."""
+    outputs), else :func:`fused` (its loops called, the rest SX): expanded, a loop's Newton
+    solve is unrolled, every iteration and fallback evaluated at every call, into each function
+    that reads it (a pump's one loop: a 4 MB C function each, 15x the simulation time of the MX
+    call graph)."""
     if expanded_size(f) > EXPAND_TRY_MAX:      # (expanding to find out took minutes on a fluid model)
         return f
     e = expanded(f)
-    return e if e.is_a("SXFunction") and e.n_instructions() <= COMPACT_SX_MAX else f
+    if not e.is_a("SXFunction"):
+        return e                  # (fused where it could be)
+    return e if e.n_instructions() <= COMPACT_SX_MAX else fused(f)
 
 
 def expanded_size(f: ca.Function, memo: dict | None = None) -> float:

@@ -229,13 +229,13 @@ _NO_CODE = "does not support code generation"
 def for_code(model: CompiledModel) -> CompiledModel:
     """``model`` built again from its DAE with solvers CasADi writes C for (sparse QR for the
     large linear blocks the in-process model solves by LAPACK), with the same outputs."""
-    with structure.for_code():
-        rebuilt = CompiledModel.from_dae(model.dae, model.name, model.ode.y_names, model.info, model.structure)
-    ode = rebuilt.ode
     try:        # sparse QR has no answer where the block is singular (ideal switches all open)
+        with structure.for_code():
+            rebuilt = CompiledModel.from_dae(model.dae, model.name, model.ode.y_names, model.info, model.structure)
+        ode = rebuilt.ode
         x0 = ode.init(ode.u_start, ode.p_values, 0.0)
         ode.ode(x0, ode.u_start, ode.p_values, 0.0)
-    except RuntimeError:
+    except (RuntimeError, ModelicaError):     # (there, its initial system has no finite derivative)
         raise CompileError(f"{model.name} solves a linear block of more than {structure.SYMBOLIC_SOLVE_MAX} "
                            "unknowns that is singular at its start: CasADi writes C only for a sparse solver, "
                            "which fails there (the model runs in process, not as an FMU)") from None
