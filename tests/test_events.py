@@ -495,7 +495,7 @@ equation
   if quenched then
     i = Goff*v;
   else
-    v = Varc*sign(i);
+    v = Varc*noEvent(sign(i));
   end if;
 end Arc;
 """
@@ -504,18 +504,32 @@ end Arc;
 def test_a_crossing_the_solver_ran_past_is_found_after_it_gives_up(tmp_path):
     """The current falls as -10 + 20 exp(-10 t) until, 6e-4 A from zero, the arc quenches
     (MSL's switches with arc). On grid points coarser than that window the solver runs past it
-    into i = 0, where v = Varc sign(i) chatters, and gives up; the failed call is probed point
-    by point, intervals halved, until the relation's sign change is seen and handled. After
-    the quench the current is Vs/(R + 1/Goff)."""
-    (tmp_path / "Arc.mo").write_text(ARC)
+    into i = 0, where v = Varc noEvent(sign(i)) chatters, and gives up; the failed call is
+    probed point by point, intervals halved, until the relation's sign change is seen and
+    handled. After the quench the current is Vs/(R + 1/Goff)."""
+    _quenches(tmp_path, ARC)
+
+
+def test_a_sign_is_an_event_where_its_argument_crosses_zero(tmp_path):
+    """sign() generates an event, as Modelica has it (the MSL's arcs are written that way): the
+    arc's voltage flips at i = 0, where the quench relation is true, and the arc quenches there;
+    the same solution, in a few events and no failed call."""
+    hybrid = _quenches(tmp_path, ARC.replace("noEvent(sign(i))", "sign(i)"))
+    assert hybrid.count <= 3
+
+
+def _quenches(tmp_path, source):
+    (tmp_path / "Arc.mo").write_text(source)
     model = compile_model([tmp_path / "Arc.mo"], "Arc")
     t = np.linspace(0, 0.2, 11)
-    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    engine = CasadiEngine()
+    res = engine.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
     assert res.ok, res.reason
     i = res.states[:, model.ode.x_names.index("i")]
     before = t < 0.1 * np.log(2) - 1e-3
     assert np.abs(i[before] - (-10 + 20 * np.exp(-10 * t[before]))).max() < 1e-4
     assert np.abs(i[t > 0.08] - 50 / (1 + 1e5)).max() < 1e-8
+    return next(iter(engine._plans.values())).hybrid
 
 
 PULSED_RC = """
@@ -883,3 +897,69 @@ def test_one_logic_signal_fed_to_elements_of_two_gates_inputs_compiles_and_is_ex
     assert np.array_equal(res.output("alarmed"), (door | stop).astype(float))
     assert np.array_equal(res.output("doubled"), 2.0 * level)
     assert np.array_equal(res.output("squared"), 1.0 * level ** 2)
+
+
+RECTIFIER = """
+model Rectifier "a three-phase thyristor bridge fired at 60 degrees into an R-L load"
+  import Modelica.Electrical.Analog;
+  import Modelica.Electrical.Polyphase;
+  import Modelica.Electrical.PowerConverters.ACDC;
+  parameter Integer m = 3;
+  Polyphase.Sources.SineVoltage mains(m = m, V = fill(sqrt(2) * 230, m), f = fill(50, m),
+    phase = -Polyphase.Functions.symmetricOrientation(m));
+  Polyphase.Basic.MultiStarResistance star(m = m);
+  Analog.Basic.Ground ground;
+  ACDC.ThyristorBridge2mPulse bridge(m = m);
+  ACDC.Control.VoltageBridge2mPulse firing(m = m, f = 50, useFilter = false, constantFiringAngle = Modelica.Constants.pi / 3);
+  Analog.Basic.Resistor load(R = 20);
+  Analog.Basic.Inductor choke(L = 0.05, i(start = 0, fixed = true));
+  Modelica.Blocks.Interfaces.RealOutput i = choke.i;
+equation
+  connect(mains.plug_n, star.plug);
+  connect(star.pin, ground.p);
+  connect(mains.plug_p, bridge.ac);
+  connect(firing.ac, mains.plug_p);
+  connect(firing.fire_p, bridge.fire_p);
+  connect(firing.fire_n, bridge.fire_n);
+  connect(bridge.dc_p, load.p);
+  connect(load.n, choke.p);
+  connect(choke.n, bridge.dc_n);
+end Rectifier;
+"""
+
+
+@needs_msl()
+def test_a_thyristor_bridge_runs_the_same_with_its_blocks_fused(tmp_path, monkeypatch):
+    """The bridge's currents are a linear block whose coefficients change with the thyristors'
+    states, solved at run time; the blocks around it are fused into a few SX functions
+    (:func:`mcl.compile.structure.fused`): the same run as with them called one by one."""
+    from mcl.compile import structure
+
+    monkeypatch.setenv("MODELICAPATH", str(msl_path()))
+    monkeypatch.setenv("MCL_NO_COMPILE_CACHE", "1")
+    (tmp_path / "Rectifier.mo").write_text(RECTIFIER)
+    t = np.linspace(0, 0.06, 121)
+    runs = []
+    for solves in (structure.FUSE_STAGES_MAX, 0):
+        monkeypatch.setattr(structure, "FUSE_STAGES_MAX", solves)
+        model = compile_model([tmp_path / "Rectifier.mo"], "Rectifier")
+        engine = CasadiEngine()
+        res = engine.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+        assert res.ok, res.reason
+        runs.append((model, res, next(iter(engine._plans.values())).hybrid.count))
+    (fused, res, crossings), (plain, ref, ref_crossings) = runs
+    # the stages around the solve are called, not every block
+    assert _flat_calls(fused.ode.ode) <= 3 < _flat_calls(plain.ode.ode)
+    assert crossings == ref_crossings >= 10         # the thyristors fire and block every half period
+    i = res.output("i")
+    assert i.max() > 1.0                            # 230 V into 20 ohm: amperes
+    assert np.max(np.abs(i - ref.output("i"))) < 1e-6 * np.max(np.abs(i)) + 1e-9
+
+
+def _flat_calls(f) -> int:
+    """Function calls in ``f`` with the MX functions it calls inlined."""
+    import casadi as ca
+    from mcl.compile.structure import _inlined
+
+    g = ca.Function("flat", *_inlined(f))
+    return sum(g.instruction_id(k) == ca.OP_CALL for k in range(g.n_instructions()))
