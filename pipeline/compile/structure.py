@@ -35,8 +35,7 @@ log = logging.getLogger(__name__)
 SYMBOLIC_SOLVE_MAX = 40
 #: a linear block of more unknowns is torn before it is solved symbolically (:func:`_linear_solution`)
 TEAR_LINEAR_MIN = 8
-#: a function with more pieces of run-time work (solves, loops) than this is left as it is by
-#: :func:`fused`
+#: a function with more run-time linear solves than this is left as it is by :func:`fused`
 FUSE_STAGES_MAX = 8
 #: Largest linear block (above SYMBOLIC_SOLVE_MAX) solved at run time by dense QR, which gives
 #: NaN where it is singular (a rotation matrix started at 0): sparse QR raises there and takes
@@ -1081,43 +1080,41 @@ def merged(f: ca.Function) -> ca.Function:
 
 
 def fused(f: ca.Function) -> ca.Function:
-    """``f`` (MX: SX functions around what SX cannot hold, in functions it calls) as a few SX
-    functions around the same run-time work: each run-time linear solve, loop's Newton solve
-    or short-circuit conditional is fed by one SX function of the inputs and the work before it,
-    and the outputs come from one more. Called block by block, a thyristor bridge's 45 blocks
-    and its one 15x15 solve took 17 us an evaluation of its right-hand side, nearly all of it the
-    calls (5 us fused). ``f`` as it is where nothing or more than FUSE_STAGES_MAX pieces of such
-    work are found (each stage recomputes what those before it did), or CasADi cannot redo one."""
+    """``f`` (MX: SX functions around run-time linear solves, in functions it calls) as a few SX
+    functions around the same solves: each solve fed by one SX function of the inputs and the
+    solves before it, the outputs from one more. Called block by block, a thyristor bridge's 45
+    blocks and its one 15x15 solve took 17 us an evaluation of its right-hand side, nearly all of
+    it the calls (5 us fused). ``f`` as it is where it holds a loop's Newton solve (fused so, a
+    model read back from the compile cache could not be differentiated: CasADi's 'Duplicate'),
+    more than FUSE_STAGES_MAX solves (each stage recomputes what those before it did), or a
+    solve CasADi cannot redo.
+    """
     if not f.is_a("MXFunction"):
         return f
     ins, outs = _inlined(f)
     if outs is None:
         return f
     g = ca.Function("flat", ins, outs)
-    work = [g.instruction_MX(k) for k in range(g.n_instructions())
-            if g.instruction_id(k) == ca.OP_SOLVE or (g.instruction_id(k) == ca.OP_CALL and not
-                                                    g.instruction_MX(k).which_function().is_a("SXFunction"))]
+    ops = [g.instruction_id(k) for k in range(g.n_instructions())]
+    if any(op == ca.OP_CALL and not g.instruction_MX(k).which_function().is_a("SXFunction") for k, op in enumerate(ops)):
+        return f
+    work = [g.instruction_MX(k) for k, op in enumerate(ops) if op == ca.OP_SOLVE]
     if not work or len(work) > FUSE_STAGES_MAX:
         return f
-    # what the rest reads of each piece: a solve's value, a call's outputs
-    read = [[n.get_output(i) for i in range(n.which_function().n_out())] if n.is_call() else [n] for n in work]
-    syms = [[ca.MX.sym(f"s{k}_{i}", r.sparsity()) for i, r in enumerate(rs)] for k, rs in enumerate(read)]
-    flat = lambda lists: [x for xs in lists for x in xs]       # noqa: E731
+    syms = [ca.MX.sym(f"s{k}", n.sparsity()) for k, n in enumerate(work)]
     try:
         stages = []
         for k, n in enumerate(work):
             deps = [n.dep(j) for j in range(n.n_dep())]
-            before, known = flat(read[:k]), flat(syms[:k])
-            stage = ca.Function(f"stage{k}", [*ins, *known], ca.graph_substitute(deps, before, known) if k else deps)
+            stage = ca.Function(f"stage{k}", [*ins, *syms[:k]], ca.graph_substitute(deps, work[:k], syms[:k]) if k else deps)
             stages.append((n, deps, merged(stage.expand())))
-        last = merged(ca.Function("stages_out", [*ins, *flat(syms)], ca.graph_substitute(outs, flat(read), flat(syms))).expand())
+        last = merged(ca.Function("stages_out", [*ins, *syms], ca.graph_substitute(outs, work, syms)).expand())
     except RuntimeError:         # (something else SX does not hold)
         return f
     args, done = f.mx_in(), []
     for n, deps, stage in stages:
-        values = stage.call([*args, *done])
-        try:    # (a solve again on the stage's values: CasADi cannot redo some of its derivatives')
-            done += n.which_function().call(values) if n.is_call() else [ca.graph_substitute(n, deps, values)]
+        try:    # (the solve again on the stage's values: CasADi cannot redo some of its derivatives')
+            done.append(ca.graph_substitute(n, deps, stage.call([*args, *done])))
         except RuntimeError:
             return f
     return ca.Function(f.name(), args, last.call([*args, *done]), f.name_in(), f.name_out())
@@ -1146,7 +1143,7 @@ def _inlined(f: ca.Function, rounds: int = 20):
 
 def compact(f: ca.Function) -> ca.Function:
     """``f`` expanded to SX where that stays small (a loop it holds does not reach its
-    outputs), else :func:`fused` (its loops called, the rest SX): expanded, a loop's Newton
+    outputs), else as it is (:func:`fused` where it can be): expanded, a loop's Newton
     solve is unrolled, every iteration and fallback evaluated at every call, into each function
     that reads it (a pump's one loop: a 4 MB C function each, 15x the simulation time of the MX
     call graph)."""

@@ -94,8 +94,9 @@ def settable_starts(model: CompiledModel) -> tuple[list[bool], np.ndarray]:
     if not len(o.x_names):
         return [], s0
     U, P, T, S = init_start.mx_in()
-    jac = ca.Function("dx0ds", [U, P, T, S], [ca.jacobian(init_start(U, P, T, S), S)])
-    try:
+    try:        # (CasADi cannot differentiate a loop's Newton solve read back from the compile
+        # cache: its 'Duplicate'; then no start is said to be settable)
+        jac = ca.Function("dx0ds", [U, P, T, S], [ca.jacobian(init_start(U, P, T, S), S)])
         J = np.array(jac(o.u_start, o.p_values, 0.0, s0), dtype=float)
     except RuntimeError:
         return [False] * len(o.x_names), s0
