@@ -961,5 +961,5 @@ def _flat_calls(f) -> int:
     import casadi as ca
     from mcl.compile.structure import _inlined
 
-    g = ca.Function("flat", *_inlined(f))
+    g = _inlined(f)[2]
     return sum(g.instruction_id(k) == ca.OP_CALL for k in range(g.n_instructions()))

@@ -981,7 +981,8 @@ class _Translator:
                     args[0].numel() == 1 and k not in self.quiet:
                 # an event where the sign changes, as Modelica has it: an arc's voltage
                 # Vmax*sign(i) flips with its current, and the arc quenches at that event; without
-                # it the solver steps through the jump (30 000 steps a second, the arc never out)
+                # it the solver steps through the jump (30 000 steps a second, the arc never out).
+                # rumoca lists no sign() among its event nodes: every one outside noEvent()
                 a, zero = args[0], ca.SX(0)
                 return (self.held_relation("greater", a, zero, a > 0) - self.held_relation("less", a, zero, a < 0))
             return self.call_builtin(body["builtin"], args)

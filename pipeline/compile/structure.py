@@ -1091,10 +1091,9 @@ def fused(f: ca.Function) -> ca.Function:
     """
     if not f.is_a("MXFunction"):
         return f
-    ins, outs = _inlined(f)
-    if outs is None:
+    ins, outs, g = _inlined(f)
+    if g is None:
         return f
-    g = ca.Function("flat", ins, outs)
     ops = [g.instruction_id(k) for k in range(g.n_instructions())]
     if any(op == ca.OP_CALL and not g.instruction_MX(k).which_function().is_a("SXFunction") for k, op in enumerate(ops)):
         return f
@@ -1121,8 +1120,9 @@ def fused(f: ca.Function) -> ca.Function:
 
 
 def _inlined(f: ca.Function, rounds: int = 20):
-    """(inputs, outputs) of MX ``f`` with every MX function it calls inlined, at any depth (the
-    solves' nodes then the ones in the outputs' graph); outputs None past ``rounds`` levels."""
+    """(inputs, outputs, a Function of them) of MX ``f`` with every MX function it calls
+    inlined, at any depth (the solves' nodes then the ones in the outputs' graph); the Function
+    None past ``rounds`` levels."""
     ins = f.mx_in()
     outs = f.call(ins, True, False)
     for _ in range(rounds):
@@ -1130,7 +1130,7 @@ def _inlined(f: ca.Function, rounds: int = 20):
         calls = [g.instruction_MX(k) for k in range(g.n_instructions()) if g.instruction_id(k) == ca.OP_CALL
                  and g.instruction_MX(k).which_function().is_a("MXFunction")]
         if not calls:
-            return ins, outs
+            return ins, outs, g
         old, new = [], []
         for n in calls:
             h = n.which_function()
@@ -1138,21 +1138,19 @@ def _inlined(f: ca.Function, rounds: int = 20):
             old += [n.get_output(i) for i in range(h.n_out())]
             new += res
         outs = ca.graph_substitute(outs, old, new)
-    return ins, None
+    return ins, outs, None
 
 
 def compact(f: ca.Function) -> ca.Function:
     """``f`` expanded to SX where that stays small (a loop it holds does not reach its
-    outputs), else as it is (:func:`fused` where it can be): expanded, a loop's Newton
+    outputs), else as it is (or :func:`fused`, where it holds no loop): expanded, a loop's Newton
     solve is unrolled, every iteration and fallback evaluated at every call, into each function
     that reads it (a pump's one loop: a 4 MB C function each, 15x the simulation time of the MX
     call graph)."""
     if expanded_size(f) > EXPAND_TRY_MAX:      # (expanding to find out took minutes on a fluid model)
         return f
     e = expanded(f)
-    if not e.is_a("SXFunction"):
-        return e                  # (fused where it could be)
-    return e if e.n_instructions() <= COMPACT_SX_MAX else fused(f)
+    return e if not e.is_a("SXFunction") or e.n_instructions() <= COMPACT_SX_MAX else f
 
 
 def expanded_size(f: ca.Function, memo: dict | None = None) -> float:
