@@ -176,6 +176,17 @@ _FILTER_BASE = [
 _TELLINEN = [(f"    dHyst = der(hyst{b}-mu0*Hstat);\n", f"    dHyst = der(hyst{b}) - mu0*der(Hstat);  // mcl: der() split\n")
              for b in "RF"]
 
+# Modelica.Electrical.Machines.Examples.ControlledDCDrives.Utilities.PartialControlledDCPM:
+# rumoca cannot flatten a replaceable record parameter holding a record (motorData) that a
+# component's modifiers read ("flat variable is missing structured identity"). No MSL
+# example redeclares driveData, so the same parameter not replaceable is the same model.
+_DRIVE_DATA = (
+    """  replaceable parameter DriveDataDCPM driveData constrainedby
+    ControlledDCDrives.Utilities.DriveDataDCPM "DC machine data"
+""", """  parameter DriveDataDCPM driveData // mcl: not replaceable (rumoca cannot flatten it so)
+    "DC machine data"
+""")
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
@@ -183,6 +194,8 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Mechanics", "Rotational", "Components", "LossyGear.mo")): _LOSSY_GEAR,
     ("Modelica", ("Mechanics", "Translational", "Components", "MassWithStopAndFriction.mo")): _FRICTION_WITH_STOP,
     ("Modelica", ("Magnetic", "FluxTubes", "BaseClasses", "GenericHysteresisTellinen.mo")): _TELLINEN,
+    ("Modelica", ("Electrical", "Machines", "Examples", "ControlledDCDrives", "Utilities",
+                  "PartialControlledDCPM.mo")): [_DRIVE_DATA],
 }
 
 
