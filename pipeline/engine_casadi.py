@@ -47,7 +47,7 @@ DETECTION_POINTS = 400    # at least this many points over the horizon where rel
 MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
 EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
-ZOOM_TOL = 1e-7           # a crossing located to this fraction of the interval it was seen in
+ZOOM_TOL = 1e-5
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
 FOLLOW_POINTS = 32        # points of a call where the loops' solutions are checked to follow on
@@ -382,7 +382,10 @@ class _Plan:
         """The loops' guesses, the tail of ``p`` (changed in place: the event handling holds
         it too), set to their solution at ``x``, ``t`` where it is found."""
         if self.ng:
-            z = np.array(self.ode.solved(x[: self.nx], self.u_at(t), p, t)).ravel()
+            try:
+                z = np.array(self.ode.solved(x[: self.nx], self.u_at(t), p, t)).ravel()
+            except RuntimeError:             # not found from the guesses held: they stay
+                return
             if np.all(np.isfinite(z)):       # (the comparisons of a failed solve are not its branch)
                 p[-self.ng:] = z
 
@@ -535,10 +538,6 @@ class _Plan:
         # the guesses each grid point was integrated with (those of its call)
         self.guesses = np.full((self.ng, len(self.t_int)), np.nan)
         self.guesses[:, 0] = p[npu:]
-        try:
-            budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
-        except RuntimeError as exc:       # (a linear block that sparse QR finds singular)
-            return fail(f"model evaluation failed at the start: {_last_line(exc)}")
         t_int = self.t_int
         traj = np.full((len(xa), len(t_int)), np.nan)
         hybrid = self.hybrid
@@ -546,6 +545,10 @@ class _Plan:
             if hybrid is not None:
                 hybrid.reset()
                 xa = hybrid.initial(self, xa, p, t_int[0])
+            try:      # (with the initial event's modes: a tank's ports open or closed)
+                budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
+            except RuntimeError as exc:       # (a linear block that sparse QR finds singular)
+                return fail(f"model evaluation failed at the start: {_last_line(exc)}")
             traj[:, 0] = xa
             ended = None            # (the last point, why) where the model called terminate()
             for idx in self.chunks:
@@ -708,7 +711,18 @@ class _Hybrid:
         """The initial event iteration (initial() true), then the clocks ticking at t0."""
         if self.update is None:
             return x
-        x = self.iterate(plan, x, p, t0, self.flags(initial=True))
+        try:
+            x = self.iterate(plan, x, p, t0, self.flags(initial=True))
+        except RuntimeError:
+            # the relations held all false may leave the model no solution (a tank's ports
+            # closed, its junction singular); their values before the first event are a guess
+            # the iteration corrects: all true then
+            held = [i for i, n in enumerate(self.ode.x_names) if n.startswith("$rel")]
+            if not held or np.all(x[held] == 1):
+                raise
+            x = x.copy()
+            x[held] = 1.0
+            x = self.iterate(plan, x, p, t0, self.flags(initial=True))
         x = self.after_init(plan, x, p, t0)
         clocks = plan.tick_at.get(0, [])
         if clocks:
@@ -964,8 +978,14 @@ class _Hybrid:
             if hi - lo <= tol:
                 break
             t = 0.5 * (lo + hi)
-            smooth = (np.sign(g_hi) != s_lo) & (np.abs(g_hi - g_lo) <= steep * (hi - lo))
-            if smooth.any() and moved[-2:] not in (["lo", "lo"], ["hi", "hi"]):
+            # (a relation exactly 0 at lo, a count equal to its bound until a tick: its secant
+            # root is lo itself, and it jumps)
+            smooth = (np.sign(g_hi) != s_lo) & (g_lo != 0) & (np.abs(g_hi - g_lo) <= steep * (hi - lo))
+            if not smooth.any() and not moved:
+                # a jump is first tried at the bracket's end: a tick on a grid point (a PWM's
+                # period) is found in one trial instead of 45 halvings
+                t = hi - 0.5 * tol
+            elif smooth.any() and moved[-2:] not in (["lo", "lo"], ["hi", "hi"]):
                 with np.errstate(divide="ignore", invalid="ignore"):
                     roots = lo + (hi - lo) * g_lo[smooth] / (g_lo[smooth] - g_hi[smooth])
                 roots = roots[np.isfinite(roots)]

@@ -127,3 +127,48 @@ end Smooth;
     assert np.ptp(y) > 0.5
     assert np.abs(np.gradient(y, t) - dy)[5:-5].max() < 1e-3 * np.ptp(dy)
     assert np.abs(np.gradient(dy, t) - ddy)[5:-5].max() < 1e-3 * np.ptp(ddy)
+
+
+def test_a_current_controlled_dc_drive_holds_its_current_reference(monkeypatch):
+    """The MSL's ControlledDCDrives declare their drive data as a replaceable record holding a
+    record, which rumoca cannot flatten; the overlay declares it a plain parameter (no example
+    redeclares it). CurrentControlledDCPM steps its torque reference to tauNominal at 0.2 s,
+    which the drive data turn into the current reference tauNominal/kPhi = IaNominal (100 A):
+    the armature current is 0 before and holds 100 A after, while the load speeds up."""
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    model = mcl.compile_model([], "Modelica.Electrical.Machines.Examples.ControlledDCDrives.CurrentControlledDCPM")
+    t = np.linspace(0.0, 2.0, 21)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    state = lambda n: res.states[:, model.ode.x_names.index(n)]     # noqa: E731
+    assert np.abs(state("dcpm.la.i")[t < 0.2]).max() < 1e-6
+    np.testing.assert_allclose(state("dcpm.la.i")[t >= 0.4], 100.0, rtol=1e-3)
+    assert np.all(np.diff(state("loadInertia.w")[t >= 0.3]) > 0)
+
+
+def test_two_tanks_of_a_simple_liquid_level_out_through_a_pipe(tmp_path, monkeypatch):
+    """Media on PartialSimpleMedium (ConstantPropertyLiquidWater) size a function's input by the
+    package's nX, which rumoca cannot prove when BaseProperties calls it; the overlay sizes it
+    X[:]. Two open tanks of 1 m² joined at their floors by a horizontal pipe, filled to 2 m and
+    0.5 m (the water's 995.586 kg/m³): the water flows from the full one to the other until
+    both stand at 1.25 m, and none is lost. Both ports start open, then the held relations of
+    their flow direction follow the flow."""
+    state = _run(tmp_path, monkeypatch, """
+model Levels
+  replaceable package Medium = Modelica.Media.Water.ConstantPropertyLiquidWater;
+  inner Modelica.Fluid.System system(energyDynamics = Modelica.Fluid.Types.Dynamics.FixedInitial);
+  Modelica.Fluid.Vessels.OpenTank full(redeclare package Medium = Medium, crossArea = 1, height = 3,
+    level_start = 2, nPorts = 1, portsData = {Modelica.Fluid.Vessels.BaseClasses.VesselPortsData(diameter = 0.1)});
+  Modelica.Fluid.Vessels.OpenTank low(redeclare package Medium = Medium, crossArea = 1, height = 3,
+    level_start = 0.5, nPorts = 1, portsData = {Modelica.Fluid.Vessels.BaseClasses.VesselPortsData(diameter = 0.1)});
+  Modelica.Fluid.Pipes.StaticPipe pipe(redeclare package Medium = Medium, length = 1, diameter = 0.1);
+equation
+  connect(full.ports[1], pipe.port_a);
+  connect(pipe.port_b, low.ports[1]);
+end Levels;
+""", "Levels", t := np.linspace(0.0, 300.0, 7))
+    rho = 995.586
+    total = state("full.m") + state("low.m")
+    np.testing.assert_allclose(total, rho * 2.5, rtol=1e-6)
+    assert np.all(np.diff(state("full.m")) <= 1e-3)          # (it settles to 5e-8 of its mass)
+    np.testing.assert_allclose([state("full.m")[-1], state("low.m")[-1]], rho * 1.25, rtol=1e-3)

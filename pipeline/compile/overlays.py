@@ -187,6 +187,14 @@ _DRIVE_DATA = (
     "DC machine data"
 """)
 
+# Modelica.Media.PartialSimpleMedium and PartialSimpleIdealGasMedium (ConstantPropertyLiquidWater,
+# SimpleAir, ...): rumoca cannot size a function's input by a constant of the medium package when
+# BaseProperties calls it (X[nX]: "function shape proof: dependent extent is not an exact Integer
+# expression"), which refuses every Modelica.Fluid model on these media (its tanks). Every call
+# passes nX fractions, so X[:] is the same function.
+_SIMPLE_MEDIUM_X = ('      input MassFraction X[nX] "Mass fractions";\n',
+                    '      input MassFraction X[:] "Mass fractions"; // mcl: X[nX] (rumoca)\n', 6)
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
@@ -196,6 +204,7 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Magnetic", "FluxTubes", "BaseClasses", "GenericHysteresisTellinen.mo")): _TELLINEN,
     ("Modelica", ("Electrical", "Machines", "Examples", "ControlledDCDrives", "Utilities",
                   "PartialControlledDCPM.mo")): [_DRIVE_DATA],
+    ("Modelica", ("Media", "package.mo")): [_SIMPLE_MEDIUM_X],
 }
 
 
