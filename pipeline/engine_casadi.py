@@ -47,7 +47,7 @@ DETECTION_POINTS = 400    # at least this many points over the horizon where rel
 MAX_EVENT_ITERATIONS = 100
 MAX_EVENTS = 100000
 EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
-ZOOM_TOL = 1e-5
+ZOOM_TOL = 1e-5           # a crossing on the states located to this fraction of the interval it was seen in
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
 FOLLOW_POINTS = 32        # points of a call where the loops' solutions are checked to follow on
@@ -542,10 +542,10 @@ class _Plan:
         traj = np.full((len(xa), len(t_int)), np.nan)
         hybrid = self.hybrid
         try:
-            if hybrid is not None:
-                hybrid.reset()
-                xa = hybrid.initial(self, xa, p, t_int[0])
-            try:      # (with the initial event's modes: a tank's ports open or closed)
+            try:      # (the step's cost with the initial event's modes: a tank's ports open or closed)
+                if hybrid is not None:
+                    hybrid.reset()
+                    xa = hybrid.initial(self, xa, p, t_int[0])
                 budget.rate, budget.guessed = self.step_cost(xa, u0, p, t_out[0]), True
             except RuntimeError as exc:       # (a linear block that sparse QR finds singular)
                 return fail(f"model evaluation failed at the start: {_last_line(exc)}")
@@ -717,7 +717,9 @@ class _Hybrid:
             # the relations held all false may leave the model no solution (a tank's ports
             # closed, its junction singular); their values before the first event are a guess
             # the iteration corrects: all true then
-            held = [i for i, n in enumerate(self.ode.x_names) if n.startswith("$rel")]
+            from .compile.rumoca_frontend import HELD_PREFIX
+
+            held = [i for i, n in enumerate(self.ode.x_names) if n.startswith(HELD_PREFIX)]
             if not held or np.all(x[held] == 1):
                 raise
             x = x.copy()

@@ -192,6 +192,8 @@ def virtual_name(path: Path, digest: str) -> str:
 
 
 ENTRY = "MclEntry_"
+#: the names of the relations held between events, among the discrete states
+HELD_PREFIX = "$rel"
 
 
 class FrontEndCrash(Exception):
@@ -1262,7 +1264,7 @@ class _Translator:
         has it: a symbol, its value set at events."""
         self.relations.append(lhs - rhs)
         self.relation_ops.append(op)
-        held = ca.SX.sym(f"$rel{len(self.relations) - 1}")
+        held = ca.SX.sym(f"{HELD_PREFIX}{len(self.relations) - 1}")
         self.held.append((len(self.relations) - 1, held, value, *_hysteresis(op, lhs, rhs, held)))
         return held
 
