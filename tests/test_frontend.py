@@ -118,6 +118,61 @@ def test_fixed_start_values_and_parameter_bound_starts(tmp_path):
         assert np.allclose(res.output("y"), x0 * np.exp(-t), atol=1e-8)
 
 
+def test_an_outer_setting_the_user_modified_picks_the_initial_equations(tmp_path):
+    """A cell reads whether it starts fixed from an outer settings component (as Modelica.Fluid's
+    vessels read system.energyDynamics); the plant's inner sets it. rumoca picks the branch
+    with the settings class's default (false: no initial equation, x from 0), also where a
+    component reads the outer's parameter itself, so mcl restates the binding as a modifier:
+    x starts at 2 and decays as 2 e^-t; with the default, from 0."""
+    source = """package P
+  model Settings
+    parameter Boolean fixedStart = false;
+  end Settings;
+  model Cell
+    outer Settings settings;
+    parameter Boolean fixedStart = settings.fixedStart;
+    Real x(start = 0);
+  initial equation
+    if fixedStart then
+      x = 2;
+    end if;
+  equation
+    der(x) = -x;
+  end Cell;
+  model Direct "reads the outer's parameter itself"
+    outer Settings settings;
+    Real x(start = 0);
+  initial equation
+    if settings.fixedStart then
+      x = 2;
+    end if;
+  equation
+    der(x) = -x;
+  end Direct;
+  model Plant
+    inner Settings settings(fixedStart = true);
+    Cell cell;
+    Direct direct;
+    output Real y = cell.x;
+    output Real y2 = direct.x;
+  end Plant;
+  model Default
+    inner Settings settings;
+    Cell cell;
+    Direct direct;
+    output Real y = cell.x;
+    output Real y2 = direct.x;
+  end Default;
+end P;
+"""
+    (tmp_path / "P.mo").write_text(source)
+    t = np.linspace(0, 1, 11)
+    for name, x0 in (("P.Plant", 2.0), ("P.Default", 0.0)):
+        res = simulate(compile_model([tmp_path / "P.mo"], name), series(t), options={"rtol": 1e-10, "atol": 1e-12})
+        for y in ("y", "y2"):
+            assert np.allclose(res.output(y), x0 * np.exp(-t), atol=1e-8), (name, y)
+
+
 def test_missing_source_path(tmp_path):
     with pytest.raises(ModelicaError, match="no such"):
         compile_model([tmp_path / "nope.mo"], "P.M")

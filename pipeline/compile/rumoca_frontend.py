@@ -372,11 +372,15 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
             if not subset:
                 raise
             compiled, subset = _compile(prep, prep.whole, model, libs), False   # a file the subset missed
+        flat = compiled.to_dict("flat")
+        again = _outer_restated(prep, prep.whole if not subset else prep.roots, model, flat)
+        if again is not None:
+            compiled, flat = again, again.to_dict("flat")
         ir = compiled.to_dict("dae")
         ir["library_subset"] = subset
         # the flat stage names each equation's origin (a component's own equation, a flow
         # sum, a connection) and each variable's flow prefix: the model's component structure
-        ir["flat"] = compiled.to_dict("flat")
+        ir["flat"] = flat
         return ir
 
     try:
@@ -419,6 +423,65 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
             raise exc from None
 
 
+def _outer_bound(flat: dict) -> dict[str, str]:
+    """{parameter: the inner's parameter it is bound to} for the parameters that pick branches of
+    the model (if-equations on them: which equations it has) and that a class binds to an outer
+    component's parameter the user modified (``energyDynamics = system.energyDynamics``, with
+    ``inner System system(energyDynamics = FixedInitial)``), or that read such a parameter
+    through the outer itself (``if world.driveTrainMechanics3D``). rumoca 0.10.2 picks those
+    branches with the outer class's defaults (DynamicFreeInitial: a tank's initial equations
+    are dropped without a word); the same binding given as a modifier from the model is read
+    right, also on the outer's instance in the component (``cell(settings(fixedStart = ...))``)."""
+    variables = flat.get("variables") or {}
+    finals = flat.get("variable_final_flags") or {}
+    picked = {ref[0] for sel in flat.get("parameter_branch_selections") or [] for ref in sel.get("references", [])}
+    modified = lambda n: bool((variables.get(n) or {}).get("binding_from_modification"))   # noqa: E731
+    bound = {}
+    for name in sorted(picked):
+        if name not in variables and "[" not in name:
+            # read through the outer itself (cell.settings.fixedStart): rumoca reads it from an
+            # instance of the outer's class; a modifier of that instance is read
+            parts = name.split(".")
+            inner = next((".".join(parts[k:]) for k in range(1, len(parts) - 1) if modified(".".join(parts[k:]))), None)
+            if inner is not None:
+                bound[name] = inner
+            continue
+        for _ in range(8):          # along a chain of bindings (a pipe's flow model's, from the pipe's)
+            v = variables.get(name)
+            ref = ((v or {}).get("binding") or {}).get("VarRef")
+            if not ref or ref.get("subscripts") or "[" in name:
+                break
+            target = ref["name"]["name"]
+            owner = name.rpartition(".")[0]
+            if (not v.get("binding_from_modification") and owner and not target.startswith(owner + ".")
+                    and modified(target)
+                    and not v.get("is_protected") and not finals.get(name)):
+                bound[name] = target
+                break
+            name = target
+    return bound
+
+
+def _outer_restated(prep: Prepared, roots: list[str], model: str, flat: dict):
+    """rumoca's compiled ``model`` with :func:`_outer_bound`'s bindings restated as modifiers of
+    an entry model extending it, or None where there are none or rumoca refuses them."""
+    import rumoca
+
+    bound = _outer_bound(flat)
+    if not bound:
+        return None
+    front = _front(roots)
+    source = f"model {ENTRY}\n  extends {model}({_modifiers(bound)});\nend {ENTRY};\n"
+    try:
+        return _guarded(front, lambda: front.session.loads(source, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo"))
+    except rumoca.RumocaError as exc:
+        import logging
+
+        logging.getLogger(__name__).warning("%s: the branches chosen by %s may follow the outer class's "
+                                            "defaults (rumoca: %s)", model, ", ".join(bound), _first_line(exc))
+        return None
+
+
 def _guarded(front: _Front, compile_):
     """``compile_()``; a Rust panic in rumoca (pyo3's PanicException, a BaseException) is a
     :class:`FrontEndCrash`, and the session it happened in is reset."""
@@ -428,7 +491,12 @@ def _guarded(front: _Front, compile_):
         if type(exc).__name__ != "PanicException":
             raise
         front.reset()
-        raise FrontEndCrash(str(exc).strip().splitlines()[0] if str(exc).strip() else "panic") from None
+        raise FrontEndCrash(_first_line(exc, "panic")) from None
+
+
+def _first_line(exc, empty: str = "") -> str:
+    lines = str(exc).strip().splitlines()
+    return lines[0] if lines else empty
 
 
 def _in_package(model: str, name: str) -> str:
