@@ -470,10 +470,8 @@ def _outer_restated(prep: Prepared, roots: list[str], model: str, flat: dict):
     bound = _outer_bound(flat)
     if not bound:
         return None
-    front = _front(roots)
-    source = f"model {ENTRY}\n  extends {model}({_modifiers(bound)});\nend {ENTRY};\n"
     try:
-        return _guarded(front, lambda: front.session.loads(source, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo"))
+        return _modified(_front(roots), model, bound)
     except rumoca.RumocaError as exc:
         import logging
 
@@ -529,9 +527,8 @@ def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], e
         if value is None:
             return None
         values[name] = value
-        source = f"model {ENTRY}\n  extends {model}({_modifiers(values)});\nend {ENTRY};\n"
         try:
-            compiled = _guarded(front, lambda: front.session.loads(source, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo"))
+            compiled = _modified(front, model, values)
         except rumoca.RumocaError as again:
             exc = again
             continue
@@ -539,6 +536,12 @@ def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], e
             logging.getLogger(__name__).warning("parameter %s has no value: its start value %s is used", n, v)
         return compiled
     return None
+
+
+def _modified(front: _Front, model: str, values: dict[str, str]):
+    """rumoca's compiled :data:`ENTRY`, ``model`` extended with ``values`` as its modifiers."""
+    source = f"model {ENTRY}\n  extends {model}({_modifiers(values)});\nend {ENTRY};\n"
+    return _guarded(front, lambda: front.session.loads(source, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo"))
 
 
 def _modifiers(values: dict[str, str]) -> str:
