@@ -8,6 +8,7 @@ becomes a :class:`TaskFailed` result and the batch goes on. ``fn(context, item)`
 """
 from __future__ import annotations
 
+import faulthandler
 import multiprocessing as mp
 import os
 import sys
@@ -186,6 +187,7 @@ def _serve(fn, context, tasks, results) -> None:
     """A worker's life: each item received, its result (or TaskFailed) sent back, until the
     parent kills it (:meth:`_Worker.stop`) or its task pipe is closed."""
     die_with_parent()
+    faulthandler.disable()      # (a crash is the parent's to report, as a failed task, not a dump)
     while True:
         try:
             item = tasks.recv()

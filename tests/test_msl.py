@@ -319,6 +319,46 @@ def test_a_mechanism_whose_frames_start_at_zero_is_initialised_down_its_chains(m
     assert np.interp(0.75, t, phi) == pytest.approx(-0.7, abs=2e-3)
 
 
+SEALED = """
+model Sealed "air heated in a closed volume that has no ports"
+  import Modelica.Fluid.Vessels.ClosedVolume;
+  replaceable package Medium = Modelica.Media.Air.SimpleAir;
+  parameter Modelica.Units.SI.HeatFlowRate Q = 100;
+  ClosedVolume v(redeclare package Medium = Medium, V = 1, nPorts = 0, use_portsData = false,
+    use_HeatTransfer = true, p_start = 1e5, T_start = 300);
+  Modelica.Thermal.HeatTransfer.Sources.FixedHeatFlow heater(Q_flow = Q);
+  inner Modelica.Fluid.System system(energyDynamics = Modelica.Fluid.Types.Dynamics.FixedInitial);
+  output Real T = v.medium.T;
+  output Real p = v.medium.p;
+equation
+  connect(heater.port, v.heatPort);
+end Sealed;
+"""
+
+
+def test_a_sealed_vessel_heats_as_an_ideal_gas_and_its_medium_limit_is_reported(msl_path, tmp_path):
+    """A vessel with nPorts = 0: its port arrays (and their parameters) are empty. Heated, the
+    air's temperature rises by Q t / (m cv) and its pressure with it (ideal gas at constant
+    volume); past SimpleAir's 400 K, the medium's assert fails the run with its own words."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    (tmp_path / "Sealed.mo").write_text(SEALED)
+    model = mcl.compile_model([tmp_path / "Sealed.mo"], "Sealed")
+    t = np.linspace(0.0, 100.0, 11)
+    inputs = TimeSeries(t, np.zeros((len(t), 0)), [])
+    res = mcl.simulate(model, inputs, t_out=t)
+    assert res.ok, res.reason
+    R, cp = 287.0512249529787, 1005.45               # SimpleAir's constants
+    m = 1e5 / (R * 300.0)
+    expected = 300.0 + 100.0 * t / (m * (cp - R))
+    assert np.max(np.abs(res.output("T") - expected)) < 1e-4 * 12.0
+    assert np.max(np.abs(res.output("p") / 1e5 - expected / 300.0)) < 1e-6
+    hot = mcl.simulate(model, inputs, params={"Q": 1000.0}, t_out=t)
+    assert not hot.ok
+    assert "Temperature T" in hot.reason and "SimpleAir" in hot.reason, hot.reason
+
+
 VESSEL = """
 model Vessel "a heated gas vessel: the balances integrate mass and energy; pressure and
   temperature, declared preferred, carry the start values"

@@ -915,12 +915,13 @@ class _Translator:
             return None
         return ca.SX(float((a == b) == (body["operator"] == "equal")))
 
-    def string_value(self, k: int, depth: int = 0) -> str | None:
+    def string_value(self, k: int, depth: int = 0, hole: str | None = None) -> str | None:
         """Node ``k``'s value where it is a constant string: a literal, a String variable bound
-        to one, substring() of one, or two joined with +; else None."""
+        to one, substring() of one, or two joined with +; else None. With ``hole``, a join's
+        operand that is not constant (String(T) in an assert's message) is written as it."""
         node = self.nodes[k]
         if depth > 16 or not isinstance(node, dict):
-            return None
+            return hole
         kind = next(iter(node))
         body = node[kind]
         if kind == "literal":
@@ -930,11 +931,11 @@ class _Translator:
             variables = self.st["variables"]
             if not isinstance(i, int) or i >= len(variables) or \
                     self.st["value_types"][variables[i]["value_type"]].get("scalar") != "string":
-                return None
+                return hole
             binding = variables[i]["attributes"].get("binding")
-            return None if binding is None else self.string_value(binding, depth + 1)
+            return hole if binding is None else self.string_value(binding, depth + 1, hole)
         if kind == "binary" and body.get("operator") == "add":
-            a, b = self.string_value(body["lhs"], depth + 1), self.string_value(body["rhs"], depth + 1)
+            a, b = (self.string_value(body[side], depth + 1, hole) for side in ("lhs", "rhs"))
             return None if a is None or b is None else a + b
         if kind == "call" and isinstance(body.get("function"), int):
             name = self.functions[body["function"]].get("name", "")
@@ -944,7 +945,7 @@ class _Translator:
                 ends = [self.sx(a) for a in args[1:]]
                 if text is not None and all(e.is_constant() and e.numel() == 1 for e in ends):
                     return text[int(float(ends[0])) - 1:int(float(ends[1]))]
-        return None
+        return hole
 
     def live_branches(self, k: int, done: dict) -> list:
         """(condition, branch) of conditional ``k`` that a constant condition does not rule
@@ -1737,6 +1738,8 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             tr.relations[k] = live(cross)
 
     def value_of(i, key_order=("binding", "start")):
+        if size[i] == 0:        # (an empty array's binding, fill(x, 0) or a record's default, has no element)
+            return ca.SX(0, 1)
         node = next((attrs[i][k] for k in key_order if attrs[i][k] is not None), None)
         e = tr.sx(node) if node is not None else ca.SX.zeros(size[i], 1)
         e = live(flat(e))
@@ -2228,9 +2231,9 @@ class _Events:
 
     def _message(self, node, action) -> str:
         # (a literal, or a String parameter: TerminateSimulation's terminationText)
-        text = self.tr.string_value(node) if node is not None else None
+        text = self.tr.string_value(node, hole="...") if node is not None else None
         where = self.where(action.get("provenance"))
-        text = text or "assert"
+        text = " ".join(text.split()) if text and text != "..." else "assert"
         return f"{text} ({where})" if where else text
 
 

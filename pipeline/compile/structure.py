@@ -622,11 +622,10 @@ def _met(name: str, resid: ca.Function):
     1e11 J, is met to 1e-5 at best, never to an absolute 1e-9). Newton's method still iterates
     on the residual itself: scaled, it stops early on a diode's exp() terms, and the run's
     right-hand side turns noisy."""
-    try:
-        zs, ps = ca.SX.sym("z", resid.size1_in(0)), ca.SX.sym("p", resid.size1_in(1))
-        r = resid(zs, ps)
-    except RuntimeError:          # the residual holds solves of its own (MX): absolute only
+    sx = _sx_residual(resid)
+    if sx is None:                # (solves of its own, or too large in SX): absolute only
         return lambda z, par, tol: _within(resid(z, par), tol)
+    zs, ps, r = sx
     size = ca.vertcat(*[1 + ROUNDING * sum(ca.fabs(a) for a in _terms(e)) for e in ca.vertsplit(r)])
     scaled = ca.Function(f"{name}_scaled", [zs, ps], [r, r / size])
 
@@ -634,6 +633,20 @@ def _met(name: str, resid: ca.Function):
         r, rs = scaled(z, par)
         return ca.logic_or(_within(r, tol), _within(rs, tol))
     return met
+
+
+def _sx_residual(resid: ca.Function):
+    """(z, p, resid(z, p)) on SX symbols, or None where ``resid`` holds solves (MX only) or its
+    calls would expand past EXPAND_TRY_MAX instructions: each call of a function is inlined whole,
+    and a water property function called per use (IF97's, in a closed steam volume's initial
+    system) grows to tens of GB."""
+    if expanded_size(resid) > EXPAND_TRY_MAX:
+        return None
+    try:
+        zs, ps = ca.SX.sym("z", resid.size1_in(0)), ca.SX.sym("p", resid.size1_in(1))
+        return zs, ps, resid(zs, ps)
+    except RuntimeError:
+        return None
 
 
 def _terms(e: ca.SX) -> list:
@@ -660,10 +673,11 @@ def _damped_step(name: str, resid: ca.Function) -> tuple[ca.Function, ca.Functio
     """One step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
     decreases |r|^2 enough (Armijo), the shortest when none does; and the Jacobian it uses."""
     z, par = ca.MX.sym("z", resid.size1_in(0)), ca.MX.sym("par", resid.size1_in(1))
-    try:
-        zs, ps = ca.SX.sym("z", z.numel()), ca.SX.sym("p", par.numel())
-        jac = ca.Function(f"{name}_jac", [zs, ps], [ca.jacobian(resid(zs, ps), zs)])
-    except RuntimeError:       # resid holds solves of inner loops (an initial system): in MX
+    sx = _sx_residual(resid)
+    if sx is not None:
+        zs, ps, rs = sx
+        jac = ca.Function(f"{name}_jac", [zs, ps], [ca.jacobian(rs, zs)])
+    else:                      # (solves of inner loops, an initial system, or too large): in MX
         jac = ca.Function(f"{name}_jac", [z, par], [ca.jacobian(resid(z, par), z)])
     r = resid(z, par)
     dz = -ca.solve(jac(z, par), r, "qr")
