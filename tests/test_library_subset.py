@@ -69,3 +69,18 @@ def test_an_msl_model_written_with_imports_reads_a_small_part_of_the_msl(tmp_pat
     assert model.info["library_subset"] is True
     assert model.info["files_read"] < 400            # of the MSL's 2500 files
     assert len(model.ode.x_names) == 1
+
+
+def test_the_msl_found_on_modelicapath_is_read_in_part_too(monkeypatch):
+    """As most users point at the MSL: through MODELICAPATH, the model named alone. The subset
+    is made in rumoca's thread, which runs without MODELICAPATH: read there, it held no
+    library, and every such compile fell back to the whole MSL (twice the time)."""
+    msl = msl_path()
+    if msl is None:
+        pytest.skip("the MSL is not at ../shared/msl or on MODELICAPATH")
+    monkeypatch.setenv("MCL_NO_COMPILE_CACHE", "1")
+    monkeypatch.setenv("MODELICAPATH", str(msl))
+    model = compile_model([], "Modelica.Electrical.Analog.Examples.ChuaCircuit")
+    assert model.info["library_subset"] is True
+    assert model.info["files_read"] < 400
+    assert {"L.i", "C1.v", "C2.v"} <= set(model.ode.x_names)

@@ -319,6 +319,9 @@ class Prepared:
     libraries: tuple = ()
     shadowed: set = field(default_factory=set)
     used: list | None = None
+    #: the library path when prepared: ``roots`` is made in the rumoca thread, which runs
+    #: without MODELICAPATH (read there, the MSL on it was missing and every subset empty)
+    search: tuple = ()
 
     @property
     def virtual(self) -> dict[str, str]:
@@ -329,7 +332,7 @@ class Prepared:
     def roots(self) -> list[str]:
         if self.texts is None:
             return self.whole
-        return library_roots(self.libraries, shadowed=self.shadowed, used=self.used, texts=self.texts)
+        return library_roots(self.search, shadowed=self.shadowed, used=self.used, texts=self.texts)
 
 
 def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
@@ -346,7 +349,7 @@ def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
         used = needed(texts, defined, model, library_path(libraries))
         texts.append(model or "")
     return Prepared(docs, files, library_roots(libraries, shadowed=defined, used=used), texts,
-                    tuple(libraries), defined, used)
+                    tuple(libraries), defined, used, tuple(library_path(libraries)))
 
 
 def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -> tuple[dict, Located]:
@@ -945,6 +948,14 @@ class _Translator:
                 ends = [self.sx(a) for a in args[1:]]
                 if text is not None and all(e.is_constant() and e.numel() == 1 for e in ends):
                     return text[int(float(ends[0])) - 1:int(float(ends[1]))]
+        if kind == "string_conversion" and hole is not None:   # String(x) of a constant: its value
+            try:
+                v = self.sx(body["value"])
+            except Exception:  # noqa: BLE001 - a message is written with what can be read
+                return hole
+            if v.is_constant() and v.numel() == 1:
+                x = float(v)
+                return str(int(x)) if x.is_integer() and abs(x) < 1e15 else f"{x:.6g}"
         return hole
 
     def live_branches(self, k: int, done: dict) -> list:
