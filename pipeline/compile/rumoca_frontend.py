@@ -316,12 +316,11 @@ class Prepared:
     files: list[Path]
     whole: list[str]        # the whole libraries: a compile failing in ``roots`` is retried there
     texts: list[str] | None = None       # the sources and the model's name (None: no subset)
-    libraries: tuple = ()
-    shadowed: set = field(default_factory=set)
-    used: list | None = None
     #: the library path when prepared: ``roots`` is made in the rumoca thread, which runs
     #: without MODELICAPATH (read there, the MSL on it was missing and every subset empty)
     search: tuple = ()
+    shadowed: set = field(default_factory=set)
+    used: list | None = None
 
     @property
     def virtual(self) -> dict[str, str]:
@@ -343,23 +342,24 @@ def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
 
     docs, files = documents(paths)
     defined = {n for _, names in docs.values() for n in names}
+    search = tuple(library_path(libraries))
     used, texts = None, None
     if files or model:
         texts = [f.read_text(encoding="utf-8", errors="replace") for f in files]
-        used = needed(texts, defined, model, library_path(libraries))
+        used = needed(texts, defined, model, search)
         texts.append(model or "")
-    return Prepared(docs, files, library_roots(libraries, shadowed=defined, used=used), texts,
-                    tuple(libraries), defined, used, tuple(library_path(libraries)))
+    return Prepared(docs, files, library_roots(search, shadowed=defined, used=used), texts,
+                    search, defined, used)
 
 
 def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -> tuple[dict, Located]:
     """rumoca's DAE-stage IR of ``model`` and the text of the files it read."""
     import rumoca
 
-    from .library import available, library_path
+    from .library import available
 
     prep = prepared or prepare(paths, libraries, model)
-    libs = available(library_path(prep.libraries))     # here: the rumoca thread runs without MODELICAPATH
+    libs = available(prep.search)     # (the rumoca thread runs without MODELICAPATH)
     top = model.split(".")[0]
     if not any(top in names for _, names in prep.docs.values()):
         if top not in libs:

@@ -531,7 +531,8 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     quick = ca.rootfinder(f"{name}_newton", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
     z0 = ca.MX(ca.DM(guess)) if isinstance(guess, np.ndarray) else guess
     z1 = quick(z0, par)
-    met = _met(name, resid)
+    sx = _sx_residual(resid)      # (expanded once, for the tolerance and the Jacobian)
+    met = _met(name, resid, sx)
     ok = met(z1, par, LOOP_TOL)
     if start is not None:
         # from the last solution; where Newton's method fails there, from the start values,
@@ -539,7 +540,7 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         # behind by the flux, sends Newton's method away where 0 does not)
         z1 = ca.if_else(ok, z1, quick(ca.DM(start), par), True)
         ok = met(z1, par, LOOP_TOL)
-    step, jac = _damped_step(name, resid)
+    step, jac = _damped_step(name, resid, sx)
     # the initial system's fallback starts a hair off the start values: a start at a
     # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
     # A run's loops move only off a start where the law has no finite derivative (|B|^n with
@@ -615,14 +616,13 @@ def _bracketed(resid: ca.Function, z0: ca.MX, par: ca.MX) -> ca.MX:
     return ca.if_else(found, 0.5 * (lo + hi), np.nan)
 
 
-def _met(name: str, resid: ca.Function):
+def _met(name: str, resid: ca.Function, sx):
     """(z, par, tol) -> whether the loop's residual is within ``tol``, or, row by row, within ``tol``
     times 1 + ROUNDING x (the sum of the row's terms' magnitudes): a thousand rounding errors
     of its largest terms where that is more (a drum's energy balance, U = m h - p V with U near
     1e11 J, is met to 1e-5 at best, never to an absolute 1e-9). Newton's method still iterates
     on the residual itself: scaled, it stops early on a diode's exp() terms, and the run's
-    right-hand side turns noisy."""
-    sx = _sx_residual(resid)
+    right-hand side turns noisy. ``sx``: :func:`_sx_residual`'s."""
     if sx is None:                # (solves of its own, or too large in SX): absolute only
         return lambda z, par, tol: _within(resid(z, par), tol)
     zs, ps, r = sx
@@ -669,11 +669,11 @@ def _within(r, tol: float):
     return ca.logic_and(ca.mmax(ca.fabs(r)) <= tol, ca.sumsqr(r) <= r.numel() * tol ** 2)
 
 
-def _damped_step(name: str, resid: ca.Function) -> tuple[ca.Function, ca.Function]:
+def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Function]:
     """One step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
-    decreases |r|^2 enough (Armijo), the shortest when none does; and the Jacobian it uses."""
+    decreases |r|^2 enough (Armijo), the shortest when none does; and the Jacobian it uses
+    (in SX where ``sx``, :func:`_sx_residual`'s, has the residual)."""
     z, par = ca.MX.sym("z", resid.size1_in(0)), ca.MX.sym("par", resid.size1_in(1))
-    sx = _sx_residual(resid)
     if sx is not None:
         zs, ps, rs = sx
         jac = ca.Function(f"{name}_jac", [zs, ps], [ca.jacobian(rs, zs)])
