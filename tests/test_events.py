@@ -674,6 +674,39 @@ end SampledPI;
     assert halfway[-1] == pytest.approx(1.95)
 
 
+def test_initial_equations_between_discrete_values_set_their_starts(tmp_path):
+    """A discrete value started by an initial equation that reads another (y = 2*x, as a noise
+    block's r = f(pre(state))): its start was left at 0. Sampled at 1 and 2 only, the
+    integral of x + y + n is exact: 18 per second, then 26, then 35."""
+    (tmp_path / "Counter.mo").write_text("""
+model Counter
+  parameter Real a = 5;
+  discrete Real x;
+  discrete Real y;
+  Integer n;
+  Real z(start = 0, fixed = true);
+  output Real total = z;
+initial equation
+  x = a;
+  y = 2*x;
+  n = 3;
+equation
+  when sample(1, 1) then
+    x = pre(x) + 1;
+    y = pre(y) + x;
+    n = pre(n) + 1;
+  end when;
+  der(z) = x + y + n;
+end Counter;
+""")
+    model = compile_model([tmp_path / "Counter.mo"], "Counter")
+    t = np.linspace(0.0, 2.5, 11)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    exact = np.where(t <= 1, 18 * t, np.where(t <= 2, 18 + 26 * (t - 1), 44 + 35 * (t - 2)))
+    np.testing.assert_allclose(res.output("total"), exact, atol=1e-6)
+
+
 @needs_msl()
 def test_pre_of_a_continuous_output_is_its_value_before_the_event(tmp_path, monkeypatch):
     """The MSL's TriggeredTrapezoid reads pre(y) of its continuous output to start a ramp from

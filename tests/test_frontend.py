@@ -245,6 +245,23 @@ def test_initial_equations_are_solved_or_the_start_fails(tmp_path, start, equati
         np.testing.assert_allclose(res.output("y"), x0 * np.exp(-t), rtol=1e-4)
 
 
+def test_integer_and_boolean_parameters_computed_at_initialisation_take_their_values(tmp_path):
+    """parameter Integer n(fixed = false), Boolean b(fixed = false) set by initial equations
+    (a noise block's seed, a MultiBody loop's positiveBranch): rumoca hands these over apart
+    from the other initial equations; they were read as 0 and false."""
+    f = tmp_path / "S.mo"
+    f.write_text("model S\n  function positive\n    input Real a;\n    output Boolean b;\n  algorithm\n"
+                 "    b := a > 0;\n  end positive;\n  parameter Real a0 = 2;\n  parameter Integer n(fixed = false);\n"
+                 "  parameter Integer m(fixed = false);\n  parameter Boolean b(fixed = false);\n"
+                 "  Real x(start = 1, fixed = true);\n  output Real y = x;\ninitial equation\n  n = 5;\n"
+                 "  m = if a0 > 1 then 4 else 3;\n  b = positive(a0);\nequation\n"
+                 "  der(x) = -7*x + (if b then n + m else -(n + m));\nend S;\n")
+    t = np.linspace(0.0, 1.0, 11)
+    res = simulate(compile_model([f], "S"), series(t), t_out=t)
+    assert res.ok
+    np.testing.assert_allclose(res.output("y"), 9 / 7 + (1 - 9 / 7) * np.exp(-7 * t), rtol=1e-5)
+
+
 RECORD_READ = """
 model Rec "a record-valued function read by another, as a medium's property functions are"
   record R

@@ -9,6 +9,7 @@ import pytest
 from mcl.cli import main
 from helpers import FAULTS
 from test_discover import rc_data
+from test_xorshift import xorshift64star, xorshift128plus
 from mcl.compile.fmu.export import validate_fmu
 
 MSL = Path(__file__).resolve().parents[2] / "shared" / "msl"
@@ -223,7 +224,8 @@ def test_a_regularised_sign_force_runs_backwards(msl_path, tmp_path):
     (tmp_path / "Conveyor.mo").write_text(CONVEYOR)
     model = mcl.compile_model([tmp_path / "Conveyor.mo"], "Conveyor")
     t = np.linspace(0.0, 4.0, 401)
-    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    span = np.array([0.0, 10.0])
+    res = mcl.simulate(model, TimeSeries(span, np.zeros((2, 0)), []), t_out=t)
     assert res.ok, res.reason
     ref = solve_ivp(lambda _t, v: (40 * np.sin(np.pi * _t) - 5 * np.tanh(v / 2e-4)) / 2, (0, 4), [0.0],
                     method="Radau", t_eval=t, rtol=1e-8, atol=1e-10)
@@ -263,7 +265,8 @@ def test_a_loop_without_a_solution_at_a_trial_step_shortens_the_step(msl_path):
     model = mcl.compile_model([], name)
     ref = _rumoca_states(name, 1.0, model.ode.x_names)
     t = np.unique(np.round(ref[0], 12)) if ref else np.linspace(0.0, 1.0, 2001)
-    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    span = np.array([0.0, 10.0])
+    res = mcl.simulate(model, TimeSeries(span, np.zeros((2, 0)), []), t_out=t)
     assert res.ok, res.reason
     if ref is None:
         return
@@ -286,7 +289,8 @@ def test_an_equation_that_looks_dependent_at_the_start_values_is_still_met(msl_p
 
     model = mcl.compile_model([], "Modelica.Electrical.Machines.Examples.SynchronousMachines.SMPM_CurrentSource")
     t = np.linspace(0.0, 2.0, 401)
-    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    span = np.array([0.0, 10.0])
+    res = mcl.simulate(model, TimeSeries(span, np.zeros((2, 0)), []), t_out=t)
     assert res.ok, res.reason          # (the invariants are checked at every output point)
     drift = np.array(model.ode.drift(res.states[0], np.zeros(0), model.ode.p_values, 0.0)).item()
     assert drift < 1e-6
@@ -312,7 +316,8 @@ def test_a_mechanism_whose_frames_start_at_zero_is_initialised_down_its_chains(m
     assert len(r0) == 3 and min(map(abs, r0)) > 1e-3
     # driven by phi = 0.7 sin(2 pi t) through a 50 Hz filter: the crank follows it
     t = np.linspace(0.0, 1.0, 201)
-    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    span = np.array([0.0, 10.0])
+    res = mcl.simulate(model, TimeSeries(span, np.zeros((2, 0)), []), t_out=t)
     assert res.ok, res.reason
     phi = res.states[:, ode.x_names.index("rev.phi")]
     assert np.interp(0.25, t, phi) == pytest.approx(0.7, abs=2e-3)
@@ -403,7 +408,8 @@ def test_a_vessel_starts_from_its_preferred_pressure_and_temperature(msl_path, t
     (tmp_path / "Vessel.mo").write_text(VESSEL)
     model = mcl.compile_model([tmp_path / "Vessel.mo"], "Vessel")
     t = np.linspace(0.0, 200.0, 201)
-    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    span = np.array([0.0, 10.0])
+    res = mcl.simulate(model, TimeSeries(span, np.zeros((2, 0)), []), t_out=t)
     assert res.ok, res.reason
     V, b, cv, R, k, p_amb, Q = 0.5, 1e-12, 718.0, 287.0, 1e-7, 1e5, 500.0
 
@@ -442,3 +448,69 @@ def test_a_robot_axis_starts_at_rest_and_ends_where_it_terminates(msl_path):
         assert "End condition reached" in res.terminated and 1.45 < res.time[-1] < 1.55 < 1.6
         phi = res.states[:, model.ode.x_names.index("load.phi")]
         assert abs(phi[0]) < 1e-6 and abs(phi[-1] - np.radians(120)) < 2e-3
+
+
+NOISY = """
+model NoisySensor "a first-order lag read through a sensor with sampled noise"
+  import Modelica.Blocks;
+  inner Blocks.Noise.GlobalSeed globalSeed(fixedSeed = 4711);
+  Blocks.Sources.Constant level(k = 2);
+  Blocks.Continuous.FirstOrder lag(T = 0.5, initType = Blocks.Types.Init.InitialState, y_start = 0);
+  Blocks.Noise.NormalNoise noise(samplePeriod = 0.01, mu = 0, sigma = 0.1);
+  Blocks.Noise.UniformNoise drift(samplePeriod = 0.05, y_min = -1, y_max = 3,
+    useAutomaticLocalSeed = false, fixedLocalSeed = 10);
+  Blocks.Math.Add sensor;
+  Blocks.Interfaces.RealOutput y "the sensor's reading";
+  Blocks.Interfaces.RealOutput e "its noise";
+  Blocks.Interfaces.RealOutput d "the uniform noise";
+equation
+  connect(level.y, lag.u);
+  connect(lag.y, sensor.u1);
+  connect(noise.y, sensor.u2);
+  connect(sensor.y, y);
+  connect(noise.y, e);
+  connect(drift.y, d);
+end NoisySensor;
+"""
+
+def _initial_state_128(local_seed, global_seed):
+    """Xorshift128plus.initialState: ten xorshift64* steps from the seeds, then one more for
+    the second word (Modelica.Math.Random, written from its documentation)."""
+    first = [local_seed, global_seed] if local_seed or global_seed else [126247697, 0]
+    for _ in range(10):
+        _, first = xorshift64star(first)
+    _, second = xorshift64star(first)
+    return first + second
+
+
+def test_noise_blocks_draw_the_msl_generators_numbers_in_process_and_in_the_fmu(msl_path, tmp_path):
+    """The MSL's noise blocks (xorshift128+, seeded by xorshift64*: their C code as expressions):
+    a uniform noise with a fixed local seed draws exactly the numbers of the generators written
+    here from their definitions; a normal noise has its mean and deviation over 1000 samples;
+    the noise is added to a lag's response, not mixed into it; the FMU draws the same."""
+    import mcl
+    from fmpy import simulate_fmu
+    from mcl.data import TimeSeries
+
+    (tmp_path / "NoisySensor.mo").write_text(NOISY)
+    model = mcl.compile_model([tmp_path / "NoisySensor.mo"], "NoisySensor")
+    t = np.round(np.arange(0.0, 10.0, 0.01), 6)        # at each draw of the normal noise, after it
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    state = _initial_state_128(10, 4711)
+    expected = []
+    for _ in range(20):                # a draw at t = 0 (the first tick), then every 0.05 s
+        r, state = xorshift128plus(state)
+        expected.append(-1 + 4 * r)
+    np.testing.assert_allclose(res.output("d")[::5][:20], expected, rtol=0, atol=1e-12)
+    e = res.output("e")
+    assert abs(e.mean()) < 3 * 0.1 / np.sqrt(len(e)) and abs(e.std() / 0.1 - 1) < 0.1
+    np.testing.assert_allclose(res.output("y") - e, 2 * (1 - np.exp(-t / 0.5)), atol=1e-3)
+
+    fmu = tmp_path / "noisy.fmu"
+    assert main(["compile", str(tmp_path / "NoisySensor.mo"), "--model", "NoisySensor", "-o", str(fmu)]) == 0
+    assert validate_fmu(fmu) == []
+    out = simulate_fmu(str(fmu), stop_time=1.0, output_interval=0.01, output=["d", "e"])
+    at = np.round(out["time"], 6)
+    between = np.abs((at * 100) % 5) > 0.5          # away from the uniform draws' instants
+    np.testing.assert_allclose(out["d"][between], np.interp(at[between], t, res.output("d")), atol=1e-12)

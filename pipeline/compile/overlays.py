@@ -195,9 +195,59 @@ _DRIVE_DATA = (
 _SIMPLE_MEDIUM_X = ('      input MassFraction X[nX] "Mass fractions";\n',
                     '      input MassFraction X[:] "Mass fractions"; // mcl: X[nX] (rumoca)\n', 6)
 
+# Modelica.Math.Random.Utilities.initializeImpureRandom stores a state for impureRandom by a call
+# statement of the impure setInternalState, but is not declared impure itself (an error of the
+# MSL 4.0.0: MLS 12.3); rumoca refuses both that and an impure function with a Modelica body,
+# and every noise block's GlobalSeed calls it. The store is left out: it is read only by
+# impureRandom, which mcl does not provide (a model calling it is refused).
+_IMPURE_INIT = ("      setInternalState(rngState, id);\n",
+                "      // mcl: setInternalState(rngState, id) left out (for impureRandom alone)\n")
+# Modelica.Math.Random.Utilities.initialStateWithXorshift64star: rumoca cannot prove the extent of
+# a slice at a loop index (state[i-2:i-1]: "dependent extent is not an exact Integer
+# expression"). The same two elements written one by one.
+_STATE_SLICES = [
+    ("""        (r,aux)      := Xorshift64star.random(state[i-2:i-1]);
+        state[i:i+1] := aux;
+""", """        (r,aux)      := Xorshift64star.random({state[i-2], state[i-1]});
+        state[i] := aux[1]; state[i+1] := aux[2]; // mcl: elements (rumoca)
+"""),
+    ("        (r,aux)       := Xorshift64star.random(state[nState-2:nState-1]);\n",
+     "        (r,aux)       := Xorshift64star.random({state[nState-2], state[nState-1]});\n"),
+    # the generators' initialState and initializeImpureRandom size the state they are about to
+    # assign by size() of it, which rumoca reads as a read of the unassigned output ("missing
+    # function value definition"): the size it is declared with
+    ("                size(state, 1));\n", "                nState); // mcl: size(state, 1)\n"),
+    ("                localSeed, globalSeed, size(state, 1));\n",
+     "                localSeed, globalSeed, nState); // mcl: size(state, 1)\n"),
+    ("      rngState := initialStateWithXorshift64star(localSeed, seed, size(rngState, 1));\n",
+     "      rngState := initialStateWithXorshift64star(localSeed, seed, 33); // mcl: size(rngState, 1)\n")]
+
+# Modelica.Blocks.Interfaces.PartialNoise (every noise block): rumoca refuses a call with two
+# outputs in a when-equation ("multi-output event calls"); the same when as a statement of an
+# algorithm. Its automatic local seed, automaticLocalSeed(path), is hashString(path) written
+# out: mcl evaluates the hash of a constant string (:mod:`.xorshift`), not a function taking one.
+_NOISE = [
+    ("""  equation
+    // Draw random number at sample times
+    when generateNoise and sample(startTime, samplePeriod) then
+      (r_raw, state) = generator.random(pre(state));
+    end when;
+
+""", """  algorithm // mcl: a when-statement (rumoca refuses a call with two outputs in a when-equation)
+    // Draw random number at sample times
+    when generateNoise and sample(startTime, samplePeriod) then
+      (r_raw, state) := generator.random(pre(state));
+    end when;
+  equation
+"""),
+    ("then automaticLocalSeed(getInstanceName()) else fixedLocalSeed;",
+     "then Modelica.Utilities.Strings.hashString(getInstanceName()) else fixedLocalSeed;")]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
+    ("Modelica", ("Math", "Random.mo")): [_IMPURE_INIT, *_STATE_SLICES],
+    ("Modelica", ("Blocks", "Interfaces.mo")): _NOISE,
     ("Modelica", ("Blocks", "Continuous.mo")): [_FIND_INTERVAL, *_BRENT, *_FILTER_BASE],
     ("Modelica", ("Mechanics", "Rotational", "Components", "LossyGear.mo")): _LOSSY_GEAR,
     ("Modelica", ("Mechanics", "Translational", "Components", "MassWithStopAndFriction.mo")): _FRICTION_WITH_STOP,

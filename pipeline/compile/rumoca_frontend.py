@@ -9,6 +9,7 @@ construct the IR holds that we do not translate is refused with its name and fil
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import itertools
 import os
@@ -19,7 +20,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import tables
+from . import tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, shaped
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import first_line
@@ -886,6 +887,8 @@ class _Translator:
             if state is False:
                 spans[k] = (len(self.fn_asserts), None)
                 compared = self.string_comparison(k)
+                if compared is None:
+                    compared = self.string_hash(k)
                 if compared is not None:
                     done[k] = compared
                     continue
@@ -917,6 +920,20 @@ class _Translator:
         if a is None or b is None:
             return None
         return ca.SX(float((a == b) == (body["operator"] == "equal")))
+
+    def string_hash(self, k: int) -> ca.SX | None:
+        """Modelica.Utilities.Strings.hashString of a constant string (a noise block's automatic
+        seed, from its instance's name), as its value; None for anything else."""
+        node = self.nodes[k]
+        body = node.get("call") if isinstance(node, dict) else None
+        if not body or not isinstance(body.get("function"), int):
+            return None
+        ext = self.functions[body["function"]].get("external") or {}
+        ops = self.call_operands(k)
+        if ext.get("symbol") != "ModelicaStrings_hashString" or len(ops) != 1:
+            return None
+        text = self.string_value(ops[0])
+        return None if text is None else ca.SX(xorshift.hash_string(text))
 
     def string_value(self, k: int, depth: int = 0, hole: str | None = None) -> str | None:
         """Node ``k``'s value where it is a constant string: a literal, a String variable bound
@@ -1371,6 +1388,8 @@ class _Translator:
             if ext.get("language") == "builtin":
                 return self.call_builtin(ext.get("symbol", f["name"]), actual)
             return self.call_table(ext["symbol"], actual)
+        if ext and ext.get("symbol") in xorshift.GENERATORS:
+            return self.call_generator(ext, body.get("output", 0), bound)
         if ext:
             self.refuse(f"external function {f['name']} ({ext.get('language', '?')} code)")
         compiled, symbolic = self.compiled_function(body["function"], args)
@@ -1389,6 +1408,17 @@ class _Translator:
         if output >= n_out or output in self._unassigned[compiled.name()]:
             self.refuse(f"function {f['name']} assigns no value to its output {output + 1}")
         return outs[output]
+
+    def call_generator(self, ext: dict, output: int, bound: dict):
+        """Output ``output`` of one of the MSL's random number generators (its C function as an
+        expression: :mod:`.xorshift`), whose C arguments are (state in, state out, number)."""
+        (state,) = [self.sx(a["input"], bound) for a in ext.get("arguments", []) if "input" in a]
+        outputs = [a["output"] for a in ext.get("arguments", []) if "output" in a]
+        try:
+            number, new = xorshift.generate(ext["symbol"], state)
+        except ValueError as exc:
+            self.refuse(str(exc))
+        return dict(zip(outputs, (new, number)))[output]
 
     def call_table(self, symbol: str, args):
         """A lookup in one of the MSL's tables (the C library's function, as an expression)."""
@@ -1717,6 +1747,15 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     residual = ca.vertcat(*[flat(e) for e in eqs]) if eqs else ca.SX(0, 1)
     check_balance(residual, x.numel(), z.numel(), model)
     init = [flat(_residual(op, tr, model)) for op in st["initialization_equation_operations"]]
+    # an Integer or Boolean parameter computed at initialisation (fixed = false): rumoca hands
+    # its initial equation over apart, as the value it is set to
+    for set_to in st.get("initial_parameter_values", []):
+        i = set_to["target"]
+        tr.span = (set_to.get("provenance") or {}).get("span")
+        if i not in init_params:
+            tr.refuse(f"an initial equation setting parameter {variables[i]['name']}, which has a value")
+        value = flat(tr.sx(set_to["value"]))
+        init.append(flat(slot[i]) - (value if value.numel() == size[i] else ca.repmat(value, size[i], 1)))
     # an algebraic variable with fixed = true starts at its start value (inertia.a(fixed=true))
     init += [flat(slot[i]) - flat(tr.sx(attrs[i]["start"])) for i in index["z"]
              if attrs[i].get("fixed") in ([True], True) and attrs[i]["start"] is not None]
@@ -1832,7 +1871,10 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
     offsets, pos = {}, 0
     for i in index["d"]:
         offsets[i], pos = pos, pos + size[i]
-    others = ca.vertcat(x, z, d)      # time and the inputs are known at the start: those stay
+    # time and the inputs are known at the start: those stay, and the parameters computed at
+    # initialisation (a noise block's seed: their folding, below, puts in their values)
+    moving = [e for i in index["x"] if i not in init_params for e in ca.vertsplit(flat(slot[i]))]
+    others = ca.vertcat(*moving, z, d)
     for j in range(d_start.numel()):     # a start value read from a variable: the iteration sets it
         if ca.depends_on(d_start[j], others):
             d_start[j] = 0
@@ -1845,6 +1887,11 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         for j in range(size[i]):
             e = v[j] if v.numel() > 1 else v[0]
             d_start[offsets[i] + j] = e if not ca.depends_on(e, others) else 0
+    given = {offsets[v["target"]] + j for v in st.get("initial_discrete_values", []) if v["target"] in offsets
+             for j in range(size[v["target"]])}
+    given |= {offsets[i] + j for i in index["d"] if attrs[i].get("fixed") in ([True], True) for j in range(size[i])}
+    given |= set(range(len(names["d"]), nd))            # (the memories and held relations: 0)
+    d_start, init_residual = _discrete_starts(d, d_start, init_residual, given, ca.vertcat(x, dx, z))
 
     def bind_event(e):            # pre(), initial() and the ticks stay symbols in the update
         return ca.substitute(e, p_all, resolved)
@@ -1873,7 +1920,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
             preferred.update(zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(value)))
     preferred = {n: e for n, e in preferred.items() if not ca.depends_on(e, ca.vertcat(x, z, u, t, d))}
 
-    return merge_common(fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
+    return merge_common(_started_discretes(fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
@@ -1882,7 +1929,48 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
                d_start=d_start,
                d_pre=d_pre, x_pre=x_pre, z_pre=z_pre, flags=flags, d_update=d_update, x_reinit=x_reinit,
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
-               assert_info=assert_info, preferred=preferred)))
+               assert_info=assert_info, preferred=preferred))))
+
+
+def _discrete_starts(d: ca.SX, d_start: ca.SX, init: ca.SX, given: set, continuous: ca.SX):
+    """(start values, initial equations left): the initial equations on discrete values alone
+    (y = 2*x, a noise block's r = f(pre(state))) solved, in turn, for the start of the one value
+    each sets that no start or pre() equation ``given`` sets, where it is linear in it; the
+    initial system then solves for the continuous unknowns. Without this the start read 0."""
+    rows = ca.vertsplit(init) if init.numel() and d.numel() else []
+    candidates = [r for r, row in enumerate(rows) if ca.depends_on(row, d) and not ca.depends_on(row, continuous)]
+    starts, known, solved = ca.vertsplit(d_start), set(given), set()
+    progress = True
+    while progress:
+        progress = False
+        for r in candidates:
+            if r in solved:
+                continue
+            at = sorted(known)
+            e = ca.substitute(rows[r], d[at], ca.vertcat(*[starts[j] for j in at])) if at else rows[r]
+            free = [j for j in range(d.numel()) if j not in known and ca.depends_on(e, d[j])]
+            if len(free) != 1:
+                continue
+            coef = ca.jacobian(e, d[free[0]])
+            if not coef.is_constant() or float(coef) == 0:
+                continue
+            starts[free[0]] = ca.substitute(-e / float(coef), d[free[0]], ca.SX(0))
+            known.add(free[0])
+            solved.add(r)
+            progress = True
+    if not solved:
+        return d_start, init
+    left = [row for r, row in enumerate(rows) if r not in solved]
+    return ca.vertcat(*starts), (ca.vertcat(*left) if left else ca.SX(0, 1))
+
+
+def _started_discretes(dae: Dae) -> Dae:
+    """``dae`` with each start of a discrete value that still reads a state (a parameter computed
+    at initialisation that no explicit equation gives) at 0: the event iteration at the start sets it."""
+    if not dae.d_start.numel() or not ca.depends_on(dae.d_start, dae.x):
+        return dae
+    starts = [0 if ca.depends_on(e, dae.x) else e for e in ca.vertsplit(dae.d_start)]
+    return dataclasses.replace(dae, d_start=ca.vertcat(*starts))
 
 
 def _hysteresis(op: str, lhs: ca.SX, rhs: ca.SX, held: ca.SX) -> tuple[ca.SX, ca.SX]:
