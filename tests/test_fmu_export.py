@@ -64,7 +64,7 @@ def test_fmu_exposes_component_variables_and_carries_sources(fmus):
     assert {"Rnl.i", "Rnl.v", "der(C1.v)", "y", "u"} <= names
     with zipfile.ZipFile(path) as z:
         files = set(z.namelist())
-    assert {"sources/fmi2_model.c", "sources/mcl_funcs.c", "modelDescription.xml"} <= files
+    assert {"sources/fmi2_model.c", "sources/mcl_funcs.c", "sources/mcl_once.c", "modelDescription.xml"} <= files
     assert any(f.startswith("binaries/linux64/") and f.endswith(".so") for f in files)
 
 

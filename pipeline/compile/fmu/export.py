@@ -24,6 +24,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+import time
 import uuid
 import zipfile
 from pathlib import Path
@@ -200,12 +201,13 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     present = {k: f for k, f in funcs.items() if f is not None}
     split, derived = parametric.split_functions(present, {k: P_ARG.get(k, 2) for k in present}, len(o.p_names))
     funcs.update(split, derived=derived)
-    cg = ca.CodeGenerator("mcl_funcs.c", {"with_header": True})
+    generators = {name: ca.CodeGenerator(name, {"with_header": True}) for name in C_FUNCTIONS}
     for key in FUNCTIONS:
         if funcs.get(key) is not None:      # update and asserts: hybrid models only
-            cg.add(_renamed(funcs[key], prefix + key))
-    cg.generate(str(build) + "/")
-    if _NO_CODE in (build / "mcl_funcs.c").read_text() and model.dae is not None and not rebuilt:
+            generators[ONCE_FILE if key in ONCE else HOT_FILE].add(_renamed(funcs[key], prefix + key))
+    for cg in generators.values():
+        cg.generate(str(build) + "/")
+    if any(_NO_CODE in (build / name).read_text() for name in C_FUNCTIONS) and model.dae is not None and not rebuilt:
         return generate_sources(for_code(model), build, ident, guid, residual_tol, tolerance, settable, True)
     template = (_HERE / "fmi2_model.c").read_text()
     nq = derived.nnz_out(0) if derived is not None else 0
@@ -220,7 +222,7 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     (build / "fmi2_model.c").write_text(source)
     for h in ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"):
         shutil.copy(_fmi_headers() / h, build / h)
-    return [build / "fmi2_model.c", build / "mcl_funcs.c"]
+    return [build / name for name in C_SOURCES]
 
 
 #: what CasADi writes in place of a solve it has no C for (a large linear block's dense QR)
@@ -453,15 +455,23 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
 
 
 _GUID_SLOT = "{mcl-guid-of-this-build}"
-_CFLAGS = ["-shared", "-fPIC", "-O2", "-fvisibility=hidden"]
-C_SOURCES = ("fmi2_model.c", "mcl_funcs.c")
+_CFLAGS = ["-fPIC", "-fvisibility=hidden"]
+#: the functions run once per run or parameter set (the initial state, the parameters derived
+#: from the parameters): their C is apart and compiled unoptimised. A filter's coefficients
+#: (Brent's root search unrolled) are 2 x 44 000 lines of one basic block each, which gcc -O2
+#: took 270 s over (12 s at -O0); the right-hand side and its Jacobian stay at -O2
+ONCE = ("init", "start", "derived")
+HOT_FILE, ONCE_FILE = "mcl_funcs.c", "mcl_once.c"
+C_FUNCTIONS = (HOT_FILE, ONCE_FILE)
+C_SOURCES = ("fmi2_model.c", *C_FUNCTIONS)
+_OPTIMISE = {ONCE_FILE: "-O0"}          # (the others: -O2)
 
 
 def _build_key(*parts: str) -> str:
     """What decides the FMU (its code or what the code is made from, its model description),
     with the C compiler and its flags."""
     h = hashlib.sha256()
-    for part in (_gcc_version(), " ".join(_CFLAGS), *parts):
+    for part in (_gcc_version(), " ".join(_CFLAGS), repr(sorted(_OPTIMISE.items())), *parts):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:40]
@@ -489,16 +499,11 @@ def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: lis
         raise CompileError(f"the FMU's generated C code is {size / 1e6:.0f} MB, too large to compile "
                            f"(the limit is {C_LIMIT / 1e6:.0f} MB): the model runs in process, not as an FMU")
     so = build / f"{ident}.so"
-    cmd = ["gcc", *_CFLAGS, f"-I{build}", *map(str, c_files), "-o", str(so), "-lm"]
-    try:
-        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=GCC_TIMEOUT)
-    except FileNotFoundError:
-        raise CompileError("gcc not found: a C compiler is needed to build FMUs") from None
-    except subprocess.TimeoutExpired:
-        raise CompileError(f"gcc did not compile the FMU's {size / 1e6:.1f} MB of C within {GCC_TIMEOUT} s: "
-                           "the model runs in process, not as an FMU") from None
-    if proc.returncode:
-        raise CompileError(f"gcc failed: {proc.stderr.strip().splitlines()[-1] if proc.stderr else ''}")
+    objects = [f.with_suffix(".o") for f in c_files]
+    # each file at its own optimisation, side by side, then linked
+    _gcc([["gcc", "-c", *_CFLAGS, _OPTIMISE.get(f.name, "-O2"), f"-I{build}", str(f), "-o", str(o)]
+          for f, o in zip(c_files, objects)], size, build)
+    _gcc([["gcc", "-shared", *_CFLAGS, *map(str, objects), "-o", str(so), "-lm"]], size, build)
     fmu = build / "model.fmu"
     with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
         z.writestr("modelDescription.xml", xml)
@@ -506,6 +511,34 @@ def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: lis
         for s in sources:
             z.write(build / s, f"sources/{s}")
     return fmu
+
+
+def _gcc(commands: list[list[str]], size: int, build: Path) -> None:
+    """Run the gcc ``commands`` side by side (their messages in ``build``); a CompileError where
+    one fails or all take longer than GCC_TIMEOUT (``size``: the C's, for the message)."""
+    logs = [build / f"gcc{i}.log" for i in range(len(commands))]
+    procs = []
+    try:
+        for command, log in zip(commands, logs):
+            with open(log, "w") as err:
+                procs.append(subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=err))
+        deadline = time.monotonic() + GCC_TIMEOUT
+        for p in procs:
+            p.wait(timeout=max(0.0, deadline - time.monotonic()))
+    except FileNotFoundError:
+        raise CompileError("gcc not found: a C compiler is needed to build FMUs") from None
+    except subprocess.TimeoutExpired:
+        raise CompileError(f"gcc did not compile the FMU's {size / 1e6:.1f} MB of C within {GCC_TIMEOUT} s: "
+                           "the model runs in process, not as an FMU") from None
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    for p, log in zip(procs, logs):
+        if p.returncode:
+            lines = log.read_text(errors="replace").strip().splitlines()
+            raise CompileError(f"gcc failed: {lines[-1] if lines else ''}")
 
 
 def _check_names(model: CompiledModel, given: dict | None, what: str) -> None:

@@ -34,6 +34,7 @@
 
 #include "fmi2Functions.h"
 #include "mcl_funcs.h"
+#include "mcl_once.h"
 
 #define NP @NP@
 #define NQ @NQ@       /* what the parameters alone determine, computed when they are set */
