@@ -57,6 +57,12 @@ def array_of(items: list) -> ca.SX:
     return ca.vertcat(*[flat(i) for i in items]) if items else ca.SX(0, 1)
 
 
+def repeated(v: ca.SX, n: int) -> ca.SX:
+    """``v`` (a column of ``n`` elements, or one) as ``n`` elements: a scalar set to every
+    element of an array."""
+    return v if v.numel() == n else ca.repmat(v, n, 1)
+
+
 def grown(base: ca.SX, sels: list) -> ca.SX:
     """``base`` extended with zeros to hold an element one past its end (an array a function
     fills in order: ``for i in 1:n loop r[i] := ...``); other subscripts leave it as it is."""

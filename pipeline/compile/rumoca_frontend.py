@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from . import tables, xorshift
-from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, shaped
+from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
@@ -929,8 +929,10 @@ class _Translator:
         if not body or not isinstance(body.get("function"), int):
             return None
         ext = self.functions[body["function"]].get("external") or {}
+        if ext.get("symbol") != "ModelicaStrings_hashString":
+            return None
         ops = self.call_operands(k)
-        if ext.get("symbol") != "ModelicaStrings_hashString" or len(ops) != 1:
+        if len(ops) != 1:
             return None
         text = self.string_value(ops[0])
         return None if text is None else ca.SX(xorshift.hash_string(text))
@@ -1755,7 +1757,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         if i not in init_params:
             tr.refuse(f"an initial equation setting parameter {variables[i]['name']}, which has a value")
         value = flat(tr.sx(set_to["value"]))
-        init.append(flat(slot[i]) - (value if value.numel() == size[i] else ca.repmat(value, size[i], 1)))
+        init.append(flat(slot[i]) - repeated(value, size[i]))
     # an algebraic variable with fixed = true starts at its start value (inertia.a(fixed=true))
     init += [flat(slot[i]) - flat(tr.sx(attrs[i]["start"])) for i in index["z"]
              if attrs[i].get("fixed") in ([True], True) and attrs[i]["start"] is not None]
@@ -2233,7 +2235,7 @@ class _Events:
                 continue
             new = pre_slot[i]
             for act, val in reversed(branches[i]):
-                new = ca.if_else(act, flat(val) if val.numel() == size[i] else ca.repmat(val, size[i], 1), new)
+                new = ca.if_else(act, repeated(flat(val), size[i]), new)
             out.append(flat(new))
         out += [flat(self.value(c)) for c in sorted(self.memory)]
         return ca.vertcat(*out) if out else ca.SX(0, 1)
@@ -2259,7 +2261,7 @@ class _Events:
                     if set(target) - {"kind", "variable"} or i not in held:
                         self.tr.refuse("a when-statement assigning part of a variable")
                     value = flat(now(self.tr.sx(d["value"])))
-                    value = value if value.numel() == size[i] else ca.repmat(value, size[i], 1)
+                    value = repeated(value, size[i])
                     new[i] = ca.if_else(act, value, new.get(i, flat(pre_slot[i])))
         return new
 

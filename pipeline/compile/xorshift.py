@@ -153,7 +153,8 @@ def generate(symbol: str, state: ca.SX) -> tuple[ca.SX, ca.SX]:
     if symbol not in _built:       # (written out once: a call is then evaluated or inlined)
         s = ca.SX.sym("s", n)
         y, out = f(ca.vertsplit(s))
-        _built[symbol] = ca.Function(symbol, [s], [y, ca.vertcat(*out)])
+        # (a word's halves are read for both the number and the new state: computed once)
+        _built[symbol] = ca.Function(symbol, [s], ca.cse([ca.SX(y), ca.vertcat(*out)]))
     state = ca.vec(state)
     if state.is_constant():
         return tuple(ca.SX(v) for v in _built[symbol](ca.DM(state)))

@@ -464,7 +464,7 @@ ONCE = ("init", "start", "derived")
 HOT_FILE, ONCE_FILE = "mcl_funcs.c", "mcl_once.c"
 C_FUNCTIONS = (HOT_FILE, ONCE_FILE)
 C_SOURCES = ("fmi2_model.c", *C_FUNCTIONS)
-_OPTIMISE = {ONCE_FILE: "-O0"}          # (the others: -O2)
+_OPTIMISE = {"fmi2_model.c": "-O2", HOT_FILE: "-O2", ONCE_FILE: "-O0"}
 
 
 def _build_key(*parts: str) -> str:
@@ -501,7 +501,7 @@ def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: lis
     so = build / f"{ident}.so"
     objects = [f.with_suffix(".o") for f in c_files]
     # each file at its own optimisation, side by side, then linked
-    _gcc([["gcc", "-c", *_CFLAGS, _OPTIMISE.get(f.name, "-O2"), f"-I{build}", str(f), "-o", str(o)]
+    _gcc([["gcc", "-c", *_CFLAGS, _OPTIMISE[f.name], f"-I{build}", str(f), "-o", str(o)]
           for f, o in zip(c_files, objects)], size, build)
     _gcc([["gcc", "-shared", *_CFLAGS, *map(str, objects), "-o", str(so), "-lm"]], size, build)
     fmu = build / "model.fmu"
