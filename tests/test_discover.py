@@ -259,6 +259,18 @@ def test_a_fit_reads_only_the_waves_before_its_own(tmp_path):
     assert dataclasses.replace(ctx, wave="w2").give_up(0.0300, 0.0301, behind, k=2, dictionary=3)
 
 
+def test_the_first_fit_runs_alone_however_few_the_fits():
+    """The most promising fit is a wave of its own, so that every other fit reads how far it
+    got, also when there are no more fits than workers (two fits on two workers ran side by
+    side: the loser to its end)."""
+    from mcl.discovery.search import waves
+
+    assert waves(2, 2, reading=True) == [(0, 1), (1, 2)]
+    assert waves(5, 2, reading=True) == [(0, 1), (1, 3), (3, 5)]
+    assert waves(1, 2, reading=True) == [(0, 1)]
+    assert waves(3, 2, reading=False) == [(0, 3)]      # no early stops: nothing to read
+
+
 def test_a_failed_law_of_the_cause_s_own_component_leaves_the_cause_decided():
     """Only another component that could not be evaluated puts the cause in doubt; a second
     law of the named component that failed to fit is a question of which law, not which part."""

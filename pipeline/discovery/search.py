@@ -205,9 +205,7 @@ class Batch:
                 # The first wave is the most promising fit alone: where it reaches the noise, the
                 # others stop within a few simulations (a 16-section ladder: a losing fit beside
                 # the right one ran 62 simulations)
-                size = max(1, int(getattr(ex, "workers", 1))) if self.ctx.progress_dir else len(todo)
-                starts = [0, *range(1, len(todo), size)] if size < len(todo) else [0]
-                for start, end in zip(starts, [*starts[1:], len(todo)]):
+                for start, end in waves(len(todo), int(getattr(ex, "workers", 1)), bool(self.ctx.progress_dir)):
                     wave = todo[start:end]
                     ctx = dataclasses.replace(self.ctx, wave=f"{part.name}:{wave[0].file}")
                     ex.map(fit_task, wave, context=ctx, timeout=3600, label="candidates",
@@ -325,6 +323,15 @@ class Round:
     signals: dict
     roles: dict
     fit: Batch | None
+
+
+def waves(n: int, workers: int, reading: bool) -> list[tuple[int, int]]:
+    """(start, end) of each wave of ``n`` fits: where fits read each other's progress, the first
+    alone and then as many as there are ``workers``; otherwise all at once. (The first was not
+    alone when the fits were no more than the workers: the loser ran beside the winner to its
+    end, 59 simulations in the bundled example, where reading it stops after 8.)"""
+    starts = [0, *range(1, n, max(1, workers))] if reading else [0]
+    return list(zip(starts, [*starts[1:], n]))
 
 
 def simplest_first(todo: list, templates: dict) -> list:
