@@ -200,7 +200,8 @@ def test_a_named_unknown_that_leaves_misfit_ends_the_search(tmp_path):
 def test_early_stop_weighs_parameters_not_only_rss(tmp_path):
     """A fit stops when another cannot be beaten: a smaller law is not stopped by a larger law's
     lower RSS (the criterion may prefer it), a larger law at the same component is stopped by a
-    smaller one it cannot improve on, and a law far behind is stopped whatever its size."""
+    smaller one it cannot improve on, and a law far behind is stopped whatever its size (at
+    another component, only 10x behind)."""
     from mcl.discovery.candidates import Context, Item, publish
 
     ctx = Context(None, {}, {}, None, None, 10, "bic", "simulation", str(tmp_path), n_obs=400)
@@ -212,8 +213,11 @@ def test_early_stop_weighs_parameters_not_only_rss(tmp_path):
     publish(tmp_path, static, 0.02279, k=2, dictionary=3)
     assert ctx.give_up(0.02275, 0.02276, storage, k=4, dictionary=6)       # can only prune back
     assert not ctx.give_up(0.02200, 0.02276, storage, k=4, dictionary=6)   # can improve on it
-    assert ctx.give_up(0.0300, 0.0301, Item("R1", 0, {}), k=2, dictionary=3)   # 400 ln(1.3) behind
-    assert not ctx.give_up(0.0300, 0.0600, Item("R1", 0, {}), k=2, dictionary=3)  # far from its optimum
+    assert ctx.give_up(0.0300, 0.0301, Item("Rx", 2, {}), k=2, dictionary=3)   # 400 ln(1.3) behind
+    assert not ctx.give_up(0.0300, 0.0600, Item("Rx", 2, {}), k=2, dictionary=3)  # far from its optimum
+    # at another component only 10x behind stops it: a local model's reach can be far off
+    assert not ctx.give_up(0.0300, 0.0301, Item("R1", 0, {}), k=2, dictionary=3)
+    assert ctx.give_up(0.300, 0.301, Item("R1", 0, {}), k=2, dictionary=3)
 
 
 def test_near_its_optimum_a_larger_law_stops_where_its_component_s_smaller_law_reached_the_noise(tmp_path):
@@ -253,7 +257,7 @@ def test_a_fit_reads_only_the_waves_before_its_own(tmp_path):
     from mcl.discovery.candidates import Context, Item, publish
 
     ctx = Context(None, {}, {}, None, None, 10, "bic", "simulation", str(tmp_path), n_obs=400)
-    lead, behind = Item("R1", 0, {}), Item("R2", 0, {})
+    lead, behind = Item("R1", 0, {}), Item("R1", 1, {})
     publish(tmp_path, lead, 0.0200, k=2, dictionary=3, wave="w1")
     assert not dataclasses.replace(ctx, wave="w1").give_up(0.0300, 0.0301, behind, k=2, dictionary=3)
     assert dataclasses.replace(ctx, wave="w2").give_up(0.0300, 0.0301, behind, k=2, dictionary=3)

@@ -131,7 +131,7 @@ class Context:
         Gauss-Newton model can still reach with its ``k`` free parameters of ``dictionary``
         terms: it stops when that is 10x the best (n ln 10 behind in any criterion); or, near its
         own optimum (its RSS within 1.5x of what it can reach), when it cannot come within the
-        decisive margin of another fit, counting no more parameters than that fit has now (which
+        decisive margin of another fit at its own component, counting no more parameters than that fit has now (which
         pruning only lowers: a larger law's lower RSS does not stop a smaller one the criterion
         may prefer); or when it cannot improve by what one more parameter costs (ln n / n of the
         RSS) on a law at its own component with no more parameters chosen from no more terms:
@@ -150,14 +150,19 @@ class Context:
         if current > 1.5 * reachable:
             return False
         for o in others:
+            if set(o.component.split("+")) != mine:
+                # another component's fit stops this one only by the 10x above: a Gauss-Newton
+                # model or a pace far from this law's optimum can be off by far more than the
+                # decisive margin (a saturating amplifier's law, crawling at 2x a sensor's RSS
+                # and reckoned unable to pass it, fell 100x below it ten simulations later)
+                continue
             k_me = k if k is not None else o.k
             fewer = None in (k_me, o.k) or o.k <= k_me
             lead = n * np.log(max(reachable, 1e-300) / max(o.rss, 1e-300))
             if not fewer:
                 lead -= complexity(n, o.k) - complexity(n, k_me)
             smaller = fewer and None not in (dictionary, o.dictionary) and o.dictionary <= dictionary
-            if lead > 10.0 or (smaller and set(o.component.split("+")) == mine
-                               and reachable > o.rss * (1.0 - np.log(n) / n)):
+            if lead > 10.0 or (smaller and reachable > o.rss * (1.0 - np.log(n) / n)):
                 return True
         return self._tied_at_noise(others, mine, dictionary)
 
