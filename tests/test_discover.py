@@ -220,6 +220,20 @@ def test_early_stop_weighs_parameters_not_only_rss(tmp_path):
     assert ctx.give_up(0.300, 0.301, Item("R1", 0, {}), k=2, dictionary=3)
 
 
+def test_near_its_optimum_a_law_stops_behind_a_parallel_component_s_law(tmp_path):
+    """A spring and a damper between the same two flanges carry the same effect: near its own
+    optimum, the damper's law stops when it cannot come within the decisive margin of the
+    spring's; a component elsewhere (another hypothesis) runs on unless 10x behind."""
+    from mcl.discovery.candidates import Context, Item, publish
+
+    ctx = Context(None, {}, {}, None, None, 10, "bic", "simulation", str(tmp_path), n_obs=400,
+                  kin={"S": {"S", "D"}, "D": {"D", "S"}, "R": {"R"}})
+    publish(tmp_path, Item("S", 0, {}), 0.0200, k=3, dictionary=3)
+    assert ctx.give_up(0.0260, 0.0270, Item("D", 1, {}), k=5, dictionary=6)
+    assert not ctx.give_up(0.0260, 0.0270, Item("R", 0, {}), k=3, dictionary=3)
+    assert ctx.give_up(0.2100, 0.2200, Item("R", 0, {}), k=3, dictionary=3)
+
+
 def test_near_its_optimum_a_larger_law_stops_where_its_component_s_smaller_law_reached_the_noise(tmp_path):
     """Near its own optimum, a storage law that the Gauss-Newton model says could still gain a
     little more than one parameter's cost stops when the static law at the same component has

@@ -116,6 +116,7 @@ class Context:
     limits: dict | None = None  # simulation options bounding a candidate's runs by the nominal's (steps, |x|)
     floor: float = 0.0          # the RSS of the noise alone (n_obs sigma^2)
     wave: str = ""              # the wave this context's fits run in (they do not read each other)
+    kin: dict = field(default_factory=dict, repr=False, compare=False)   # component -> it and its parallel ones
 
     def settled(self, item) -> bool:
         """Another fit of this round has reached the noise (its RMS within 1.2x of it): a law
@@ -131,9 +132,10 @@ class Context:
         Gauss-Newton model can still reach with its ``k`` free parameters of ``dictionary``
         terms: it stops when that is 10x the best (n ln 10 behind in any criterion); or, near its
         own optimum (its RSS within 1.5x of what it can reach), when it cannot come within the
-        decisive margin of another fit at its own component, counting no more parameters than that fit has now (which
-        pruning only lowers: a larger law's lower RSS does not stop a smaller one the criterion
-        may prefer); or when it cannot improve by what one more parameter costs (ln n / n of the
+        decisive margin of another fit at its own component or one in parallel with it (the
+        same effect), counting no more parameters than that fit has now (which pruning only
+        lowers: a larger law's lower RSS does not stop a smaller one the criterion may prefer);
+        or when it cannot improve by what one more parameter costs (ln n / n of the
         RSS) on a law at its own component with no more parameters chosen from no more terms:
         it could only prune back to that law, which the criterion then prefers. Laws at other
         components that can tie run to their end: the verdict compares them."""
@@ -149,12 +151,15 @@ class Context:
             return True
         if current > 1.5 * reachable:
             return False
+        kin = set().union(*(self._kin(c) for c in mine))
         for o in others:
-            if set(o.component.split("+")) != mine:
-                # another component's fit stops this one only by the 10x above: a Gauss-Newton
-                # model or a pace far from this law's optimum can be off by far more than the
-                # decisive margin (a saturating amplifier's law, crawling at 2x a sensor's RSS
-                # and reckoned unable to pass it, fell 100x below it ten simulations later)
+            theirs = set(o.component.split("+"))
+            if not theirs <= kin:
+                # a component that is not this one nor in parallel with it (another hypothesis,
+                # not the same effect) stops this fit only by the 10x above: a Gauss-Newton model
+                # or a pace far from this law's optimum can be off by far more than the decisive
+                # margin (a saturating amplifier's law, crawling at 2x a sensor's RSS and
+                # reckoned unable to pass it, fell 100x below it ten simulations later)
                 continue
             k_me = k if k is not None else o.k
             fewer = None in (k_me, o.k) or o.k <= k_me
@@ -162,9 +167,19 @@ class Context:
             if not fewer:
                 lead -= complexity(n, o.k) - complexity(n, k_me)
             smaller = fewer and None not in (dictionary, o.dictionary) and o.dictionary <= dictionary
-            if lead > 10.0 or (smaller and reachable > o.rss * (1.0 - np.log(n) / n)):
+            if lead > 10.0 or (smaller and theirs == mine and reachable > o.rss * (1.0 - np.log(n) / n)):
                 return True
         return self._tied_at_noise(others, mine, dictionary)
+
+    def _kin(self, component: str) -> set:
+        """``component`` and the components in parallel with it (the same effect's carriers)."""
+        if component not in self.kin:
+            structure = getattr(self.base, "structure", None) if self.base is not None else None
+            try:
+                self.kin[component] = {component, *(structure.parallel(component) if structure else ())}
+            except KeyError:          # a name the structure does not hold
+                self.kin[component] = {component}
+        return self.kin[component]
 
     def _tied_at_noise(self, others: list, mine: set, dictionary: int | None) -> bool:
         """A law at this component chosen from no more terms has reached the noise: this fit,
