@@ -4,7 +4,6 @@ through the benchmark's own code (benchmarks/real_data.py). Skipped where the th
 are not beside the checkout."""
 import sys
 
-import numpy as np
 import pytest
 
 from helpers import ROOT, msl_path

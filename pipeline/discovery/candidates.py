@@ -173,12 +173,9 @@ class Context:
 
     def _kin(self, component: str) -> set:
         """``component`` and the components in parallel with it (the same effect's carriers)."""
-        if component not in self.kin:
-            structure = getattr(self.base, "structure", None) if self.base is not None else None
-            try:
-                self.kin[component] = {component, *(structure.parallel(component) if structure else ())}
-            except KeyError:          # a name the structure does not hold
-                self.kin[component] = {component}
+        if component not in self.kin:     # (asked at every step of every fit: the structure once)
+            parallel = self.base.structure.parallel(component) if self.base is not None else ()
+            self.kin[component] = {component, *parallel}
         return self.kin[component]
 
     def _tied_at_noise(self, others: list, mine: set, dictionary: int | None) -> bool:
