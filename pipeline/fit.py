@@ -531,6 +531,8 @@ class Algorithm1(Fitter):
 
 #: simulations over which a fit's pace is measured (see LevenbergMarquardt._hopeless)
 STALL = 10
+#: simulations over which a fit with ``settle`` must gain its share of the cost to go on
+SETTLE = 8
 
 
 class LevenbergMarquardt(Fitter):
@@ -543,8 +545,17 @@ class LevenbergMarquardt(Fitter):
     """
 
     def __init__(self, max_simulations: int = 150, axis: int | None = 0, damping: float = 1e-3,
-                 tol: float = 1e-10, feasibility=None, give_up=None, progress=None, restore: int = 24):
+                 tol: float = 1e-10, feasibility=None, give_up=None, progress=None, restore: int = 24,
+                 settle: float | None = None, by_gain: bool = False):
         self.max_simulations, self.axis, self.damping, self.tol = max_simulations, axis, damping, tol
+        #: stop once the last SETTLE simulations together lowered the cost by less than this
+        #: share: a crawl along a valley (steps taken and rejected in turn, each gaining a
+        #: fraction of a percent) cannot change the answer within the budget
+        self.settle = settle
+        #: after a step taken, shrink the damping by how much of its predicted gain it made
+        #: (Nielsen's rule) instead of always by 3: the discovery's fits keep the rule their
+        #: answers were measured with (the tanks' law changed with the last bit of the damping)
+        self.by_gain = by_gain
         #: simulations spent looking for a feasible start near the given one when it fails
         self.restore = restore
         self.feasibility = feasibility
@@ -593,7 +604,11 @@ class LevenbergMarquardt(Fitter):
             if new is not None and new[2] < cost:
                 rel = (cost - new[2]) / max(cost, 1e-300)
                 trusted = rel >= 0.25 * predicted
-                w, current, lam = trial, new, max(lam / 3, 1e-12)
+                # (by_gain: a step that made little of its gain is followed by a shorter one,
+                # not by a longer one to be rejected)
+                gained = rel / max(predicted, 1e-300)
+                shrunk = lam * max(1 / 3, 1 - (2 * min(gained, 1.0) - 1) ** 3) if self.by_gain else lam / 3
+                w, current, lam = trial, new, max(shrunk, 1e-12)
                 if self.progress:
                     self.progress(current[2])
                 if rel < self.tol or np.linalg.norm(step) < 1e-12 * (1 + np.linalg.norm(w)):
@@ -604,6 +619,9 @@ class LevenbergMarquardt(Fitter):
                 if lam > 1e12:
                     message = "no descent step found"
                     break
+            if self.settle and len(costs) > SETTLE and costs[-1] > (1 - self.settle) * costs[-1 - SETTLE]:
+                message = "settled"
+                break
         W, y = problem.recorder.points()
         if 0 < y[start:].sum() < len(y[start:]):
             q.fit(W[start:], y[start:])

@@ -89,6 +89,23 @@ def test_levenberg_marquardt_recovers_the_hidden_cubic(rc_template):
     assert res.simulations <= 60
 
 
+def test_a_fit_that_no_longer_gains_its_share_stops_where_it_stands(rc_template):
+    """``settle``: once SETTLE simulations together lower the cost by less than the share, the
+    fit stops (the calibration's crawl along a valley); the damping that follows each step's gain
+    (``by_gain``) reaches the same optimum."""
+    model, names = rc_template
+    runs = {}
+    for kw in ({}, {"settle": 0.01}, {"settle": 0.01, "by_gain": True}):
+        problem = FitProblem(model, hidden_cubic_data(), names)
+        runs[tuple(kw)] = LevenbergMarquardt(max_simulations=200, tol=1e-10, **kw).fit(problem, [0.1, 0.1, 0.1])
+    plain, settled, by_gain = runs.values()
+    assert settled.message == by_gain.message == "settled" and plain.message == "converged"
+    assert settled.simulations < plain.simulations
+    for res in runs.values():
+        assert res.cost == pytest.approx(plain.cost, rel=1e-3)
+        assert max(map(abs, recovered(res))) < 0.03
+
+
 @pytest.mark.parametrize("optimizer,gradient", [("Powell", False), ("L-BFGS-B", True)])
 def test_algorithm3_recovers_the_hidden_cubic(rc_template, optimizer, gradient):
     model, names = rc_template

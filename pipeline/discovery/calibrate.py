@@ -24,6 +24,10 @@ from .fitters import FIT_OPTIONS, residual
 DETERMINED = 1.0
 #: simulations of the calibration's fit
 REFIT_BUDGET = 60
+#: the calibration's fit stops once its last few simulations gained less than this share of the
+#: RSS (half a percent of the RMS): on the Silverbox, 57 of the first stage's 60 simulations
+#: gained 3 %, stepping and stepping back along the valley where kf, ks and M.m trade off
+SETTLED = 0.01
 #: resamples of the block bootstrap
 RESAMPLES = 200
 
@@ -168,13 +172,17 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
 
 def _refit(model, data: TimeSeries, params: dict, names: list[str], budget: int = REFIT_BUDGET) -> dict:
     """``params`` with ``names`` refitted on ``data`` (Levenberg-Marquardt from their values, in
-    at most ``budget`` simulations)."""
+    at most ``budget`` simulations), stopped once it has settled (:data:`SETTLED`). The
+    damping follows each step's gain: with the rule that only shrinks it after a step taken,
+    every other step of the Silverbox's calibration was rejected, a simulation each; with it,
+    not one of the second stage's. Its final calibration took 126 CPU-s instead of 163, with
+    the same test errors."""
     from ..fit import FitProblem, LevenbergMarquardt
 
     fixed = {k: v for k, v in params.items() if k not in names}
     problem = FitProblem(model, data, names, fixed=fixed, options=FIT_OPTIONS)
-    res = LevenbergMarquardt(max_simulations=budget, axis=None, tol=1e-6).fit(
-        problem, [params[n] for n in names])
+    lm = LevenbergMarquardt(max_simulations=budget, axis=None, tol=1e-6, settle=SETTLED, by_gain=True)
+    res = lm.fit(problem, [params[n] for n in names])
     return {**params, **dict(zip(names, map(float, res.w)))}
 
 

@@ -159,9 +159,7 @@ class Causes:
         compared once each is refitted with the freed parameters: a law's shape must not win by
         standing in for a miscalibrated offset or gain (a hardening spring written as exp(s/s1)
         beside a force offset, where the calibrated cubic explains the data better)."""
-        from ..progress import quiet
         from ..stats import criterion as criterion_of
-        from .calibrate import calibrate
         from .verdict import effect_kind, helps
 
         if not self.spec.free or len(bests) != 1 or bests[0].get("pair"):
@@ -176,22 +174,14 @@ class Causes:
             return bests
         n_obs = int(np.isfinite(self.y).sum())
         score = criterion_of(self.spec.criterion).score
-        scored = []
-        for law in laws:
-            trial = dict(law)
-            try:
-                ext = with_causes(nominal, found + [trial], self.train)
-            except ConfigError:
-                continue
-            names = refitted(trial["_names"], trial["active"])
-            held = [n for n in trial["_names"] if n not in names]
-            with quiet():
-                cal = calibrate(ext.model, self.train, None, ext.model.parameters, names, self.spec.free,
-                                self.outputs, held)
-            if cal.get("train_rms") is None:
-                continue
-            k = self.n_params + len(names) + len(cal["freed"])
-            scored.append((score(cal["train_rms"] ** 2 * n_obs, n_obs, k), law))
+        # each law's calibration in a worker of its own: they are independent, and each is
+        # dozens of simulations of the record searched
+        context = Calibration(nominal, found, laws, self.train, self.spec.free, self.outputs)
+        with self.reg.executor(self.spec.executor) as ex:
+            done = ex.map(_calibrated, list(range(len(laws))), context=context, timeout=3600,
+                          label="calibrations")
+        scored = [(score(cal["train_rms"] ** 2 * n_obs, n_obs, self.n_params + cal["k"]), law)
+                  for law, cal in zip(laws, done) if cal and cal.get("train_rms") is not None]
         if not scored:
             return bests
         value, chosen = min(scored, key=lambda x: x[0])
@@ -232,6 +222,36 @@ class Causes:
             if after["misfit_left"] == "at the noise level":
                 break
         return found, base
+
+
+@dataclasses.dataclass
+class Calibration:
+    """What the calibrations of a round's best laws share (inherited by forked workers)."""
+    nominal: Base
+    found: list
+    laws: list
+    train: TimeSeries
+    free: object
+    outputs: list
+
+
+def _calibrated(ctx: Calibration, k: int) -> dict | None:
+    """The executor's task: law ``k`` put in the model and calibrated with the parameters freed
+    (its training RMS, and ``k``: the parameters it was fitted with); None when it cannot be put
+    in the model."""
+    from ..progress import quiet
+    from .calibrate import calibrate
+
+    trial = dict(ctx.laws[k])
+    try:
+        ext = with_causes(ctx.nominal, ctx.found + [trial], ctx.train)
+    except ConfigError:
+        return None
+    names = refitted(trial["_names"], trial["active"])
+    held = [n for n in trial["_names"] if n not in names]
+    with quiet():
+        cal = calibrate(ext.model, ctx.train, None, ext.model.parameters, names, ctx.free, ctx.outputs, held)
+    return {"train_rms": cal.get("train_rms"), "k": len(names) + len(cal.get("freed", ()))}
 
 
 def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, force: bool = False,
