@@ -50,6 +50,7 @@ def test_the_emps_friction_is_named_and_its_law_reaches_millimetres_on_the_test_
     force to position) its optimum depends on the span it is fitted on. Measured at 3b65307:
     fitted on the search's 8192 samples it reaches 5.2 mm, on the whole training record (what is
     delivered) 8.8 mm against 5.8 mm for the law alone; the same at acd0dce, whose table said 5.2.
+    At c44875f, whose calibration fits go further on the training record, 9.5 mm.
     A closed-loop nominal (the benchmark's own protocol) is what would make it well posed."""
     found = discovered("emps")
     assert found["cause"].split()[0] == "F" and "Coulomb-like friction" in found["cause"], found["cause"]
