@@ -203,9 +203,38 @@ def _serve(fn, context, tasks, results) -> None:
             results.send(TaskFailed(f"the result could not be sent back: {exc}"))
 
 
+class _Packed:
+    """A task context as Dask ships it: pickled (by cloudpickle) inside CasADi's pickle context,
+    which SX expressions need (a discovery's context holds some: the rates of its components'
+    variables) and which shares their symbols among them. It stays packed as Dask passes it
+    from worker to worker; each worker unpacks it once, for its tasks."""
+
+    def __init__(self, obj=None, blob: bytes | None = None):
+        if blob is None:
+            import casadi as ca
+            import cloudpickle
+
+            with ca.global_pickle_context():
+                blob = cloudpickle.dumps(obj)
+        self.blob, self._obj = blob, None
+
+    def __reduce__(self):
+        return _Packed, (None, self.blob)
+
+    def unpacked(self):
+        if self._obj is None:
+            import pickle
+
+            import casadi as ca
+
+            with ca.global_unpickle_context():
+                self._obj = pickle.loads(self.blob)
+        return self._obj
+
+
 def _dask_task(fn, context, item):
     try:
-        return fn(context, item)
+        return fn(context.unpacked() if isinstance(context, _Packed) else context, item)
     except Exception as exc:  # noqa: BLE001
         return TaskFailed(f"{type(exc).__name__}: {exc}")
 
@@ -237,7 +266,7 @@ class DaskExecutor(Executor):
         from distributed import as_completed
 
         bar = Progress(label, len(items), workers=self.workers, enabled=progress)
-        ctx = self.client.scatter(context, broadcast=True, hash=False) if context is not None else None
+        ctx = self.client.scatter(_Packed(context), broadcast=True, hash=False) if context is not None else None
         futures = [self.client.submit(_dask_task, fn, ctx, item, pure=False) for item in items]
         index = {f.key: k for k, f in enumerate(futures)}
         results: dict[int, Any] = {}

@@ -71,6 +71,26 @@ def test_dask_local_cluster_gives_the_same_results():
     assert isinstance(failing[0], TaskFailed) and failing[1] == 2
 
 
+def evaluate_rate(context, x):
+    """A task reading SX expressions from its context, as a discovery's fits do (the rates of the
+    components' variables), which pickle only inside CasADi's pickle context."""
+    import casadi as ca
+
+    rate, sym = context["rate"], context["x"]
+    return float(ca.Function("rate", [sym], [rate])(x))
+
+
+def test_dask_ships_a_context_holding_casadi_expressions():
+    pytest.importorskip("distributed")
+    import casadi as ca
+
+    x = ca.SX.sym("x")
+    context = {"rate": 3 * x ** 2 + 1, "x": x}     # the same symbol in both: shared after the trip
+    with DaskExecutor(workers=2) as ex:
+        out = ex.map(evaluate_rate, [0.0, 1.0, 2.0, 3.0], context=context, timeout=60, progress=False)
+    assert out == [1.0, 4.0, 13.0, 28.0]
+
+
 def test_progress_eta_counts_rounds_of_workers(caplog):
     bar = Progress("batch", 4, workers=2)
     bar.start -= 10.0            # the first two tasks ran side by side for 10 s
