@@ -456,6 +456,13 @@ def _check_against_model(spec: RunSpec, series: dict, problems: _Problems) -> No
                                                    f"(measured: {', '.join(measured)})")
     if spec.unknown != "auto":
         _check_component(problems, "unknown", model, spec.unknown, spec.model_name)
+    ode = getattr(model, "ode", None)
+    if isinstance(spec.free, (list, tuple)) and ode is not None:
+        # (before the search: found wrong only by the calibration, it ended a run of minutes)
+        for name in spec.free:
+            if name not in ode.p_names:
+                problems.add("free", f"'{name}' is not a free parameter of {spec.model_name}"
+                                     f"{did_you_mean(name, ode.p_names)}")
     if spec.second:
         sec, base = spec.second, spec.path.parent if spec.path else Path(".")
         try:

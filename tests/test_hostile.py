@@ -550,6 +550,14 @@ def test_run_file_keys_given_twice_and_paths(tmp_path, capsys, monkeypatch):
     assert (home / "x" / "report.json").is_file() and not (tmp_path / "~").exists()
 
 
+def test_a_free_parameter_the_model_lacks_is_refused_before_the_search(tmp_path, capsys):
+    run = setup_run(tmp_path, cubic=0.0)
+    run.write_text(run.read_text() + "free: [R1.R, R1.RR]\n")
+    refused(capsys, ["run", str(run)], "run.yaml:9: free: 'R1.RR' is not a free parameter of Circuit.RC "
+                                       "(did you mean 'R1.R'?)", tmp_path)
+    assert not (tmp_path / "out").exists() and not list(tmp_path.glob("out/*.partial"))
+
+
 @pytest.mark.parametrize("cell", ["1_000", "١٢", "0x10", "1e", "--1"])
 def test_csv_numbers_are_plain_decimal_numbers(tmp_path, cell):
     (tmp_path / "d.csv").write_text(f"time,u\n0,{cell}\n1,2\n")
