@@ -33,6 +33,7 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..errors import ConfigError
+from ..executor import TaskFailed
 from ..progress import log
 from ..runfile import CALIBRATION_SPAN
 from ..stats import misfit_significance, noise_levels, rms
@@ -180,6 +181,10 @@ class Causes:
         with self.reg.executor(self.spec.executor) as ex:
             done = ex.map(_calibrated, list(range(len(laws))), context=context, timeout=3600,
                           label="calibrations")
+        for law, cal in zip(laws, done):
+            if isinstance(cal, TaskFailed):      # (the law is left out of the choice, not the run)
+                log.warning("      the calibration of %s's law %s failed: %s", law["component"],
+                            law.get("equation") or spec_name(law["template"]), cal.reason)
         scored = [(score(cal["train_rms"] ** 2 * n_obs, n_obs, self.n_params + cal["k"]), law)
                   for law, cal in zip(laws, done) if cal and cal.get("train_rms") is not None]
         if not scored:
