@@ -459,10 +459,8 @@ def _check_against_model(spec: RunSpec, series: dict, problems: _Problems) -> No
     ode = getattr(model, "ode", None)
     if isinstance(spec.free, (list, tuple)) and ode is not None:
         # (before the search: found wrong only by the calibration, it ended a run of minutes)
-        for name in spec.free:
-            if name not in ode.p_names:
-                problems.add("free", f"'{name}' is not a free parameter of {spec.model_name}"
-                                     f"{did_you_mean(name, ode.p_names)}")
+        for why in unknown_free(spec.free, ode.p_names, spec.model_name):
+            problems.add("free", why)
     if spec.second:
         sec, base = spec.second, spec.path.parent if spec.path else Path(".")
         try:
@@ -473,6 +471,13 @@ def _check_against_model(spec: RunSpec, series: dict, problems: _Problems) -> No
                 _check_component(problems, "second.component", second, target, sec["model"]["name"])
         except MclError as exc:
             problems.add("second.model.name", str(exc))
+
+
+def unknown_free(free, p_names, model_name: str) -> list[str]:
+    """What is wrong with the names of ``free:`` (a list) for a model whose free parameters are
+    ``p_names``: one message per name it does not have."""
+    return [f"'{name}' is not a free parameter of {model_name}{did_you_mean(name, p_names)}"
+            for name in free if name not in p_names]
 
 
 def _check_component(problems, key: str, model, name: str, model_name: str) -> None:

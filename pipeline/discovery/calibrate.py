@@ -17,6 +17,7 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..progress import log
+from ..runfile import unknown_free
 from ..stats import gram_inverse, rms
 from .fitters import FIT_OPTIONS, residual
 
@@ -128,12 +129,11 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
 
     nominal = [n for n in model.ode.p_names if n not in laws and n not in held and np.isfinite(params[n])]
     asked = nominal if free == "auto" else list(free)
-    unknown = [n for n in asked if n not in model.ode.p_names]
+    unknown = unknown_free(asked, model.ode.p_names, model.name)      # (a run file's are checked before)
     if unknown:
-        from ..errors import ConfigError, did_you_mean
+        from ..errors import ConfigError
 
-        raise ConfigError(f"free: {unknown[0]} is not a free parameter of the model"
-                          f"{did_you_mean(unknown[0], nominal)}")
+        raise ConfigError(f"free: {unknown[0]}")
     candidates = [n for n in asked if n not in laws]
     r, J = jacobian(model, train, params, laws + candidates)
     if r is None:
