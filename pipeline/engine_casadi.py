@@ -675,9 +675,21 @@ class _Hybrid:
     # -- event iteration ---------------------------------------------------------------------
     def iterate(self, plan, x, p, t, flags):
         """Modelica's event iteration: update until the discrete values (and states reinit'ed)
-        no longer change, pre() taking the last values each time they settle."""
+        no longer change, pre() taking the last values each time they settle. Where they never
+        settle with pre() held, again with pre() taking each new value once they cycle."""
         if self.update is None:
             return x
+        try:
+            return self._iterate(plan, x, p, t, flags, False)
+        except _Stop as exc:
+            if "did not converge" not in str(exc):
+                raise
+            try:
+                return self._iterate(plan, x, p, t, flags, True)
+            except _Stop:
+                raise exc from None
+
+    def _iterate(self, plan, x, p, t, flags, promote: bool):
         nx, nc = plan.nx, plan.nx - self.nd
         xa = np.asarray(x, float).copy()
         cur = xa[:nx].copy()
@@ -685,6 +697,7 @@ class _Hybrid:
         u = plan.u_at(t)
         reinit = None         # the states a reinit() sets, applied once the iteration settles
         seen = set()          # the values met since pre() last changed: meeting one again is a cycle
+        cycles = 0            # cycles met since then
         for _ in range(MAX_EVENT_ITERATIONS):
             new = self.update(cur, u, p, t, pre, flags).ravel()
             if not np.all(np.isfinite(new)):
@@ -694,6 +707,7 @@ class _Hybrid:
             new[:nc] = cur[:nc]
             seen.add((cur[nc:] + 0.0).tobytes())      # + 0.0: -0.0 is 0.0
             if (new[nc:] + 0.0).tobytes() in seen:
+                cycles += 1
                 new = one_change(cur, new, nc)
             if np.array_equal(new, cur):
                 if np.array_equal(cur, pre):
@@ -702,9 +716,15 @@ class _Hybrid:
                         return xa
                     cur[:nc], reinit = reinit, None     # then settle again with the new states
                 pre = cur.copy()
-                seen = set()
+                seen, cycles = set(), 0
                 continue
             cur = new
+            if promote and cycles > 1:
+                # with pre() held, the values have no fixed point (a one-way clutch: locked, the
+                # torque it holds starts it forward; rolling, its torque no longer does, and it
+                # locks again): pre() takes each new value, as in Modelica's event iteration
+                # (the clutch starts forward, pre(startForward) then keeps it rolling)
+                pre = cur.copy()
         raise _Stop(f"event iteration did not converge at t = {t:g} (discrete variables keep changing)")
 
     def initial(self, plan, x, p, t0):

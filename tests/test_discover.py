@@ -305,3 +305,22 @@ def test_a_failed_law_of_the_cause_s_own_component_leaves_the_cause_decided():
     other = [{"component": "C", "template": {"name": "polynomial"}, "failed": "FitError"}]
     weigh_unevaluated(evidence, best, other, [], spec, 8192)
     assert evidence["strength"] == "undecided: C could not be evaluated" and evidence["unevaluated"] == ["C"]
+
+
+def test_laws_of_one_component_the_data_do_not_choose_between_are_named_together():
+    """A cause's component may follow two laws equally well (a tank's outflow as a cubic or as
+    exp plus Torricelli): the verdict names the best and lists those within the criterion's
+    tie as as good, with their score differences; a law further behind, or another
+    component's, is not listed."""
+    from types import SimpleNamespace
+
+    from mcl.discovery.verdict import EQUAL, decide
+
+    law = lambda comp, score, eq: {"component": comp, "score": score, "family": "shape", "equation": eq,
+                                   "template": {"name": "polynomial"}}
+    cands = [law("out1", -201.5, "i = c*va^3"), law("out1", -201.5 + 0.5 * EQUAL, "i = a*sqrt(va)"),
+             law("out1", -201.5 + 2 * EQUAL, "i = b*sinh(va)"), law("out2", -201.0, "i = d*v^3")]
+    spec = SimpleNamespace(criterion="bic")
+    causes, why_not, _ = decide(cands, spec, np.ones(100), None, {}, None, 1e3)
+    assert why_not is None and causes[0]["equation"] == "i = c*va^3"
+    assert [(a["equation"], a["score_difference"]) for a in causes[0]["alternatives"]] == [("i = a*sqrt(va)", 0.5 * EQUAL)]

@@ -139,6 +139,39 @@ end Hysteresis;
 """
 
 
+LATCH = """
+model Latch "a one-way clutch's start: locked, it holds the whole torque; rolling, its path variable is half of it"
+  parameter Real tau_max = 1 "breakaway torque";
+  parameter Real tau0 = 0.2 "sliding torque";
+  Real sa "the torque held while locked, the driving torque less the acceleration while rolling";
+  Real w(start = 0, fixed = true);
+  Boolean startForward(start = false, fixed = true);
+  Boolean locked(start = true, fixed = true);
+equation
+  sa = if locked then time else 0.5 * time;
+  startForward = sa > tau_max or pre(startForward) and sa > tau0;
+  locked = not startForward;
+  der(w) = if locked then 0 else sa - tau0;
+end Latch;
+"""
+
+
+def test_a_clutch_that_has_no_fixed_point_with_pre_held_starts_as_modelica_says(tmp_path):
+    """At t = 1 the held torque passes tau_max: startForward, so the clutch rolls, its path
+    variable halves and startForward is false again, so it locks: with pre() held the event
+    iteration cycles. In Modelica's iteration pre() takes the new values, and
+    pre(startForward) keeps it rolling (0.5 t > tau0): w = int_1^t (0.5 s - 0.2) ds."""
+    (tmp_path / "Latch.mo").write_text(LATCH)
+    model = compile_model([tmp_path / "Latch.mo"], "Latch")
+    t = np.linspace(0, 2, 41)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    names = model.ode.x_names
+    w = np.where(t < 1, 0.0, 0.25 * (t ** 2 - 1) - 0.2 * (t - 1))
+    assert np.max(np.abs(res.states[:, names.index("w")] - w)) < 1e-5
+    assert np.array_equal(res.states[t != 1, names.index("startForward")], (t[t != 1] > 1).astype(float))
+
+
 def test_a_hysteresis_controller_switches_where_it_should(tmp_path, caplog):
     (tmp_path / "H.mo").write_text(HYSTERESIS)
     model = compile_model([tmp_path / "H.mo"], "Hysteresis")

@@ -15,7 +15,7 @@ from mcl.compile.fmu.export import build_fmu, validate_fmu
 from mcl.engine_casadi import CasadiEngine
 from mcl.model import FmuModel
 from mcl.simulation import SimulationOptions
-from test_events import BALL, HYSTERESIS, STOPPING, _ball_truth
+from test_events import BALL, HYSTERESIS, LATCH, STOPPING, _ball_truth
 
 SAMPLED = """
 model Sampled "a sampled PI controller holding its output between ticks, on a first-order plant"
@@ -54,7 +54,7 @@ def fmus(tmp_path_factory):
     d = tmp_path_factory.mktemp("hybrid")
     out = {}
     for name, text in (("Ball", BALL), ("Hysteresis", HYSTERESIS), ("Sampled", SAMPLED), ("Limited", LIMITED),
-                       ("Stopping", STOPPING)):
+                       ("Stopping", STOPPING), ("Latch", LATCH)):
         (d / f"{name}.mo").write_text(text)
         model = compile_model([d / f"{name}.mo"], name)
         out[name] = (model, build_fmu(model, d / f"{name}.fmu"))
@@ -110,6 +110,17 @@ def test_a_bouncing_ball_reinitialised_at_each_impact(fmus, kind):
         g_, e = 9.81, 0.8
         impacts = np.sqrt(2 / g_) * (1 + 2 * np.cumsum(e ** np.arange(1, 7)) - 2 * e ** np.arange(1, 7))
         assert np.allclose(event_times(res, "n"), impacts[:6], atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["ModelExchange", "CoSimulation"])
+def test_a_clutch_that_cycles_with_pre_held_starts_in_the_fmu_as_in_process(fmus, kind):
+    """The FMU's event iteration falls back as the engine's does (test_events' Latch)."""
+    _, path = fmus["Latch"]
+    res = simulate_fmu(str(path), stop_time=2.0, output_interval=0.05, fmi_type=kind, output=["w", "startForward"])
+    t = np.linspace(0, 2, 41)
+    g = at(res, t)
+    w = np.where(t < 1, 0.0, 0.25 * (t ** 2 - 1) - 0.2 * (t - 1))
+    assert np.max(np.abs(g["w"] - w)) < 1e-4
 
 
 def test_a_sampled_controller_against_its_exact_recursion(fmus):

@@ -56,6 +56,37 @@ def test_unbalanced_model_is_refused(tmp_path):
     assert err.value.where == f"{f.resolve()}:{line_of(f, 'model M')}"
 
 
+def test_a_parameter_bound_to_a_call_on_an_array_is_a_parameter(tmp_path):
+    """rumoca counts a parameter bound to a bare call with an array argument as an equation
+    (the model refused as unbalanced: 2 equations for 1 unknown); mcl compiles it again with
+    the binding restated (f(...) + 0) and the parameter takes the call's value: x decays at
+    the rate the function sums, and the rates of its two scalar parameters besides."""
+    f = tmp_path / "Decay.mo"
+    f.write_text("""model Decay
+  function total
+    input Real u[:];
+    output Real y;
+  algorithm
+    y := 0;
+    for i in 1:size(u, 1) loop
+      y := y + u[i];
+    end for;
+  end total;
+  parameter Real w[3] = {0.5, 1, 1.5};
+  parameter Real k(unit = "1/s") = total(w) "the decay rate";
+  parameter Integer n = integer(total({1, 2})) annotation(Evaluate = true);
+  Real x(start = 1, fixed = true);
+equation
+  der(x) = -k * x * n / 3;
+end Decay;
+""")
+    model = compile_model([f], "Decay")
+    t = np.linspace(0.0, 1.0, 11)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    assert np.allclose(res.states[:, 0], np.exp(-3.0 * t), rtol=1e-5)
+
+
 @pytest.mark.parametrize("body,construct,needle", [
     ("  function f\n    input Real x;\n    output Real y;\n  protected\n    Integer i;\n  algorithm\n"
      "    y := 0;\n    i := 0;\n    while i < 3 loop\n      y := y + x;\n      i := i + 1;\n    end while;\n"

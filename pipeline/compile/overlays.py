@@ -91,10 +91,12 @@ Additionally, a left and right stop are handled.
 
 # Modelica.Mechanics.Rotational.Components.LossyGear: rumoca evaluates a parameter bound to a
 # call of the two-output Vectors.interpolate as an array, and refuses the parameter that tests it
-# (tau_bf_a_0: "expected Boolean, got Array"). A one-output function around the same call.
+# (tau_bf_a_0: "expected Boolean, got Array"). A one-output function around the same call; the
+# parameters' bindings as call + 0, which rumoca otherwise counts as equations where the loss
+# table has more than one row (:mod:`.bindings`: HeatLosses, 245 equations for 243 unknowns).
 _LOSSY_GEAR = [
     (f"Modelica.Math.Vectors.interpolate(lossTable[:,1], lossTable[:,{k}], 0, 1)",
-     f"interpolate1_(lossTable[:,1], lossTable[:,{k}], 0)") for k in (2, 3, 4, 5)
+     f"interpolate1_(lossTable[:,1], lossTable[:,{k}], 0) + 0") for k in (2, 3, 4, 5)
 ] + [("  // Calculate tau_bf_a_0 from the following equations\n",
       "  function interpolate1_ input Real x[:]; input Real y[size(x, 1)]; input Real xi; output Real yi; "
       "algorithm (yi, ) := Modelica.Math.Vectors.interpolate(x, y, xi, 1); end interpolate1_;\n")]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import itertools
+import logging
 import os
 import re
 from dataclasses import dataclass, field
@@ -22,6 +23,7 @@ import numpy as np
 
 from . import tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
+from .bindings import restated
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
@@ -100,9 +102,13 @@ class _Front:
         self.docs: dict[str, str] = {}      # path -> content hash
         self.owner: dict[str, str] = {}     # top-level class -> path
 
-    def compile(self, docs: dict[Path, tuple[str, set]], model: str):
+    def compile(self, docs: dict[Path, tuple[str, set]], model: str, restate: bool = False):
+        """rumoca's compiled ``model`` from ``docs``; ``restate``: each single-file document with
+        its parameters bound to bare calls restated (:mod:`.bindings`)."""
         import rumoca
 
+        if restate:
+            docs = {p: (h + _RESTATED, names) for p, (h, names) in docs.items()}
         if any(self.docs.get(str(p), h) != h or any(self.owner.get(n, str(p)) != str(p) for n in names)
                for p, (h, names) in docs.items()):
             self.session.clear()
@@ -133,8 +139,13 @@ class _Front:
         rumoca does not also read the files beside it (a run directory holds many)."""
         if path.name == "package.mo":
             return self.session.load(str(path), model=model)
-        return self.session.loads(path.read_text(encoding="utf-8", errors="replace"), model=model,
+        text = path.read_text(encoding="utf-8", errors="replace")
+        return self.session.loads(restated(text) if digest.endswith(_RESTATED) else text, model=model,
                                   filename=virtual_name(path, digest))
+
+
+#: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
+_RESTATED = "+restated"
 
 
 VIRTUAL = "/mcl-source"
@@ -412,6 +423,16 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
     try:
         return _guarded(front, lambda: front.compile(prep.docs, model))
     except rumoca.RumocaError as exc:
+        if "unbalanced model" in str(exc):
+            # rumoca's count of a parameter bound to a call (:mod:`.bindings`): the model
+            # again with those bindings restated, else its own error
+            try:
+                compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True))
+            except rumoca.RumocaError:
+                raise exc from None
+            logging.getLogger(__name__).info("%s: compiled with its parameters bound to function calls restated (f(...) + 0): "
+                     "rumoca counts such a binding as an equation", model)
+            return compiled
         if _UNVALUED.search(str(exc)):
             compiled = _started(front, prep, model, libs, exc)
             if compiled is None:

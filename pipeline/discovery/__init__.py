@@ -295,6 +295,8 @@ class Discovery:
                          f"[{c['evidence']['strength']}]"))
             for e in c.get("equivalents", []):
                 rows.append(("equivalent", f"{e['component']}: {e['reason']}"))
+            for a in c.get("alternatives", []):
+                rows.append(("as good a law", f"{a['equation']} ({a['score_difference']:+.2g})"))
         if not self.causes_:
             rows.append(("cause", self.report_.get("no_cause", "none")))
         rows.append(("training RMS", f"{g['train_rms_before']:.4g} → {g['train_rms_after']:.4g}"))

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..data import read_csv
+from ..errors import MclError
 from ..progress import log
 from ..stats import criterion as criterion_of, rms
 from ..templates import unscaled
@@ -27,6 +28,19 @@ from .words import in_words, words
 
 def class_name_for(component: str, template) -> str:
     return re.sub(r"\W", "_", f"{component}_{template.name}")
+
+
+def _as_good(alt: dict, comp) -> dict:
+    """An equally good law of the component (:func:`.verdict.alternatives`) in its own words."""
+    from ..services import registry
+
+    out = {k: alt[k] for k in ("equation", "family", "score_difference")}
+    if alt.get("template") is not None and alt.get("w") is not None:
+        try:
+            out["equation"] = in_words(registry().template(alt["template"]), np.asarray(alt["w"]), comp)
+        except MclError:              # (its words are the template's)
+            pass
+    return out
 
 
 def describe(best: dict, base, spec, train, signals) -> dict:
@@ -70,13 +84,17 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     equivalents = best.get("equivalents", [])
     if equivalents:
         effect += "; equivalent: " + ", ".join(f"{e['component']} ({e['reason']})" for e in equivalents)
+    alternatives = [_as_good(a, comp) for a in best.get("alternatives", [])]
+    if alternatives:
+        effect += "; as good for the data: " + "; ".join(f"{a['equation']} ({a['score_difference']:+.2g})"
+                                                        for a in alternatives)
     name = {"v": "v", "dv": "der(v)", "i": "i", "va": _local(wd.potentials[0]), "vb": _local(wd.potentials[1])}[var]
     return {"component": comp.name, "class": comp.cls, "effect": effect, "template": best["template"],
             "w": w.tolist(), "mode": best.get("mode"), "nominal_form": best.get("nominal_form"),
             "evidence": {"criterion": criterion_of(spec.criterion).name, "delta_to_next": best["delta"],
                          "strength": criterion_of(spec.criterion).strength(best["delta"]),
                          "role": best.get("role"), "effect_kind": best.get("effect_kind")},
-            "equivalents": equivalents,
+            "equivalents": equivalents, "alternatives": alternatives,
             "law": {"equation": law, "where": wd.definitions,
                     "template_equation": template.equation(w, across="v", flow="i"),
                     "family": best.get("family"), "across": wd.across, "flow": wd.flow,

@@ -242,6 +242,9 @@ def _summary_rows(report) -> str:
         rows.append(("law", f"{cause['law']['equation']}  where {cause['law'].get('where', '')}"))
         for e in cause.get("equivalents", []):
             rows.append(("equivalent", f"{e['component']} ({e.get('class') or ''}): {e['reason']}"))
+        for a in cause.get("alternatives", []):
+            rows.append(("as good a law", f"{a['equation']}  (Δ{ev.get('criterion', 'bic').upper()} "
+                                          f"{a['score_difference']:+.2g}: the data do not choose between them)"))
         if cause.get("after"):
             rows.append(("misfit left", f"training RMS {_g(cause['after']['train_rms'])}: {cause['after']['misfit_left']}"))
     failed = report.get("failed", [])

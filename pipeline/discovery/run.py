@@ -161,7 +161,7 @@ class Causes:
         standing in for a miscalibrated offset or gain (a hardening spring written as exp(s/s1)
         beside a force offset, where the calibrated cubic explains the data better)."""
         from ..stats import criterion as criterion_of
-        from .verdict import effect_kind, helps
+        from .verdict import alternatives, effect_kind, helps
 
         if not self.spec.free or len(bests) != 1 or bests[0].get("pair"):
             return bests
@@ -190,15 +190,19 @@ class Causes:
         if not scored:
             return bests
         value, chosen = min(scored, key=lambda x: x[0])
+        for v, law in sorted(scored, key=lambda x: x[0]):
+            log.debug("      calibrated %s %+.3g: %s", law["component"], v - value, law.get("equation") or spec_name(law["template"]))
         log.info("      with the calibration (free: %s), %s's law: %s", self.spec.free if isinstance(self.spec.free, str)
                  else ", ".join(self.spec.free), best["component"], chosen.get("equation") or spec_name(chosen["template"]))
         same = lambda a, b: (a.get("family"), a.get("equation")) == (b.get("family"), b.get("equation"))
+        # the laws the calibrated data do not choose between, named with the one chosen
+        others = alternatives(chosen, scored, value)
         if same(chosen, best):
-            return bests
+            return [{**best, "alternatives": others, "calibrated_score": value}]
         env = best["_signals"][best["component"]].env() if best["component"] in best["_signals"] else None
         decided = {k: best[k] for k in ("equivalents", "role", "pair", "_signals", "_base", "_round") if k in best}
         return [{**chosen, **decided, "delta": best["delta"] + best["score"] - chosen["score"],
-                 "effect_kind": effect_kind(chosen, env), "calibrated_score": value}]
+                 "effect_kind": effect_kind(chosen, env), "calibrated_score": value, "alternatives": others}]
 
     def find(self, nominal: Base, val0) -> tuple[list[dict], Base]:
         found, base, val = [], nominal, val0

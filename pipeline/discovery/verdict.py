@@ -81,6 +81,22 @@ def equivalents(best: dict, ranked: list[dict], structure) -> list[dict]:
     return out
 
 
+def alternatives(best: dict, scored: list[tuple[float, dict]], score: float) -> list[dict]:
+    """The other laws of ``best``'s component that explain the data as well (``scored``: (score,
+    law) pairs; ``score``: best's), each with its equation and score difference: the data do
+    not choose between them (a tank's outflow as a cubic, or as exp plus Torricelli, 2.5 apart
+    in the BIC, named one or the other by the last digit of a run)."""
+    out = []
+    for value, c in sorted(scored, key=lambda x: x[0]):
+        if (c is best or "parts" in c or c.get("component") != best["component"] or value - score > EQUAL
+                or (c.get("family"), c.get("equation")) == (best.get("family"), best.get("equation"))):
+            continue
+        w = (np.asarray(c["w"]) * np.asarray(c["active"])).tolist() if "w" in c and "active" in c else None
+        out.append({"equation": c.get("equation") or spec_name(c["template"]), "family": c.get("family"),
+                    "template": c.get("template"), "w": w, "score_difference": float(value - score)})
+    return out
+
+
 def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: float, signals: dict | None = None):
     """(causes, why not, score of the model without them): the winning law, or both laws of a
     winning pair, each with its lead over the best candidate that shares none of its components
@@ -112,7 +128,8 @@ def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: f
     delta = min(others + [nominal_score]) - best["score"]
     shared = {k: best.get(k) for k in ("score", "rss", "train_rms", "validation_rms", "simulations")}
     causes = [{**law, **shared, "delta": delta, "equivalents": equivalents(law, ranked if len(laws) == 1 else [], structure),
-               "effect_kind": kind(law), "role": roles.get(law["component"]), "pair": len(laws) > 1}
+               "effect_kind": kind(law), "role": roles.get(law["component"]), "pair": len(laws) > 1,
+               "alternatives": alternatives(law, [(c["score"], c) for c in ranked], law["score"]) if len(laws) == 1 else []}
               for law in laws]
     return causes, None, nominal_score
 

@@ -246,47 +246,63 @@ static int met(const double* seen, int n, const double* d) {
     return 0;
 }
 
-/* Modelica's event iteration at t with the flags in m->flags, on m->st.x. *changed gets bit 1
- * when a discrete value changed, bit 2 when a continuous state did (reinit). */
-static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
+/* Modelica's event iteration at t with the flags in m->flags, from m->st.x into m->cur (its
+ * states reinit'ed), as engine_casadi._Hybrid._iterate: 0 settled, 1 no convergence, -1 failed.
+ * promote: once the values cycle with pre() held, pre() takes each new value. */
 #if HYBRID
+static int settle(Model* m, double t, const double* u, int promote) {
     State* s = &m->st;
     double *cur = m->cur, *pre = m->pre, *nw = m->nw;
-    int has_reinit = 0, nseen = 0;
+    int has_reinit = 0, nseen = 0, cycles = 0;
     memcpy(cur, s->x, NX * sizeof(double));
     memcpy(pre, cur, NX * sizeof(double));
     for (int it = 0; it < MAX_EVENT_ITERATIONS; it++) {
         if (call_update(m, cur, u, t, pre, nw)) {
             logmsg(m, fmi2Error, "event iteration failed at t = %g", t);
-            return fmi2Error;
+            return -1;
         }
         for (int i = 0; i < NX; i++)
-            if (!isfinite(nw[i])) { logmsg(m, fmi2Error, "event iteration gave non-finite values at t = %g", t); return fmi2Error; }
+            if (!isfinite(nw[i])) { logmsg(m, fmi2Error, "event iteration gave non-finite values at t = %g", t); return -1; }
         if (!same(nw, cur, NC)) { memcpy(m->reinit, nw, NC * sizeof(double)); has_reinit = 1; }
         memcpy(nw, cur, NC * sizeof(double));      /* states keep their values until the rest settles */
         memcpy(m->seen + nseen * ND, cur + NC, ND * sizeof(double));
         nseen++;
-        if (met(m->seen, nseen, nw + NC)) one_change(cur, nw);
+        if (met(m->seen, nseen, nw + NC)) { one_change(cur, nw); cycles++; }
         if (same(nw, cur, NX)) {
             if (same(cur, pre, NX)) {
-                if (!has_reinit) {
-                    if (changed && !same(cur + NC, s->x + NC, ND)) *changed |= 1;
-                    if (changed && !same(cur, s->x, NC)) *changed |= 2;
-                    memcpy(s->x, cur, NX * sizeof(double));
-                    m->dirty = 1;
-                    return fmi2OK;
-                }
+                if (!has_reinit) return 0;
                 memcpy(cur, m->reinit, NC * sizeof(double));   /* then settle again with the new states */
                 has_reinit = 0;
             }
             memcpy(pre, cur, NX * sizeof(double));
             nseen = 0;
+            cycles = 0;
             continue;
         }
         memcpy(cur, nw, NX * sizeof(double));
+        if (promote && cycles > 1) memcpy(pre, cur, NX * sizeof(double));
     }
-    logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
-    return fmi2Error;
+    return 1;
+}
+#endif
+
+/* Modelica's event iteration at t with the flags in m->flags, on m->st.x. *changed gets bit 1
+ * when a discrete value changed, bit 2 when a continuous state did (reinit). */
+static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
+#if HYBRID
+    State* s = &m->st;
+    int r = settle(m, t, u, 0);
+    if (r == 1) r = settle(m, t, u, 1);
+    if (r < 0) return fmi2Error;
+    if (r == 1) {
+        logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
+        return fmi2Error;
+    }
+    if (changed && !same(m->cur + NC, s->x + NC, ND)) *changed |= 1;
+    if (changed && !same(m->cur, s->x, NC)) *changed |= 2;
+    memcpy(s->x, m->cur, NX * sizeof(double));
+    m->dirty = 1;
+    return fmi2OK;
 #else
     (void)m; (void)t; (void)u; (void)changed;
     return fmi2OK;
