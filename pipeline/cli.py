@@ -125,10 +125,11 @@ def cmd_simulate(args) -> int:
     from .services import simulate
     from .data import read_csv, write_csv
     from .outputs import check_input, check_output, record
-    from .simulation import SimulationOptions
+    from .simulation import RUN_TIME_LIMIT, SimulationOptions
 
     params = _parse_params(args.param)
-    options = SimulationOptions.from_dict({"rtol": args.rtol, "atol": args.atol, "time_limit": args.time_limit},
+    limit = RUN_TIME_LIMIT if args.time_limit is None else args.time_limit
+    options = SimulationOptions.from_dict({"rtol": args.rtol, "atol": args.atol, "time_limit": limit},
                                           option=_flag)
     _libraries(args)
     data = check_input(args.input, "data file")
@@ -408,7 +409,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--compiler", help="compiler plugin by name, for Modelica sources")
     p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance, in (0, 1) (default 1e-6)")
     p.add_argument("--atol", type=float, default=1e-10, help="absolute tolerance, > 0 (default 1e-10)")
-    p.add_argument("--time-limit", type=float, default=60.0, help="seconds before giving up, > 0 (default 60)")
+    p.add_argument("--time-limit", type=float, default=None,
+                   help="seconds before giving up, > 0 (default: 600, mcl.simulation.RUN_TIME_LIMIT)")
     _force_option(p, "a result or plot")
     p.set_defaults(func=cmd_simulate)
 

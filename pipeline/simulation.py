@@ -20,6 +20,11 @@ from .data import TimeSeries
 from .errors import ConfigError
 
 
+#: seconds a simulation the user asks for (``mcl simulate``, :func:`mcl.simulate`) may take by
+#: default: a 10 s machine model with a load dump takes 220 CPU-s; a fit's runs keep 60 s
+RUN_TIME_LIMIT = 600.0
+
+
 @dataclass
 class SimulationOptions:
     """Solver settings shared by the engines."""

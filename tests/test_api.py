@@ -17,13 +17,29 @@ from test_discover import setup_run
 def test_public_names_are_the_functions():
     import mcl.simulation  # importing the module must not shadow the function
 
-    assert callable(simulate) and simulate.__module__ == "mcl.services"   # re-exported by mcl.api
+    assert callable(simulate) and simulate.__module__ == "mcl.api"   # the services' with a run's time limit
     assert mcl.simulate is simulate and mcl.compile_model is compile_model and callable(discover)
     assert mcl.Discovery is Discovery
     from mcl.plugins import executors, templates  # noqa: F401  built-ins inside the namespace
 
     assert (mcl.modelica.MCL_LIBRARY / "package.mo").is_file()
     assert mcl.__version__ == mcl.compile.library.mcl_version()
+
+
+def test_a_simulation_the_user_asks_for_may_take_ten_minutes_a_fit_s_one(monkeypatch):
+    """mcl.simulate (and mcl simulate) give one run RUN_TIME_LIMIT (a 10 s machine model with a
+    load dump takes 220 CPU-s); options that set a limit, or a SimulationOptions, keep theirs;
+    the fits' runs (the services' simulate) keep SimulationOptions' own 60 s."""
+    from mcl import services
+    from mcl.simulation import RUN_TIME_LIMIT, SimulationOptions
+
+    seen = []
+    monkeypatch.setattr(services, "simulate", lambda model, inputs, params, t_out, options, *rest: seen.append(options))
+    for options in (None, {"rtol": 1e-8}, {"time_limit": 5.0}, SimulationOptions(time_limit=7.0)):
+        simulate(None, None, options=options)
+    limit = lambda o: o.time_limit if isinstance(o, SimulationOptions) else o["time_limit"]
+    assert [limit(o) for o in seen] == [RUN_TIME_LIMIT, RUN_TIME_LIMIT, 5.0, 7.0] and seen[1]["rtol"] == 1e-8
+    assert SimulationOptions().time_limit == 60.0 and RUN_TIME_LIMIT == 600.0
 
 
 def test_mcl_library_carries_the_distribution_version():
