@@ -116,6 +116,10 @@ class _Stop(Exception):
     """A simulation ends early: its reason is the failed result's."""
 
 
+class _Unsettled(_Stop):
+    """The event iteration found no fixed point of the discrete values."""
+
+
 class _SolverFailed(_Stop):
     """The solver gave up (an error, or too much work where time was not short): a hybrid run
     first looks for a crossing it ran into (:meth:`_Hybrid.probe`)."""
@@ -681,9 +685,7 @@ class _Hybrid:
             return x
         try:
             return self._iterate(plan, x, p, t, flags, False)
-        except _Stop as exc:
-            if "did not converge" not in str(exc):
-                raise
+        except _Unsettled as exc:
             try:
                 return self._iterate(plan, x, p, t, flags, True)
             except _Stop:
@@ -725,7 +727,7 @@ class _Hybrid:
                 # locks again): pre() takes each new value, as in Modelica's event iteration
                 # (the clutch starts forward, pre(startForward) then keeps it rolling)
                 pre = cur.copy()
-        raise _Stop(f"event iteration did not converge at t = {t:g} (discrete variables keep changing)")
+        raise _Unsettled(f"event iteration did not converge at t = {t:g} (discrete variables keep changing)")
 
     def initial(self, plan, x, p, t0):
         """The initial event iteration (initial() true), then the clocks ticking at t0."""

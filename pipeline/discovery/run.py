@@ -191,7 +191,8 @@ class Causes:
             return bests
         value, chosen = min(scored, key=lambda x: x[0])
         for v, law in sorted(scored, key=lambda x: x[0]):
-            log.debug("      calibrated %s %+.3g: %s", law["component"], v - value, law.get("equation") or spec_name(law["template"]))
+            log.debug("      calibrated %s %+.3g: %s", law["component"], v - value,
+                      law.get("equation") or spec_name(law["template"]))
         log.info("      with the calibration (free: %s), %s's law: %s", self.spec.free if isinstance(self.spec.free, str)
                  else ", ".join(self.spec.free), best["component"], chosen.get("equation") or spec_name(chosen["template"]))
         same = lambda a, b: (a.get("family"), a.get("equation")) == (b.get("family"), b.get("equation"))
