@@ -28,6 +28,8 @@ from .dae import Dae, check_balance, fold_initial_parameters, merge_common, reso
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
+log = logging.getLogger(__name__)
+
 _UNARY = {"negate": lambda a: -a, "plus": lambda a: a, "not": ca.logic_not}
 _BINARY = {
     "add": ca.plus, "subtract": ca.minus, "multiply": multiply, "divide": ca.rdivide, "power": ca.power,
@@ -146,6 +148,17 @@ class _Front:
 
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
+
+
+def _restatable(docs: dict[Path, tuple[str, set]]) -> bool:
+    """Whether restating changes any of the single-file documents (:meth:`_Front._load`): a
+    model unbalanced for another reason is not compiled twice."""
+    for path in docs:
+        if path.name != "package.mo":
+            text = path.read_text(encoding="utf-8", errors="replace")
+            if restated(text) != text:
+                return True
+    return False
 
 
 VIRTUAL = "/mcl-source"
@@ -423,14 +436,14 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
     try:
         return _guarded(front, lambda: front.compile(prep.docs, model))
     except rumoca.RumocaError as exc:
-        if "unbalanced model" in str(exc):
+        if "unbalanced model" in str(exc) and _restatable(prep.docs):
             # rumoca's count of a parameter bound to a call (:mod:`.bindings`): the model
             # again with those bindings restated, else its own error
             try:
                 compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True))
             except rumoca.RumocaError:
                 raise exc from None
-            logging.getLogger(__name__).info("%s: compiled with its parameters bound to function calls restated (f(...) + 0): "
+            log.info("%s: compiled with its parameters bound to function calls restated (f(...) + 0): "
                      "rumoca counts such a binding as an equation", model)
             return compiled
         if _UNVALUED.search(str(exc)):
@@ -498,10 +511,8 @@ def _outer_restated(prep: Prepared, roots: list[str], model: str, flat: dict):
     try:
         return _modified(_front(roots), model, bound)
     except rumoca.RumocaError as exc:
-        import logging
-
-        logging.getLogger(__name__).warning("%s: the branches chosen by %s may follow the outer class's "
-                                            "defaults (rumoca: %s)", model, ", ".join(bound), _first_line(exc))
+        log.warning("%s: the branches chosen by %s may follow the outer class's defaults (rumoca: %s)",
+                    model, ", ".join(bound), _first_line(exc))
         return None
 
 
@@ -536,8 +547,6 @@ MAX_STARTED = 8
 def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], exc):
     """rumoca's compiled model extending ``model`` that gives each parameter rumoca needs, and
     that has only a start value, that value; None where one has no literal start value."""
-    import logging
-
     import rumoca
 
     from .classes import LibraryClasses
@@ -558,7 +567,7 @@ def _started(front: _Front, prep: Prepared, model: str, libs: dict[str, Path], e
             exc = again
             continue
         for n, v in values.items():
-            logging.getLogger(__name__).warning("parameter %s has no value: its start value %s is used", n, v)
+            log.warning("parameter %s has no value: its start value %s is used", n, v)
         return compiled
     return None
 
