@@ -255,6 +255,10 @@ class Template:
         """The law as a Modelica equation in v, i, dv, di, va, vb and the parameters."""
         raise NotImplementedError
 
+    def written_law(self, w) -> str:
+        """The law as a learned class states it for the fitted ``w`` (:meth:`modelica_class`)."""
+        return self.law()
+
     def residual(self, w, env: dict) -> np.ndarray:
         """G(xi; w) evaluated on arrays of v, i (and dv, di, va, vb): zero where the law holds."""
         raise NotImplementedError
@@ -303,18 +307,22 @@ class Template:
         """What each parameter is, for the Modelica class (one per parameter name)."""
         return ["scale of the law" if k == 0 else "" for k in range(len(self.parameter_names()))]
 
-    def modelica_class(self, class_name: str, component: Component, w=None, note: str = "") -> str:
+    def modelica_class(self, class_name: str, component: Component, w=None, note: str = "",
+                       learned: bool = False) -> str:
         """A component class implementing the template, with the connectors of ``component``;
-        ``note`` goes into the class description (e.g. the range the law was learned on)."""
+        ``note`` goes into the class description (e.g. the range the law was learned on). A
+        ``learned`` law is written without the terms pruned to 0 (:meth:`written_law`); a law
+        still to be fitted keeps every term (a 0 is a start value)."""
         a, b = component.connectors
         w = self.start() if w is None else np.asarray(w, dtype=float)
+        law = self.written_law(w) if learned else self.law()
         params = "\n".join(f"  parameter Real {n} = {float(v)!r}" + (f' "{d}"' if d else "") + ";"
                            for n, v, d in zip(self.parameter_names(), w, self.parameter_descriptions()))
         if getattr(component, "signal", False):       # a block: its output i in its input v
             return (f'block {class_name} "{self.description} (mcl template {self.name}){note}"\n'
                     f"  {a.cls} {a.name};\n  {b.cls} {b.name};\n"
                     f'  Real v "the input";\n  Real i "the output";\n{params}\n'
-                    f"equation\n  v = {a.name};\n  i = {b.name};\n  {self.law()};\nend {class_name};\n")
+                    f"equation\n  v = {a.name};\n  i = {b.name};\n  {law};\nend {class_name};\n")
         xa, fa, xb, fb = a.potential[0], a.flow[0], b.potential[0], b.flow[0]
         memory = ""
         if "dv" in self.uses:
@@ -333,7 +341,7 @@ class Template:
                 f'  Real i "flow into {a.name}";\n{memory}{params}\n'
                 f"equation\n  v = {a.name}.{xa} - {b.name}.{xb};\n"
                 f"  0 = {a.name}.{fa} + {b.name}.{fb};\n  i = {a.name}.{fa};\n{mem_eq}"
-                f"  {self.law()};\nend {class_name};\n")
+                f"  {law};\nend {class_name};\n")
 
     @property
     def law_variable(self) -> str:
@@ -517,6 +525,16 @@ class PolynomialTemplate(Template):
         names = self.parameter_names()
         k = len(self.lhs)
         return f"{self._side(names[:k], self.lhs)} = {self._side(names[k:], self.rhs)}"
+
+    def written_law(self, w) -> str:
+        """The law without the terms pruned to 0: a term that is gone is not written, since it
+        may still not be evaluable where the law runs (0*sqrt(|v|) has a Jacobian of 0*inf =
+        NaN at v = 0, and a recompiled model fails its first step)."""
+        names, w = self.parameter_names(), np.asarray(w, float)
+        k, n = len(self.lhs), len(self.terms)
+        kept = [j for j in range(n) if w[j] != 0.0]
+        side = lambda js: self._side([names[j] for j in js], [self.terms[j] for j in js])
+        return f"{side([j for j in kept if j < k])} = {side([j for j in kept if j >= k])}"
 
     def features(self, env: dict, w=None) -> np.ndarray:
         """Signed features phi with G = phi @ w (lhs positive, rhs negative): columns per term,

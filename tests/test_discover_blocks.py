@@ -160,3 +160,85 @@ def test_the_gains_of_a_physical_models_measuring_chain_are_not_searched_but_may
                                        "data: {train: train.csv}\nunknown: sensor\noutput: out\n")
     spec, lines = parse_runfile(tmp_path / "run.yaml")
     check_data(spec, lines)            # no error: the sensor may take a law when named
+
+
+CHAIN = """
+model Chain "a Wiener-Hammerstein chain: a filter, an amplifier stage taken as linear, a filter"
+  import Modelica.Blocks;
+  import Modelica.Blocks.Types.Init;
+  Blocks.Interfaces.RealInput u "input voltage";
+  Blocks.Interfaces.RealOutput y "output voltage";
+  Blocks.Continuous.FirstOrder G1(k=1, T=0.05, initType=Init.InitialState, y_start=0) "input filter";
+  Blocks.Math.Gain stage(k=1) "a diode-clamped stage, taken as linear";
+  Blocks.Continuous.SecondOrder G2(k=1, w=20, D=0.4, initType=Init.InitialState, y_start=0, yd_start=0)
+    "output filter";
+equation
+  connect(u, G1.u);
+  connect(G1.y, stage.u);
+  connect(stage.y, G2.u);
+  connect(G2.y, y);
+end Chain;
+"""
+
+#: the stage as built: a diode clamps its output above about 0.5 V (a knee 0.05 V wide)
+CLAMPED = lambda x: x - 0.05 * np.logaddexp(0.0, (x - 0.5) / 0.05)
+
+
+def chain_data(path, seed):
+    """The measured output (noise 2e-3) for an input of five sines of random phase."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 10, 1001)
+    parts = [(a, w, p) for a, w, p in zip((0.5, 0.4, 0.3, 0.3, 0.2), (0.7, 1.9, 3.7, 6.1, 9.5), rng.uniform(0, 6.3, 5))]
+    u = lambda s: sum(a * np.sin(w * np.asarray(s, float) + p) for a, w, p in parts)
+
+    def rhs(s, x):
+        g1, g2, dg2 = x
+        return [(u(s) - g1) / 0.05, dg2, 400 * (CLAMPED(g1) - g2) - 16 * dg2]
+
+    sol = solve_ivp(rhs, (0, 10), [0, 0, 0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.01)
+    y = sol.y[1] + rng.normal(0, 0.002, len(t))
+    path.write_text("time,u,y\n" + "\n".join(f"{a:.10g},{b:.10g},{c:.10g}" for a, b, c in zip(t, u(t), y)) + "\n")
+
+
+@pytest.mark.slow
+def test_a_clamp_between_two_filters_is_learned_as_a_knee(tmp_path):
+    """The nonlinearity of a Wiener-Hammerstein chain, measured nowhere, is a one-sided limit:
+    the stage is named, the law has a knee where the diode starts to conduct, and the curve is
+    the clamp's over the range the filter drove it."""
+    chain_data(tmp_path / "train.csv", 1)
+    chain_data(tmp_path / "validate.csv", 2)
+    report = discovered(tmp_path, "Chain.mo", "Chain", CHAIN)
+    assert report["misfit"]["significant"]
+    cause = report["cause"]
+    assert cause["component"] == "stage", cause["effect"]
+    assert "knee" in cause["effect"], cause["effect"]
+    xs, ys = np.array(cause["law"]["curve"]).T
+    err = np.max(np.abs(ys - CLAMPED(xs))) / np.ptp(CLAMPED(xs))
+    assert err < 0.03, (err, cause["law"]["equation"])
+    g = report["gain"]
+    assert g["validation_rms_after"] < 0.1 * g["validation_rms_before"], g
+
+
+def test_what_a_calibrated_model_may_set_and_how_it_is_written(tmp_path):
+    """A TransferFunction's bb and a Filter's coefficients are protected, a Filter's nx is final:
+    ``free: auto`` leaves them, and the calibrated model is written as a modification that
+    sets whole arrays."""
+    from mcl.discovery.modelica import _modification, internal_parameters
+
+    (tmp_path / "Filters.mo").write_text("""
+model Filters
+  import Modelica.Blocks.Continuous;
+  parameter Real k = 1;
+  Continuous.TransferFunction G(b = {1}, a = {1, 2, 1});
+  Continuous.Filter F(order = 2, f_cut = 10);
+equation
+  F.u = k * sin(time);
+  G.u = F.y;
+end Filters;
+""")
+    names = ["k", "G.a[2]", "G.bb[1]", "G.x_start[1]", "F.f_cut", "F.cr[1]", "F.nx", "F.u_nominal"]
+    hidden = internal_parameters("Filters", names, [MSL], [tmp_path / "Filters.mo"])
+    assert hidden == ["G.bb[1]", "F.cr[1]", "F.nx"]
+    params = {"k": 1.0, "G.a[1]": 1.0, "G.a[2]": 2.0, "G.a[3]": 1.0, "F.f_cut": 10.0}
+    text, skipped = _modification({"k": 2.5, "G.a[2]": 3.0, "F.f_cut": 12.0}, params)
+    assert text == "k = 2.5, G(a = {1.0, 3.0, 1.0}), F(f_cut = 12.0)" and not skipped

@@ -146,3 +146,30 @@ def test_an_affine_nominal_law_keeps_its_constant():
     assert np.isclose(form.coefficients["va"], 1 / 2.53) and np.isclose(form.coefficients["1"], 0.4 / 2.53)
     plain = nominal_of({**env, "i": (h1 - 0.2) / 2.0}, {"v", "i", "va", "vb"})
     assert plain.exact and plain.coefficients == pytest.approx({"v": 0.5})
+
+
+def test_a_learned_class_leaves_out_the_terms_pruned_to_zero():
+    """A pruned sqrt(|v|) term written as 0*sqrt(|v|)*... would still be differentiated where the
+    law runs: its Jacobian 0*inf = NaN at v = 0 stopped a recompiled model at its first step.
+    A class still to be fitted keeps every term (its 0 is a start value)."""
+    tpl = PolynomialTemplate(lhs=["i"], rhs=["v", "sqrt(abs(v))*tanh(v/s1)", "s3*log(1 + exp((v - s2)/s3))"],
+                             scales={"s1": 0.2, "s2": 0.5, "s3": 0.05})
+    comp = Component("Outlet1", "Outlet", [Connector("a", "Tanks.Port", ("h",), ("q",)),
+                                           Connector("b", "Tanks.Port", ("h",), ("q",))])
+    w = [1.0, 0.9, 0.0, -1.0, 0.2, 0.5, 0.05]
+    learned = tpl.modelica_class("Outlet1_learned", comp, w, learned=True)
+    assert "w1*i = w2*v + w4*s3*log(1+exp((v-s2)/s3));" in learned and "sqrt" not in learned.split("equation")[1]
+    assert "w1*i = w2*v + w3*sqrt(abs(v))*tanh(v/s1) + w4*" in tpl.modelica_class("Outlet1_learned", comp, w)
+
+
+def test_a_knee_is_distilled_with_its_place_and_width():
+    """A clamp (slope 1 below 0.5, then 0, rounded over 0.05): the line through 0 and one knee,
+    its place and width fitted, named as a knee."""
+    from mcl.discovery.families import shape_words
+
+    x = np.linspace(-1.5, 1.4, 201)
+    f = x - 0.05 * np.logaddexp(0.0, (x - 0.5) / 0.05)
+    law = next(law for law in distillations(x, f, "v") if len(law["terms"]) == 2)
+    assert law["terms"] == ["v", "s2*log(1 + exp((v - s1)/s2))"], law
+    assert abs(law["scales"]["s1"] - 0.5) < 1e-3 and abs(law["scales"]["s2"] - 0.05) < 1e-3, law
+    assert shape_words(law["terms"][1]).startswith("a knee on one side")

@@ -20,6 +20,20 @@ _PREFIXES = {"parameter", "constant", "input", "output", "flow", "stream", "disc
              "outer", "replaceable", "redeclare", "each", "public", "protected", "expandable"}
 
 
+def _read_import(info: "ClassInfo", statement: str) -> None:
+    """An import clause into ``info``: ``import A.B.C``, ``import X = A.B``, ``import A.B.*``,
+    ``import A.B.{C, D}``."""
+    body = re.sub(r"\s+", "", statement[len("import"):])
+    if m := re.fullmatch(r"(\w+)=([\w.]+)", body):
+        info.imports[m.group(1)] = m.group(2)
+    elif body.endswith(".*"):
+        info.wildcards.append(body[:-2])
+    elif m := re.fullmatch(r"([\w.]+)\.\{([\w,]+)\}", body):
+        info.imports.update({n: f"{m.group(1)}.{n}" for n in m.group(2).split(",")})
+    elif re.fullmatch(r"[\w.]+", body):
+        info.imports[body.rsplit(".", 1)[-1]] = body
+
+
 @dataclass
 class ClassInfo:
     name: str                      # fully qualified
@@ -28,6 +42,8 @@ class ClassInfo:
     declarations: list[tuple[set, str, str, bool]] = field(default_factory=list)  # prefixes, type, name, conditional
     short: str | None = None       # `connector RealInput = input Real`: the right-hand side
     starts: dict[str, str] = field(default_factory=dict)   # a declaration's literal start value
+    imports: dict[str, str] = field(default_factory=dict)  # import A.B.C / X = A.B: the short name's class
+    wildcards: list[str] = field(default_factory=list)     # import A.B.*: the packages searched
 
 #: a literal start value in a declaration's modifier: ``period(final min=small, start=1)``
 _START = re.compile(r"\bstart\s*=\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|true|false)\s*[,)]")
@@ -143,9 +159,13 @@ class LibraryClasses:
         if body.startswith("="):
             info.short = body[1:].strip()
             return info
+        hidden = False           # in a protected section: not modifiable from outside
         for st in _statements(_without_nested(body)):
             words = st.split()
-            if not words or words[0] == "import":
+            if not words:
+                continue
+            if words[0] == "import":
+                _read_import(info, st)
                 continue
             if words[0] == "extends":
                 info.extends.append(re.match(r"extends\s+([\w.]+)", st).group(1))
@@ -154,6 +174,9 @@ class LibraryClasses:
             prefixes = set()
             while tokens and tokens[0] in _PREFIXES:
                 prefixes.add(tokens.pop(0))
+            hidden = "protected" in prefixes or (hidden and "public" not in prefixes)
+            if hidden:
+                prefixes.add("protected")
             if len(tokens) < 2 or not re.match(r"[A-Za-z_]", tokens[0]):
                 continue
             type_name, k = tokens[0], 1
@@ -170,8 +193,17 @@ class LibraryClasses:
                 info.starts[tokens[k]] = start.group(1)
         return info
 
-    def resolve(self, name: str, scope: str) -> ClassInfo | None:
-        """``name`` as written inside class ``scope``: looked up from the innermost scope out."""
+    def resolve(self, name: str, scope: str, info: ClassInfo | None = None) -> ClassInfo | None:
+        """``name`` as written inside class ``scope``: through the imports of ``info`` (the class
+        it is written in), then looked up from the innermost scope out."""
+        if info is not None:
+            head, _, rest = name.partition(".")
+            if head in info.imports:
+                return self.find(info.imports[head] + (f".{rest}" if rest else ""))
+            for package in info.wildcards:
+                found = self.find(f"{package}.{name}")
+                if found is not None:
+                    return found
         parts = scope.split(".")
         for k in range(len(parts), -1, -1):
             found = self.find(".".join([*parts[:k], name]))
@@ -190,7 +222,7 @@ class LibraryClasses:
         for b in self.bases(info):
             out += self.members(b, seen)
         for prefixes, type_name, name, conditional in info.declarations:
-            out.append((prefixes, self.resolve(type_name, info.name) or self.resolve(type_name, scope),
+            out.append((prefixes, self.resolve(type_name, info.name, info) or self.resolve(type_name, scope),
                         type_name, name, conditional))
         return out
 

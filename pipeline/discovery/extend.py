@@ -160,10 +160,12 @@ def unit_of(name: str, units: dict) -> str | None:
     return units.get(name)
 
 
-def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs):
+def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs, calibrated: dict | None = None):
     """The extended model: simulated from the compiled DAE with every learned law (what was
     fitted), written as Modelica, compiled again and exported as an FMU; the cause of each
-    round records the files. Returns (training outputs, validation outputs, files)."""
+    round records the files. With a calibration (``free:``), the model written and exported is
+    the calibrated one, and it is checked against the calibrated run. Returns (training
+    outputs, validation outputs, files)."""
     from ..services import compile_model, simulate
     from ..compile.fmu.export import build_fmu
 
@@ -173,7 +175,8 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs)
     y_val = pick(simulate(model, validate)) if validate is not None else None
     ext_dir = part / "extended"
     log.info("[4/5] extended model: Modelica, compiled again, and an FMU")
-    sources, name, package, notes = write_extended(causes, base, spec, ext_dir, _data_words(spec, train))
+    sources, name, package, notes = write_extended(causes, base, spec, ext_dir, _data_words(spec, train), calibrated)
+    y_ref = pick(simulate(model, train, calibrated["params"])) if calibrated else y_train
     files = {"modelica": str(package.relative_to(part)), "sources": [str(s.relative_to(part)) for s in sources],
              "model": name, "notes": notes}
     try:
@@ -182,9 +185,12 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs)
         fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu", experiment=train)
         files["fmu"] = str(fmu.relative_to(part))
         check = simulate(ext.with_outputs(train.names), train)
-        if check.ok and y_train is not None:
+        if check.ok and y_ref is not None:
             y_check = check.outputs[:, [ext.with_outputs(train.names).output_names.index(o) for o in outputs]]
-            files["recompiled_difference"] = float(np.max(np.abs(y_check - y_train)))
+            files["recompiled_difference"] = float(np.max(np.abs(y_check - y_ref)))
+        elif not check.ok:
+            files["error"] = f"the written extended model does not simulate the training data: {check.reason}"
+            log.warning("      %s", files["error"])
     except Exception as exc:  # noqa: BLE001 - the learned laws stand; the written model is reported
         files["error"] = f"the written extended model does not compile: {getattr(exc, 'message', exc)}"
         log.warning("      %s", files["error"])

@@ -186,13 +186,19 @@ _SHAPES = ("tanh({x}/{s})", "sinh({x}/{s})", "{x}/sqrt(1 + ({x}/{s})^2)", "exp({
 #: tank's bottom, or by a sensor whose zero is not the opening's height)
 _TORRICELLI = "sqrt(abs({x} - {s}))*sign({x} - {s})"
 
+#: a knee: the slope changes by 1 about x = s (above it, or below -s), rounded over a width w
+#: (a softplus): a diode that starts to conduct, a clamp, a limit on one side, a dead zone or a
+#: stop on one side; with the line through 0 it is a one-sided saturation of any sharpness
+_KNEES = ("{w}*log(1 + exp(({x} - {s})/{w}))", "{w}*log(1 + exp(-({x} + {s})/{w}))")
+
 
 #: what an engineer calls each shape (the effect's words)
 _SHAPE_WORDS = {"tanh({x}/{s})": "Coulomb-like friction or saturation", "sinh({x}/{s})": "an exponential rise on both sides",
                 "{x}/sqrt(1 + ({x}/{s})^2)": "saturation", "exp({x}/{s}) - 1": "an exponential rise (a diode, an overflow)",
                 "{x} - {s}*tanh({x}/{s})": "a dead zone", "tanh({x}/{s})*exp(-({x}/{s})^2)": "the Stribeck effect",
                 "sqrt(abs({x}))*tanh({x}/{s})": "a square root (an orifice)",
-                _TORRICELLI: "a square root of the level above an opening (Torricelli)"}
+                _TORRICELLI: "a square root of the level above an opening (Torricelli)",
+                **{k: "a knee on one side (a diode's, a clamp's or a stop's)" for k in _KNEES}}
 
 
 def shape_words(term: str, signal: bool = False) -> str:
@@ -206,63 +212,78 @@ def shape_words(term: str, signal: bool = False) -> str:
 
 
 #: a shape's scale in a term: named (s1, s2, ...) or a number (a family's fixed scales)
-_SCALE = r"(?P<s>s\d+|(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
+_SCALE = r"(?:s\d+|(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)"
+#: the placeholders of a shape: the variable, and the scales it is fitted in
+_SLOTS = {"{x}": r"[a-z]+", "{s}": _SCALE, "{w}": _SCALE}
 
 
 def _pattern(shape: str) -> str:
-    """A regular expression for ``shape`` with any variable and any scale, named or a number."""
-    parts = re.split(r"(\{x\}|\{s\})", shape.replace(" ", ""))
+    """A regular expression for ``shape`` with any variable and any scales, named or numbers."""
+    parts = re.split(r"(\{[xsw]\})", shape.replace(" ", ""))
     out, seen = [], set()
     for p in parts:
-        if p in ("{x}", "{s}"):
+        if p in _SLOTS:
             g = p[1]
-            out.append(f"(?P={g})" if g in seen else (r"(?P<x>[a-z]+)" if g == "x" else _SCALE))
+            out.append(f"(?P={g})" if g in seen else f"(?P<{g}>{_SLOTS[p]})")
             seen.add(g)
         else:
             out.append(re.escape(p))
     return "".join(out)
 
 
-def basis(x: np.ndarray, name: str) -> list[tuple[str, float | None]]:
-    """Candidate terms in the variable ``name`` for a law visited over ``x``, as (pattern, scale):
+def _slots(pattern: str) -> list[str]:
+    """The scales a shape is fitted in, in order (s, then w where it has one)."""
+    return [g for g in ("s", "w") if "{" + g + "}" in pattern]
+
+
+def basis(x: np.ndarray, name: str) -> list[tuple[str, tuple | None]]:
+    """Candidate terms in the variable ``name`` for a law visited over ``x``, as (pattern, scales):
     polynomials, |x| x, and the shapes of friction, saturation and exponential laws at scales
-    spread over the visited span (the scale of a chosen shape is then fitted); in a connector's
-    own potential (va, vb) also a constant (an outflow that starts above the bottom); in a
-    variable that stays above 0 (a level) also Torricelli's square root of its height above an
-    opening, the opening's height s fitted (the level's datum is rarely the opening's)."""
+    spread over the visited span (the scale of a chosen shape is then fitted); knees on either
+    side at a few places and widths; in a connector's own potential (va, vb) also a constant (an
+    outflow that starts above the bottom); in a variable that stays above 0 (a level) also
+    Torricelli's square root of its height above an opening, the opening's height s fitted (the
+    level's datum is rarely the opening's)."""
     span = float(np.max(np.abs(x))) or 1.0
     terms = [(t, None) for t in ("{x}", "{x}^2", "{x}^3", "{x}*abs({x})", "sqrt(abs({x}))*sign({x})")]
-    shapes = [(shape, k * span) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
+    shapes = [(shape, (k * span,)) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
+    shapes += [(knee, (k * span, w * span)) for knee in _KNEES for k in (0.1, 0.3, 0.6) for w in (0.03, 0.15)]
     if name in ("va", "vb"):
         terms.insert(0, ("1", None))
     if np.min(x) > 0:      # a level (or a drop) that stays above 0: an opening may sit above its datum
-        shapes += [(_TORRICELLI, k * float(np.min(x))) for k in (0.25, 0.5, 0.75, 0.9)]
+        shapes += [(_TORRICELLI, (k * float(np.min(x)),)) for k in (0.25, 0.5, 0.75, 0.9)]
     return terms + shapes
 
 
-def _text(term, name: str, scale=None, digits: int = 4) -> str:
-    pattern, s = term
-    if s is None:
+def _text(term, name: str, scales=None, digits: int = 4) -> str:
+    pattern, grid = term
+    if grid is None:
         return pattern.format(x=name)
-    return pattern.format(x=name, s=f"{(scale if scale is not None else s):.{digits}g}")
+    values = scales if scales is not None else grid
+    return pattern.format(x=name, **{g: f"{v:.{digits}g}" for g, v in zip(_slots(pattern), values)})
 
 
-def _values(term, x, name, scale=None) -> np.ndarray:
+def _values(term, x, name, scales=None) -> np.ndarray:
     from ..templates import Monomial
 
     with np.errstate(all="ignore"):
-        return np.broadcast_to(Monomial.parse(_text(term, name, scale, digits=17)).value({name: x}), np.shape(x))
+        return np.broadcast_to(Monomial.parse(_text(term, name, scales, digits=17)).value({name: x}), np.shape(x))
 
 
 def _fit_scales(chosen, x, f, name):
     """Fitted scales of the shapes among ``chosen`` (variable projection: least squares in the
-    coefficients inside); returns (rms error, scales by position, coefficients)."""
+    coefficients inside); returns (rms error, scales by position (a tuple each), coefficients)."""
     from scipy.optimize import least_squares
 
     shaped = [k for k, t in enumerate(chosen) if t[1] is not None]
+    cuts = np.cumsum([0] + [len(chosen[k][1]) for k in shaped])
+
+    def split(log_s):
+        s = np.exp(log_s)
+        return {k: tuple(s[a:b]) for k, a, b in zip(shaped, cuts[:-1], cuts[1:])}
 
     def design(log_s):
-        s = dict(zip(shaped, np.exp(log_s)))
+        s = split(log_s)
         return np.column_stack([_values(t, x, name, s.get(k)) for k, t in enumerate(chosen)])
 
     def solve(log_s):
@@ -272,11 +293,11 @@ def _fit_scales(chosen, x, f, name):
         c, *_ = np.linalg.lstsq(A, f, rcond=None)
         return f - A @ c, c
 
-    log_s = np.log([chosen[k][1] for k in shaped])
+    log_s = np.log([v for k in shaped for v in chosen[k][1]])
     if shaped:
         log_s = least_squares(lambda ls: solve(ls)[0], log_s, x_scale=1.0, diff_step=1e-6).x
     r, c = solve(log_s)
-    return float(np.sqrt(np.mean(r**2))), dict(zip(shaped, np.exp(log_s))), c
+    return float(np.sqrt(np.mean(r**2))), split(log_s), c
 
 
 def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
@@ -312,7 +333,7 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
             err, scales, c = _fit_scales(chosen, x, f, name)
             # at equal fit the plainer law: a shape is a small cost, one whose scale ran far
             # beyond the visited span (a tanh become linear) a large one
-            score = err / scale + 1e-4 * len(scales) + sum(s > 20 * span for s in scales.values())
+            score = err / scale + 1e-4 * len(scales) + sum(s > 20 * span for v in scales.values() for s in v)
             if score < best[0]:
                 best = (score, _law(chosen, name, scales, c, err))
         if best[1] is not None:
@@ -324,11 +345,13 @@ def _law(chosen, name: str, scales: dict, c, err: float) -> dict:
     """A distilled law: its terms with named scales (s1, s2, ...: fitted further by simulation),
     their values, the coefficients and the curve error."""
     terms, named = [], {}
-    for k, (pattern, s) in enumerate(chosen):
-        if s is None:
+    for k, (pattern, grid) in enumerate(chosen):
+        if grid is None:
             terms.append(pattern.format(x=name))
             continue
-        key = f"s{len(named) + 1}"
-        named[key] = float(scales.get(k, s))
-        terms.append(pattern.format(x=name, s=key))
+        keys = {}
+        for g, v in zip(_slots(pattern), scales.get(k, grid)):
+            keys[g] = f"s{len(named) + 1}"
+            named[keys[g]] = float(v)
+        terms.append(pattern.format(x=name, **keys))
     return {"terms": terms, "scales": named, "c": np.asarray(c, float), "err": err}

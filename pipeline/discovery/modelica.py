@@ -210,10 +210,11 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
             x, s_, p = folded
             term, c = Monomial(((x, p),)), c / s_**p
         text = term.modelica()
-        for s_name, s_val in scales.items():
-            text = re.sub(rf"\b{s_name}\b", f"{s_val:.6g}", text)
+        for s_name, s_val in scales.items():      # a scale is a parameter too: a calibration sets it
+            if re.search(rf"\b{s_name}\b", text) and not any(p.startswith(f"  parameter Real {s_name} ") for p in params):
+                params.append(f'  parameter Real {s_name} = {float(s_val)!r} "a scale inside the law";')
         text = re.sub(r"\b(va|vb|dv|di|v|i)\b", lambda m: names.get(m.group(1), m.group(1)), text)
-        pname = f"c{len(params) + 1}"
+        pname = f"c{len(rhs) + 1}"
         unit = coefficient_unit(term, u)
         unit_mod = f'(unit="{unit}")' if unit else ""
         params.append(f'  parameter Real {pname}{unit_mod} = {float(c)!r} "coefficient of {html.escape(text)}";')
@@ -264,7 +265,7 @@ def _template_class(cause: dict, comp, template, libraries, sources, scope: str 
         raise ValueError(f"the connector classes of {comp.name} ({comp.cls or 'class unknown'}) are not found")
     note = "; " + cause["law"]["note"]
     return template.modelica_class(cause["learned_class"], dataclasses.replace(comp, connectors=conns),
-                                   np.asarray(cause["w"]), note)
+                                   np.asarray(cause["w"]), note, learned=True)
 
 
 def _statement_end(text: str, start: int) -> int:
@@ -330,23 +331,30 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
     return None
 
 
-def write_extended(causes: list[dict], base, spec, directory: Path, data: str = "") -> tuple[list[Path], str, Path, list[str]]:
+def write_extended(causes: list[dict], base, spec, directory: Path, data: str = "",
+                   calibrated: dict | None = None) -> tuple[list[Path], str, Path, list[str]]:
     """The extended model as Modelica in ``directory``: the package ``Learned`` with the learned
     classes, and a copy of the user's sources (or of the model's class) in which each learned
-    component is declared with its learned class. Returns (sources, model name, the Learned
-    package file, notes on what could not be written)."""
+    component is declared with its learned class; with a calibration (``calibrated``: the laws'
+    calibrated ``w`` per cause, the nominal ``values`` and all ``params``), also the class
+    :func:`calibrated_class`, which is then the model returned. Returns (sources, model name,
+    the Learned package file, notes on what could not be written)."""
     from ..compile.library import uses_annotation
 
     directory.mkdir(parents=True, exist_ok=True)
-    notes, classes, swaps = [], [], []
-    for cause in causes:
+    notes, classes, swaps, law_values = [], [], [], {}
+    for k, cause in enumerate(causes):
         comp = base.structure.components[cause["component"]]
         if "." in comp.name:
             notes.append(f"{comp.name} is inside a component: its learned class is in the package, "
                          "the model is not rewritten for it")
+        write = lambda c: learned_class(c, comp, spec.libraries, spec.sources, base.model.info.get("units", {}),
+                                        data, scope=spec.model_name)
         try:
-            classes.append(learned_class(cause, comp, spec.libraries, spec.sources, base.model.info.get("units", {}),
-                                         data, scope=spec.model_name))
+            classes.append(write(cause))
+            if calibrated and "." not in comp.name:     # the class's own parameters at their calibrated values
+                before, after = _parameter_values(classes[-1]), _parameter_values(write({**cause, "w": calibrated["w"][k]}))
+                law_values.update({f"{comp.name}.{n}": v for n, v in after.items() if before.get(n) != v})
         except ValueError as exc:
             notes.append(str(exc))
             continue
@@ -387,6 +395,13 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
                 break
         if not done:
             notes.append(f"the declaration of {name} is not in {spec.model_name}'s own text: the model is not rewritten for it")
+    if calibrated:
+        text, more = calibrated_class(short, model_name, {**calibrated["values"], **law_values}, calibrated["params"],
+                                      calibrated["free"])
+        classes.append(text)
+        notes += more + [f"{n} is not written into {short}Calibrated: its class keeps it from modifiers (protected or final)"
+                         for n in calibrated.get("unwritable", ())]
+        model_name = f"{LEARNED_PACKAGE}.{short}Calibrated"
     body = "\n".join(classes) + (f"\n{extra}" if extra else "")
     indented = "\n".join(("  " + line) if line.strip() else "" for line in body.splitlines())
     uses = uses_annotation(body, spec.libraries)
@@ -394,6 +409,12 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
     package.write_text(f'package {LEARNED_PACKAGE} "Components learned by mcl"\n{indented}\n'
                        + (f"  {uses};\n" if uses else "") + f"end {LEARNED_PACKAGE};\n")
     return [*sources, package], model_name, package, notes
+
+
+def _parameter_values(text: str) -> dict[str, float]:
+    """The Real parameters a class ``text`` declares with a number, by name."""
+    return {m.group(1): float(m.group(2)) for m in
+            re.finditer(r'parameter Real (\w+)(?:\(unit="[^"]*"\))? = ([-+\d.eE]+)[ ;]', text)}
 
 
 def _class_and_bases(short: str, texts: list[str]) -> list[str]:
@@ -438,3 +459,81 @@ def _library_class_text(model: str, libraries=()) -> str | None:
     if not m or not end:
         return None
     return text[m.start(): m.end() + end.end()].strip() + "\n"
+
+
+def internal_parameters(model: str, names, libraries=(), sources=()) -> list[str]:
+    """Of the parameters ``names`` (a.b.c, x[2]) of class ``model``, those no modifier can set:
+    an element on the path is protected or final in its class (a TransferFunction's bb, a
+    Filter's coefficients). They are the classes' own workings: ``free: auto`` leaves them, and
+    a calibrated model could not be written with them. A path not found is taken as settable."""
+    lib = _library(libraries, sources)
+    top = lib.find(model)
+    members = {}
+
+    def member(info, part):
+        if info.name not in members:
+            members[info.name] = {m[3]: m for m in lib.members(info)}
+        return members[info.name].get(part)
+
+    out = []
+    for name in names:
+        info, hidden = top, False
+        for part in re.sub(r"\[[^\]]*\]", "", name).split("."):
+            m = member(info, part) if info is not None else None
+            if m is None:
+                break
+            if {"protected", "final"} & m[0]:
+                hidden = True
+                break
+            info = m[1]
+        if hidden:
+            out.append(name)
+    return out
+
+
+def _modification(values: dict, params: dict) -> tuple[str, list[str]]:
+    """The modification (``f1 = 5050.3, G1(A_ripple = 0.559), G2(a = {1, 2e4, ...})``) that sets
+    ``values`` (dotted names, array elements as x[2]: the whole array is written, its other
+    elements at their ``params`` value); returns it and the names it cannot write (an element
+    of an array of more than one dimension, or one whose elements are not all known)."""
+    tree, skipped = {}, []
+    arrays = {}
+    for name, value in values.items():
+        m = re.fullmatch(r"(.+)\[(\d+)\]", name)
+        if m is None:
+            path, leaf = name.split("."), repr(float(value))
+        else:
+            base = m.group(1)
+            if base in arrays:
+                continue
+            elements = sorted((int(k.group(1)), n) for n in params if (k := re.fullmatch(re.escape(base) + r"\[(\d+)\]", n)))
+            if [k for k, _ in elements] != list(range(1, len(elements) + 1)):
+                skipped.append(name)
+                continue
+            arrays[base] = True
+            path = base.split(".")
+            leaf = "{" + ", ".join(repr(float(values.get(n, params[n]))) for _, n in elements) + "}"
+        if "[" in ".".join(path):
+            skipped.append(name)
+            continue
+        node = tree
+        for part in path[:-1]:
+            node = node.setdefault(part, {})
+        node[path[-1]] = leaf
+
+    def text(node) -> str:
+        return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k}({text(v)})" for k, v in node.items())
+
+    return text(tree), skipped
+
+
+def calibrated_class(short: str, extended: str, values: dict, params: dict, free) -> tuple[str, list[str]]:
+    """The model delivered with ``free:``: class ``{short}Calibrated`` extends the extended
+    model ``extended`` with the calibrated ``values`` (the nominal parameters and the learned
+    classes' own parameters, by their dotted names) as its modification. Returns the class and
+    notes on the values it cannot write."""
+    mod, skipped = _modification(values, params)
+    how = free if isinstance(free, str) else ", ".join(free)
+    notes = [f"{n} is not written into {short}Calibrated (an element of an array it cannot write whole)" for n in skipped]
+    return (f'model {short}Calibrated "{extended} with the learned laws and the parameters calibrated with them '
+            f'(free: {how})"\n  extends {extended}' + (f"({mod})" if mod else "") + f";\nend {short}Calibrated;\n"), notes

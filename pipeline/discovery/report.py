@@ -259,7 +259,10 @@ def _summary_rows(report) -> str:
         gain_rows.append(row)
     header = ["", "nominal model", "with the learned laws", "improvement"] + (
         ["laws + calibration", "improvement"] if calibrated else [])
-    return f"<table>{body}</table><h2>Before and after</h2>{_table(header, gain_rows)}"
+    own = (report.get("calibration") or {}).get("validation_initial_state")
+    note = (f"<p>The calibrated model's validation run starts from its own initial state "
+            f"({html.escape(', '.join(own))}), fitted on the head of that record.</p>") if own else ""
+    return f"<table>{body}</table><h2>Before and after</h2>{_table(header, gain_rows)}{note}"
 
 
 def _uncertainty_rows(report) -> str:

@@ -177,7 +177,8 @@ class Causes:
         score = criterion_of(self.spec.criterion).score
         # each law's calibration in a worker of its own: they are independent, and each is
         # dozens of simulations of the record searched
-        context = Calibration(nominal, found, laws, self.train, self.spec.free, self.outputs)
+        context = Calibration(nominal, found, laws, self.train, self.spec.free, self.outputs,
+                              internal(self.spec, nominal.model) if self.spec.free == "auto" else [])
         with self.reg.executor(self.spec.executor) as ex:
             done = ex.map(_calibrated, list(range(len(laws))), context=context, timeout=3600,
                           label="calibrations")
@@ -243,6 +244,7 @@ class Calibration:
     train: TimeSeries
     free: object
     outputs: list
+    internal: list
 
 
 def _calibrated(ctx: Calibration, k: int) -> dict | None:
@@ -258,7 +260,7 @@ def _calibrated(ctx: Calibration, k: int) -> dict | None:
     except ConfigError:
         return None
     names = refitted(trial["_names"], trial["active"])
-    held = [n for n in trial["_names"] if n not in names]
+    held = [n for n in trial["_names"] if n not in names] + ctx.internal
     with quiet():
         cal = calibrate(ext.model, ctx.train, None, ext.model.parameters, names, ctx.free, ctx.outputs, held)
     return {"train_rms": cal.get("train_rms"), "k": len(names) + len(cal.get("freed", ()))}
@@ -350,7 +352,8 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     if report["causes"]:
         report["cause"] = report["causes"][0]
         report["_model"] = base.model         # the extended model, for Discovery.predict (not written)
-        extended_y, ext_val, files = extend(report["causes"], base, spec, part, train, validate, outputs)
+        extended_y, ext_val, files = extend(report["causes"], base, spec, part, train, validate, outputs,
+                                            report.get("_calibrated"))
         report["extended"] = files
         if val_y is not None:
             val_y[1] = ext_val
@@ -406,9 +409,26 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
     if spec.free:
         names = [n for law in laws for n in refitted(law["names"], law["active"])]
         held = [n for law in laws for n in law["names"] if n not in names]
+        hidden = internal(spec, base.model)
         cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
-                        spec.free, outputs, held, judged_on=whole)
+                        spec.free, outputs, held + (hidden if spec.free == "auto" else []), judged_on=whole)
         report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
+        if "params" in cal:          # the model delivered (:func:`modelica.calibrated_class`)
+            report["_calibrated"] = {"params": cal["params"], "free": spec.free,
+                                     "w": [[cal["params"][n] for n in law["names"]] for law in laws],
+                                     "values": {n: cal["params"][n] for n in cal["freed"] if n not in hidden},
+                                     "unwritable": [n for n in cal["freed"] if n in hidden]}
+
+
+def internal(spec, model) -> list[str]:
+    """The parameters no modifier can set (protected or final in their classes,
+    :func:`modelica.internal_parameters`): ``free: auto`` leaves them (a list the user gives
+    stands), and the calibrated model is not written with them."""
+    from .modelica import internal_parameters
+
+    if getattr(model, "ode", None) is None:
+        return []
+    return internal_parameters(spec.model_name, model.ode.p_names, spec.libraries, spec.sources)
 
 
 def overall(noise: dict) -> float:
