@@ -217,6 +217,11 @@ def test_a_clamp_between_two_filters_is_learned_as_a_knee(tmp_path):
     assert err < 0.03, (err, cause["law"]["equation"])
     g = report["gain"]
     assert g["validation_rms_after"] < 0.1 * g["validation_rms_before"], g
+    # the learned block exports as a library of its own, beside its FMU
+    from mcl.cli import main
+
+    assert main(["export", str(tmp_path / "out"), "-o", str(tmp_path / "lib"), "--name", "Clamps"]) == 0
+    assert f"block {cause['learned_class']}" in (tmp_path / "lib" / "Clamps" / "package.mo").read_text()
 
 
 def test_what_a_calibrated_model_may_set_and_how_it_is_written(tmp_path):

@@ -62,7 +62,7 @@ def export_library(run_dir, output, name: str = "MCLLearned", force: bool = Fals
         raise ConfigError("report.json lacks the learned component's files", where=str(report_file)) from None
     if not IDENT.match(str(cls)) or not source.is_file():
         raise ConfigError("report.json names no learned class that exists", where=str(report_file))
-    m = re.search(rf"^\s*model {re.escape(cls)}\b.*?^\s*end {re.escape(cls)};", source.read_text(), re.S | re.M)
+    m = re.search(rf"^\s*(?:model|block) {re.escape(cls)}\b.*?^\s*end {re.escape(cls)};", source.read_text(), re.S | re.M)
     if not m:
         raise ConfigError(f"class {cls} not found", where=str(source))
     body = textwrap.indent(textwrap.dedent(m.group(0)), "  ")   # the class's own indentation kept
