@@ -120,11 +120,13 @@ def _gradient(template, w, active, xs):
 
 
 def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dict, laws: list[str],
-              free, outputs, held=(), judged_on: TimeSeries | None = None) -> dict:
+              free, outputs, held=(), judged_on: TimeSeries | None = None, own_start: int | None = None) -> dict:
     """The laws' parameters ``laws`` refitted together with the nominal parameters ``free``
     (names, or "auto": those the data determine). Returns what was freed, what the data cannot
     determine, the values with standard errors, and the training and validation RMS (the
-    training RMS on ``judged_on`` when given: the whole record of which ``train`` is the head)."""
+    training RMS on ``judged_on`` when given: the whole record of which ``train`` is the head).
+    Where the initial state is calibrated, the validation run starts from its own, fitted on
+    the first ``own_start`` samples of ``validate`` (default: as many as ``train`` has)."""
     from ..services import simulate
 
     nominal = [n for n in model.ode.p_names if n not in laws and n not in held and np.isfinite(params[n])]
@@ -164,7 +166,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     sim = simulate(model, whole, new)
     out["train_rms"] = rms(residual(whole, model, sim, outputs)) if sim.ok else None
     if validate is not None:
-        own = _own_start(model, validate.head(len(train.time)), new) if initial else new
+        own = _own_start(model, validate.head(own_start or len(train.time)), new) if initial else new
         sv = simulate(model, validate, own)
         out["validation_rms"] = rms(residual(validate, model, sv, outputs)) if sv.ok else None
         if own is not new:

@@ -411,7 +411,8 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
         held = [n for law in laws for n in law["names"] if n not in names]
         hidden = internal(spec, base.model)
         cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
-                        spec.free, outputs, held + (hidden if spec.free == "auto" else []), judged_on=whole)
+                        spec.free, outputs, held + (hidden if spec.free == "auto" else []), judged_on=whole,
+                        own_start=spec.max_samples)
         report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
         if "params" in cal:          # the model delivered (:func:`modelica.calibrated_class`)
             report["_calibrated"] = {"params": cal["params"], "free": spec.free,
