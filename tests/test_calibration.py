@@ -135,3 +135,22 @@ def test_a_held_out_record_is_judged_from_its_own_initial_state(tmp_path):
     assert abs(out["values"]["lag.y_start"]["after"]) < 0.05, out["values"]     # the training record's
     assert out["validation_initial_state"] == ["lag.y_start"]
     assert out["validation_rms"] < 2e-3, out        # the noise; from the training start, 0.31
+
+
+def test_a_calibrated_model_that_does_not_compile_leaves_the_laws_alone_delivered(tmp_path):
+    """Should the calibrated class not compile, the extended model with the laws alone is still
+    delivered (and compiled), and a note says why."""
+    from types import SimpleNamespace
+
+    from mcl.discovery.extend import _delivered
+
+    (tmp_path / "M.mo").write_text("model M\n  parameter Real k = 1;\n  Real x(start = 1, fixed = true);\n"
+                                   "equation\n  der(x) = -k*x;\nend M;\n")
+    (tmp_path / "Learned.mo").write_text("package Learned\n  model MCalibrated\n    extends M(k = nosuch);\n"
+                                         "  end MCalibrated;\nend Learned;\n")
+    files = {"model": "M", "notes": []}
+    spec = SimpleNamespace(model_name="M", libraries=[])
+    ext, y = _delivered(files, [tmp_path / "M.mo", tmp_path / "Learned.mo"], spec, {"params": {"k": 2.0}},
+                        lambda p: "calibrated run", "run with the laws alone")
+    assert files["model"] == "M" and ext.name == "M" and y == "run with the laws alone"
+    assert "the calibrated model does not compile" in files["notes"][0] and "nosuch" in files["notes"][0]

@@ -166,7 +166,7 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
     round records the files. With a calibration (``free:``), the model written and exported is
     the calibrated one, and it is checked against the calibrated run. Returns (training
     outputs, validation outputs, files)."""
-    from ..services import compile_model, simulate
+    from ..services import simulate
     from ..compile.fmu.export import build_fmu
 
     model = base.model
@@ -176,11 +176,10 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
     ext_dir = part / "extended"
     log.info("[4/5] extended model: Modelica, compiled again, and an FMU")
     sources, name, package, notes = write_extended(causes, base, spec, ext_dir, _data_words(spec, train), calibrated)
-    y_ref = pick(simulate(model, train, calibrated["params"])) if calibrated else y_train
     files = {"modelica": str(package.relative_to(part)), "sources": [str(s.relative_to(part)) for s in sources],
              "model": name, "notes": notes}
     try:
-        ext = compile_model(sources, name, libraries=spec.libraries)
+        ext, y_ref = _delivered(files, sources, spec, calibrated, lambda p: pick(simulate(model, train, p)), y_train)
         # the FMU's default experiment is the training data's span and sampling
         fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu", experiment=train)
         files["fmu"] = str(fmu.relative_to(part))
@@ -199,6 +198,24 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
     if spec.second:
         causes[0]["second_configuration"] = _second(spec, causes[0], base)
     return y_train, y_val, files
+
+
+def _delivered(files: dict, sources, spec, calibrated, run, y_train):
+    """The model delivered, compiled, and the outputs it must reproduce: the calibrated one
+    (with ``calibrated``) when it compiles, else the extended model with the laws alone (a note
+    says why); ``files["model"]`` names it."""
+    from ..services import compile_model
+    from .modelica import calibrated_name
+
+    if calibrated:
+        try:
+            ext = compile_model(sources, calibrated_name(spec.model_name), libraries=spec.libraries)
+            files["model"] = calibrated_name(spec.model_name)
+            return ext, run(calibrated["params"])
+        except Exception as exc:  # noqa: BLE001 - the laws alone are still a model to deliver
+            files["notes"].append(f"the calibrated model does not compile ({getattr(exc, 'message', exc)}): "
+                                  "the model with the laws alone is delivered")
+    return compile_model(sources, files["model"], libraries=spec.libraries), y_train
 
 
 def _data_words(spec, train) -> str:

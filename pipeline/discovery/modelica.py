@@ -337,8 +337,8 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
     classes, and a copy of the user's sources (or of the model's class) in which each learned
     component is declared with its learned class; with a calibration (``calibrated``: the laws'
     calibrated ``w`` per cause, the nominal ``values`` and all ``params``), also the class
-    :func:`calibrated_class`, which is then the model returned. Returns (sources, model name,
-    the Learned package file, notes on what could not be written)."""
+    :func:`calibrated_class` (named :func:`calibrated_name`). Returns (sources, the extended
+    model's name, the Learned package file, notes on what could not be written)."""
     from ..compile.library import uses_annotation
 
     directory.mkdir(parents=True, exist_ok=True)
@@ -401,7 +401,6 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
         classes.append(text)
         notes += more + [f"{n} is not written into {short}Calibrated: its class keeps it from modifiers (protected or final)"
                          for n in calibrated.get("unwritable", ())]
-        model_name = f"{LEARNED_PACKAGE}.{short}Calibrated"
     body = "\n".join(classes) + (f"\n{extra}" if extra else "")
     indented = "\n".join(("  " + line) if line.strip() else "" for line in body.splitlines())
     uses = uses_annotation(body, spec.libraries)
@@ -525,6 +524,11 @@ def _modification(values: dict, params: dict) -> tuple[str, list[str]]:
         return ", ".join(f"{k} = {v}" if isinstance(v, str) else f"{k}({text(v)})" for k, v in node.items())
 
     return text(tree), skipped
+
+
+def calibrated_name(model: str) -> str:
+    """The name of the calibrated model :func:`write_extended` writes for model ``model``."""
+    return f"{LEARNED_PACKAGE}.{model.split('.')[-1]}Calibrated"
 
 
 def calibrated_class(short: str, extended: str, values: dict, params: dict, free) -> tuple[str, list[str]]:
