@@ -92,6 +92,15 @@ def test_the_law_is_refitted_with_an_offset_written_as_zero_and_a_wrong_damping(
     ext = report["extended"]
     assert ext["model"] == "Learned.OscillatorCalibrated" and ext["recompiled_difference"] < 1e-3, ext
     assert "u0 = 0.05" in (tmp_path / "out" / ext["modelica"]).read_text()
+    # and what the Python API predicts, from the run directory, is that model's
+    from mcl import Discovery
+
+    d = Discovery("Oscillator", sources=[tmp_path / "Oscillator.mo"], libraries=[msl_path()], free=["D.d", "u0"],
+                  output=tmp_path / "out", verbose=False)
+    d._set_results(report, tmp_path / "out")
+    validate = np.loadtxt(tmp_path / "validate.csv", delimiter=",", skiprows=1)
+    y = d.predict({"time": validate[:, 0], "u": validate[:, 1]})["y"].to_numpy()
+    assert abs(np.sqrt(np.mean((y - validate[:, 2]) ** 2)) - g["validation_rms_calibrated"]) < 1e-6
 
 
 LAG = """

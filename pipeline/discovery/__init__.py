@@ -144,6 +144,8 @@ class Discovery:
         self.law_ = self.laws_[0] if self.laws_ else None
         self.candidates_ = report["candidates"]
         self.model_ = report.get("_model")       # the extended model, compiled (None when read back)
+        # with ``free:``, the values it is delivered with (read back, the delivered class has them)
+        self._delivered_params = (report.get("_calibrated") or {}).get("params")
 
     def _fitted(self) -> None:
         if not hasattr(self, "report_"):
@@ -184,7 +186,8 @@ class Discovery:
         return self.model_
 
     def predict(self, inputs, time: str | None = None, model: str = "extended"):
-        """The outputs of the extended model (``model="nominal"``: the model as given) on new
+        """The outputs of the extended model as delivered (with ``free:``, calibrated;
+        ``model="nominal"``: the model as given) on new
         ``inputs`` (a DataFrame, structured array, mapping, TimeSeries or CSV, with a time
         column): a DataFrame indexed by time."""
         from ..services import compile_model, simulate
@@ -195,7 +198,7 @@ class Discovery:
             self.spec().sources, self.model, libraries=self.spec().libraries)
         if m is None:          # nothing was learned: the model as given
             m = compile_model(self.spec().sources, self.model, libraries=self.spec().libraries)
-        res = simulate(m, data)
+        res = simulate(m, data, self._delivered_params if m is self.report_.get("_model") else None)
         if not res.ok:
             raise ConfigError(f"the {model} model does not simulate these inputs: {res.reason}")
         return res.to_frame()
