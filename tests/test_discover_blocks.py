@@ -247,3 +247,31 @@ end Filters;
     params = {"k": 1.0, "G.a[1]": 1.0, "G.a[2]": 2.0, "G.a[3]": 1.0, "F.f_cut": 10.0}
     text, skipped = _modification({"k": 2.5, "G.a[2]": 3.0, "F.f_cut": 12.0}, params)
     assert text == "k = 2.5, G(a = {1.0, 3.0, 1.0}), F(f_cut = 12.0)" and not skipped
+    assert _modification({"k": float("nan")}, params) == ("", ["k"])        # no value: not written
+
+
+def test_sections_of_a_class_are_read_in_order(tmp_path):
+    """A protected section holding only a function, then a public one: what follows public is
+    settable again; a protected import is an import, a protected extends an extends."""
+    from mcl.discovery.modelica import internal_parameters
+
+    (tmp_path / "P.mo").write_text("""
+model P
+  parameter Real a = 1;
+protected
+  function f
+    input Real x;
+    output Real y;
+  algorithm
+    y := x;
+  end f;
+public
+  parameter Real k = 2;
+protected
+  import Modelica.Units.SI;
+  parameter SI.Time T = 1;
+  extends Modelica.Icons.Example;
+equation
+end P;
+""")
+    assert internal_parameters("P", ["a", "k", "T"], [MSL], [tmp_path / "P.mo"]) == ["T"]

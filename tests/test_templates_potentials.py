@@ -164,12 +164,15 @@ def test_a_learned_class_leaves_out_the_terms_pruned_to_zero():
 
 def test_a_knee_is_distilled_with_its_place_and_width():
     """A clamp (slope 1 below 0.5, then 0, rounded over 0.05): the line through 0 and one knee,
-    its place and width fitted, named as a knee."""
+    its place and width fitted, named as a knee; far past the knee it is finite (a width of
+    1e-4: exp((v - s)/w) alone overflows)."""
     from mcl.discovery.families import shape_words
 
     x = np.linspace(-1.5, 1.4, 201)
     f = x - 0.05 * np.logaddexp(0.0, (x - 0.5) / 0.05)
     law = next(law for law in distillations(x, f, "v") if len(law["terms"]) == 2)
-    assert law["terms"] == ["v", "s2*log(1 + exp((v - s1)/s2))"], law
+    assert law["terms"] == ["v", "(v - s1 + abs(v - s1))/2 + s2*log(1 + exp(-abs(v - s1)/s2))"], law
     assert abs(law["scales"]["s1"] - 0.5) < 1e-3 and abs(law["scales"]["s2"] - 0.05) < 1e-3, law
     assert shape_words(law["terms"][1]).startswith("a knee on one side")
+    knee = Monomial.parse(law["terms"][1], ("s1", "s2"))
+    assert knee.value({"v": np.array([2.0]), "s1": 0.5, "s2": 1e-4})[0] == pytest.approx(1.5)

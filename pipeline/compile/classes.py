@@ -162,8 +162,11 @@ class LibraryClasses:
         hidden = False           # in a protected section: not modifiable from outside
         for st in _statements(_without_nested(body)):
             words = st.split()
+            while words and words[0] in ("public", "protected"):     # a section begins (the last one holds)
+                hidden = words.pop(0) == "protected"
             if not words:
                 continue
+            st = " ".join(words)
             if words[0] == "import":
                 _read_import(info, st)
                 continue
@@ -174,7 +177,6 @@ class LibraryClasses:
             prefixes = set()
             while tokens and tokens[0] in _PREFIXES:
                 prefixes.add(tokens.pop(0))
-            hidden = "protected" in prefixes or (hidden and "public" not in prefixes)
             if hidden:
                 prefixes.add("protected")
             if len(tokens) < 2 or not re.match(r"[A-Za-z_]", tokens[0]):

@@ -144,8 +144,13 @@ class Discovery:
         self.law_ = self.laws_[0] if self.laws_ else None
         self.candidates_ = report["candidates"]
         self.model_ = report.get("_model")       # the extended model, compiled (None when read back)
-        # with ``free:``, the values it is delivered with (read back, the delivered class has them)
-        self._delivered_params = (report.get("_calibrated") or {}).get("params")
+        # with ``free:``, the values it is delivered with (read back, the delivered class has them;
+        # where the calibrated class did not compile, the laws alone are delivered)
+        from .modelica import calibrated_name
+
+        delivered = (report.get("extended") or {}).get("model")
+        self._delivered_params = ((report.get("_calibrated") or {}).get("params")
+                                  if delivered == calibrated_name(self.model) else None)
 
     def _fitted(self) -> None:
         if not hasattr(self, "report_"):

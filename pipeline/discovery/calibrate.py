@@ -126,7 +126,8 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     determine, the values with standard errors, and the training and validation RMS (the
     training RMS on ``judged_on`` when given: the whole record of which ``train`` is the head).
     Where the initial state is calibrated, the validation run starts from its own, fitted on
-    the first ``own_start`` samples of ``validate`` (default: as many as ``train`` has)."""
+    the first ``own_start`` samples of ``validate`` (default: as many as ``train`` has; at most
+    a quarter of the record): the initial-state parameters ``free`` allows, not ``held``."""
     from ..services import simulate
 
     nominal = [n for n in model.ode.p_names if n not in laws and n not in held and np.isfinite(params[n])]
@@ -166,32 +167,38 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     sim = simulate(model, whole, new)
     out["train_rms"] = rms(residual(whole, model, sim, outputs)) if sim.ok else None
     if validate is not None:
-        own = _own_start(model, validate.head(own_start or len(train.time)), new) if initial else new
+        # (at most a quarter of the record: the rest is judged on what was not fitted to it)
+        head = validate.head(min(own_start or len(train.time), max(len(validate.time) // 4, 1)))
+        states = [n for n in getattr(model, "initial_parameters", ()) if n not in held and np.isfinite(params[n])
+                  and (free == "auto" or n in free)]
+        own, seen = _own_start(model, head, new, states) if initial else (new, [])
         sv = simulate(model, validate, own)
+        if not sv.ok and seen:         # a start fitted on the head that fails later: the training's
+            sv, seen = simulate(model, validate, new), []
         out["validation_rms"] = rms(residual(validate, model, sv, outputs)) if sv.ok else None
-        if own is not new:
-            out["validation_initial_state"] = sorted(n for n in own if own[n] != new[n])
+        if seen:
+            out["validation_initial_state"] = seen
     out["params"] = new
     return out
 
 
-def _own_start(model, head: TimeSeries, params: dict) -> dict:
-    """``params`` with the model's initial state refitted on the ``head`` of a held-out record
-    (where the calibration fitted the training record's): that record starts where the system
-    happened to be, not where the training record did (the Wiener-Hammerstein test record starts
-    mid-signal: its first 20 samples alone made the test error 2.8 mV, not 0.85). The laws and
-    the physical parameters stay as calibrated; a state the head does not see stays as well."""
-    names = [n for n in getattr(model, "initial_parameters", ()) if np.isfinite(params.get(n, np.nan))]
-    r, J = jacobian(model, head, params, names)
+def _own_start(model, head: TimeSeries, params: dict, states: list[str]) -> tuple[dict, list[str]]:
+    """``params`` with the initial state ``states`` refitted on the ``head`` of a held-out record
+    (where the calibration fitted the training record's), and the states the head moved: that
+    record starts where the system happened to be, not where the training record did (the
+    Wiener-Hammerstein test record starts mid-signal: its first 20 samples alone made the test
+    error 2.8 mV, not 0.85). The laws and the physical parameters stay as calibrated; a state
+    the head does not see stays as well."""
+    r, J = jacobian(model, head, params, states)
     if r is None:
-        return params
-    seen = [n for k, n in enumerate(names) if np.any(J[:, k] != 0.0)]
+        return params, []
+    seen = [n for k, n in enumerate(states) if np.any(J[:, k] != 0.0)]
     if not seen:
-        return params
+        return params, []
     own = _refit(model, head, params, seen, REFIT_BUDGET // 3)
     log.info("      validation: its own initial state (%s) fitted on its first %d samples",
              ", ".join(seen), len(head.time))
-    return own
+    return own, seen
 
 
 def _refit(model, data: TimeSeries, params: dict, names: list[str], budget: int = REFIT_BUDGET) -> dict:

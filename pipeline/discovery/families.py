@@ -187,9 +187,12 @@ _SHAPES = ("tanh({x}/{s})", "sinh({x}/{s})", "{x}/sqrt(1 + ({x}/{s})^2)", "exp({
 _TORRICELLI = "sqrt(abs({x} - {s}))*sign({x} - {s})"
 
 #: a knee: the slope changes by 1 about x = s (above it, or below -s), rounded over a width w
-#: (a softplus): a diode that starts to conduct, a clamp, a limit on one side, a dead zone or a
-#: stop on one side; with the line through 0 it is a one-sided saturation of any sharpness
-_KNEES = ("{w}*log(1 + exp(({x} - {s})/{w}))", "{w}*log(1 + exp(-({x} + {s})/{w}))")
+#: (a softplus, w log(1 + exp((x - s)/w)), written as the ramp plus its rounding so that no
+#: exp overflows far past the knee): a diode that starts to conduct, a clamp, a limit on one
+#: side, a dead zone or a stop on one side; with the line through 0 it is a one-sided
+#: saturation of any sharpness
+_KNEES = ("({x} - {s} + abs({x} - {s}))/2 + {w}*log(1 + exp(-abs({x} - {s})/{w}))",
+          "(abs({x} + {s}) - {x} - {s})/2 + {w}*log(1 + exp(-abs({x} + {s})/{w}))")
 
 
 #: what an engineer calls each shape (the effect's words)

@@ -378,6 +378,7 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
         else:
             extra, model_name = text, f"{LEARNED_PACKAGE}.{short}"
         files = []
+    swapped = set()
     for name, cls in swaps:
         done = False
         for owner in _class_and_bases(short, [f.read_text(errors="replace") for f in files] + [extra]):
@@ -393,9 +394,13 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
                     extra, done = new, True
             if done:
                 break
-        if not done:
+        if done:
+            swapped.add(name)
+        else:
             notes.append(f"the declaration of {name} is not in {spec.model_name}'s own text: the model is not rewritten for it")
     if calibrated:
+        # (a learned class's values only where the model declares the component with it)
+        law_values = {n: v for n, v in law_values.items() if n.rsplit(".", 1)[0] in swapped}
         text, more = calibrated_class(short, model_name, {**calibrated["values"], **law_values}, calibrated["params"],
                                       calibrated["free"])
         classes.append(text)
@@ -495,9 +500,11 @@ def _modification(values: dict, params: dict) -> tuple[str, list[str]]:
     ``values`` (dotted names, array elements as x[2]: the whole array is written, its other
     elements at their ``params`` value); returns it and the names it cannot write (an element
     of an array of more than one dimension, or one whose elements are not all known)."""
-    tree, skipped = {}, []
+    tree, skipped = {}, [n for n, v in values.items() if not np.isfinite(v)]
     arrays = {}
     for name, value in values.items():
+        if not np.isfinite(value):
+            continue
         m = re.fullmatch(r"(.+)\[(\d+)\]", name)
         if m is None:
             path, leaf = name.split("."), repr(float(value))
@@ -510,8 +517,11 @@ def _modification(values: dict, params: dict) -> tuple[str, list[str]]:
                 skipped.append(name)
                 continue
             arrays[base] = True
-            path = base.split(".")
-            leaf = "{" + ", ".join(repr(float(values.get(n, params[n]))) for _, n in elements) + "}"
+            path, whole = base.split("."), [float(values.get(n, params[n])) for _, n in elements]
+            if not np.all(np.isfinite(whole)):
+                skipped.append(name)
+                continue
+            leaf = "{" + ", ".join(map(repr, whole)) + "}"
         if "[" in ".".join(path):
             skipped.append(name)
             continue
@@ -538,6 +548,7 @@ def calibrated_class(short: str, extended: str, values: dict, params: dict, free
     notes on the values it cannot write."""
     mod, skipped = _modification(values, params)
     how = free if isinstance(free, str) else ", ".join(free)
-    notes = [f"{n} is not written into {short}Calibrated (an element of an array it cannot write whole)" for n in skipped]
+    notes = [f"{n} is not written into {short}Calibrated (not a finite number, or an element of an array it cannot "
+             "write whole)" for n in skipped]
     return (f'model {short}Calibrated "{extended} with the learned laws and the parameters calibrated with them '
             f'(free: {how})"\n  extends {extended}' + (f"({mod})" if mod else "") + f";\nend {short}Calibrated;\n"), notes

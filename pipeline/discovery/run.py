@@ -261,6 +261,8 @@ def _calibrated(ctx: Calibration, k: int) -> dict | None:
         return None
     names = refitted(trial["_names"], trial["active"])
     held = [n for n in trial["_names"] if n not in names] + ctx.internal
+    held += replaced([c["component"] for c in ctx.found + [trial]], ext.model,
+                     held + names + [n for c in ctx.found for n in c.get("_names", ())])
     with quiet():
         cal = calibrate(ext.model, ctx.train, None, ext.model.parameters, names, ctx.free, ctx.outputs, held)
     return {"train_rms": cal.get("train_rms"), "k": len(names) + len(cal.get("freed", ()))}
@@ -409,6 +411,7 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
     if spec.free:
         names = [n for law in laws for n in refitted(law["names"], law["active"])]
         held = [n for law in laws for n in law["names"] if n not in names]
+        held += replaced([b["component"] for b in found], base.model, held + names)
         hidden = internal(spec, base.model)
         cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
                         spec.free, outputs, held + (hidden if spec.free == "auto" else []), judged_on=whole,
@@ -419,6 +422,14 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
                                      "w": [[cal["params"][n] for n in law["names"]] for law in laws],
                                      "values": {n: cal["params"][n] for n in cal["freed"] if n not in hidden},
                                      "unwritable": [n for n in cal["freed"] if n in hidden]}
+
+
+def replaced(components, model, laws) -> list[str]:
+    """The nominal parameters of the components a law replaced (R1.R beside R1's law): the
+    learned class that takes the component's place has none of them, so a calibration does not
+    move them (the model delivered could not carry the values); ``laws``: the laws' own names."""
+    prefixes = tuple(f"{c}." for c in components)
+    return [n for n in getattr(getattr(model, "ode", None), "p_names", ()) if n.startswith(prefixes) and n not in laws]
 
 
 def internal(spec, model) -> list[str]:
