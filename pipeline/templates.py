@@ -522,9 +522,7 @@ class PolynomialTemplate(Template):
         return " + ".join(f"{n}*{m.modelica()}" if str(m) != "1" else n for n, m in zip(names, terms)) or "0"
 
     def law(self) -> str:
-        names = self.parameter_names()
-        k = len(self.lhs)
-        return f"{self._side(names[:k], self.lhs)} = {self._side(names[k:], self.rhs)}"
+        return self.written_law(np.ones(len(self.terms)))
 
     def written_law(self, w) -> str:
         """The law without the terms pruned to 0: a term that is gone is not written, since it

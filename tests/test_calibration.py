@@ -159,7 +159,7 @@ def test_a_calibrated_model_that_does_not_compile_leaves_the_laws_alone_delivere
                                          "  end MCalibrated;\nend Learned;\n")
     files = {"model": "M", "notes": []}
     spec = SimpleNamespace(model_name="M", libraries=[])
-    ext, y = _delivered(files, [tmp_path / "M.mo", tmp_path / "Learned.mo"], spec, {"params": {"k": 2.0}},
-                        lambda p: "calibrated run", "run with the laws alone")
-    assert files["model"] == "M" and ext.name == "M" and y == "run with the laws alone"
+    ext, run = _delivered(files, [tmp_path / "M.mo", tmp_path / "Learned.mo"], spec,
+                          {"params": {"k": 2.0}, "run": "the calibrated run"})
+    assert files["model"] == "M" and ext.name == "M" and run is None
     assert "the calibrated model does not compile" in files["notes"][0] and "nosuch" in files["notes"][0]

@@ -124,7 +124,8 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     """The laws' parameters ``laws`` refitted together with the nominal parameters ``free``
     (names, or "auto": those the data determine). Returns what was freed, what the data cannot
     determine, the values with standard errors, and the training and validation RMS (the
-    training RMS on ``judged_on`` when given: the whole record of which ``train`` is the head).
+    training RMS on ``judged_on`` when given: the whole record of which ``train`` is the head);
+    also the calibrated ``params`` and their ``run`` on that record.
     Where the initial state is calibrated, the validation run starts from its own, fitted on
     the first ``own_start`` samples of ``validate`` (default: as many as ``train`` has; at most
     a quarter of the record): the initial-state parameters ``free`` allows, not ``held``."""
@@ -178,7 +179,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
         out["validation_rms"] = rms(residual(validate, model, sv, outputs)) if sv.ok else None
         if seen:
             out["validation_initial_state"] = seen
-    out["params"] = new
+    out["params"], out["run"] = new, sim
     return out
 
 

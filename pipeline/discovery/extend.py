@@ -179,7 +179,8 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
     files = {"modelica": str(package.relative_to(part)), "sources": [str(s.relative_to(part)) for s in sources],
              "model": name, "notes": notes}
     try:
-        ext, y_ref = _delivered(files, sources, spec, calibrated, lambda p: pick(simulate(model, train, p)), y_train)
+        ext, calibrated_run = _delivered(files, sources, spec, calibrated)
+        y_ref = pick(calibrated_run) if calibrated_run is not None else y_train
         # the FMU's default experiment is the training data's span and sampling
         fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu", experiment=train)
         files["fmu"] = str(fmu.relative_to(part))
@@ -200,10 +201,10 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
     return y_train, y_val, files
 
 
-def _delivered(files: dict, sources, spec, calibrated, run, y_train):
-    """The model delivered, compiled, and the outputs it must reproduce: the calibrated one
-    (with ``calibrated``) when it compiles, else the extended model with the laws alone (a note
-    says why); ``files["model"]`` names it."""
+def _delivered(files: dict, sources, spec, calibrated):
+    """The model delivered, compiled, and the calibrated run it must reproduce: the calibrated
+    one (with ``calibrated``) when it compiles, else the extended model with the laws alone
+    (None: the run with the laws alone; a note says why); ``files["model"]`` names it."""
     from ..services import compile_model
     from .modelica import calibrated_name
 
@@ -211,11 +212,11 @@ def _delivered(files: dict, sources, spec, calibrated, run, y_train):
         try:
             ext = compile_model(sources, calibrated_name(spec.model_name), libraries=spec.libraries)
             files["model"] = calibrated_name(spec.model_name)
-            return ext, run(calibrated["params"])
+            return ext, calibrated["run"]
         except Exception as exc:  # noqa: BLE001 - the laws alone are still a model to deliver
             files["notes"].append(f"the calibrated model does not compile ({getattr(exc, 'message', exc)}): "
                                   "the model with the laws alone is delivered")
-    return compile_model(sources, files["model"], libraries=spec.libraries), y_train
+    return compile_model(sources, files["model"], libraries=spec.libraries), None
 
 
 def _data_words(spec, train) -> str:

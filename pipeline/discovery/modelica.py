@@ -500,10 +500,10 @@ def _modification(values: dict, params: dict) -> tuple[str, list[str]]:
     ``values`` (dotted names, array elements as x[2]: the whole array is written, its other
     elements at their ``params`` value); returns it and the names it cannot write (an element
     of an array of more than one dimension, or one whose elements are not all known)."""
-    tree, skipped = {}, [n for n, v in values.items() if not np.isfinite(v)]
-    arrays = {}
+    tree, skipped, arrays = {}, [], set()
     for name, value in values.items():
         if not np.isfinite(value):
+            skipped.append(name)
             continue
         m = re.fullmatch(r"(.+)\[(\d+)\]", name)
         if m is None:
@@ -516,7 +516,7 @@ def _modification(values: dict, params: dict) -> tuple[str, list[str]]:
             if [k for k, _ in elements] != list(range(1, len(elements) + 1)):
                 skipped.append(name)
                 continue
-            arrays[base] = True
+            arrays.add(base)
             path, whole = base.split("."), [float(values.get(n, params[n])) for _, n in elements]
             if not np.all(np.isfinite(whole)):
                 skipped.append(name)

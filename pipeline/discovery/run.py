@@ -416,9 +416,9 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
         cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
                         spec.free, outputs, held + (hidden if spec.free == "auto" else []), judged_on=whole,
                         own_start=spec.max_samples)
-        report["calibration"] = {k: v for k, v in cal.items() if k != "params"}
+        report["calibration"] = {k: v for k, v in cal.items() if k not in ("params", "run")}
         if "params" in cal:          # the model delivered (:func:`modelica.calibrated_class`)
-            report["_calibrated"] = {"params": cal["params"], "free": spec.free,
+            report["_calibrated"] = {"params": cal["params"], "run": cal["run"], "free": spec.free,
                                      "w": [[cal["params"][n] for n in law["names"]] for law in laws],
                                      "values": {n: cal["params"][n] for n in cal["freed"] if n not in hidden},
                                      "unwritable": [n for n in cal["freed"] if n in hidden]}
