@@ -120,6 +120,10 @@ class _Unsettled(_Stop):
     """The event iteration found no fixed point of the discrete values."""
 
 
+class _NonFinite(_Stop):
+    """The event iteration met non-finite values (a singular mode's linear block)."""
+
+
 class _SolverFailed(_Stop):
     """The solver gave up (an error, or too much work where time was not short): a hybrid run
     first looks for a crossing it ran into (:meth:`_Hybrid.probe`)."""
@@ -703,7 +707,7 @@ class _Hybrid:
         for _ in range(MAX_EVENT_ITERATIONS):
             new = self.update(cur, u, p, t, pre, flags).ravel()
             if not np.all(np.isfinite(new)):
-                raise _Stop(f"event iteration gave non-finite values at t = {t:g}")
+                raise _NonFinite(f"event iteration gave non-finite values at t = {t:g}")
             if not np.array_equal(new[:nc], cur[:nc]):
                 reinit = new[:nc].copy()
             new[:nc] = cur[:nc]
@@ -735,7 +739,7 @@ class _Hybrid:
             return x
         try:
             x = self.iterate(plan, x, p, t0, self.flags(initial=True))
-        except RuntimeError:
+        except (RuntimeError, _NonFinite):
             # the relations held all false may leave the model no solution (a tank's ports
             # closed, its junction singular); their values before the first event are a guess
             # the iteration corrects: all true then

@@ -514,3 +514,59 @@ def test_noise_blocks_draw_the_msl_generators_numbers_in_process_and_in_the_fmu(
     at = np.round(out["time"], 6)
     between = np.abs((at * 100) % 5) > 0.5          # away from the uniform draws' instants
     np.testing.assert_allclose(out["d"][between], np.interp(at[between], t, res.output("d")), atol=1e-12)
+
+
+GEARBOX = """
+model Gearbox "a lossy gear between two inertias, a bearing friction on the motor side"
+  import Modelica.Mechanics.Rotational;
+  Rotational.Components.LossyGear gear(ratio = 2, lossTable = [0, 0.5, 0.5, 0, 0], useSupport = true);
+  Rotational.Components.Inertia motor(J = 1);
+  Rotational.Components.Inertia load(J = 1.5, phi(fixed = true, start = 0), w(fixed = true, start = 0));
+  Rotational.Components.BearingFriction bearing(tau_pos = [0, 0.5; 1, 1], useSupport = true);
+  Rotational.Sources.Torque drive(useSupport = true);
+  Rotational.Sources.Torque brake(useSupport = true);
+  Rotational.Components.Fixed fixed;
+  Modelica.Blocks.Sources.Sine push(amplitude = 10, f = 1);
+  Modelica.Blocks.Sources.Ramp pull(height = 5, duration = 2, offset = -10);
+  output Real w_motor = motor.w;
+  output Real w_load = load.w;
+  output Real loss = gear.flange_a.tau*motor.w + gear.flange_b.tau*load.w "power into the gear";
+equation
+  connect(push.y, drive.tau);
+  connect(pull.y, brake.tau);
+  connect(drive.flange, bearing.flange_a);
+  connect(bearing.flange_b, motor.flange_a);
+  connect(motor.flange_b, gear.flange_a);
+  connect(gear.flange_b, load.flange_a);
+  connect(load.flange_b, brake.flange);
+  connect(gear.support, fixed.flange);
+  connect(bearing.support, fixed.flange);
+  connect(drive.support, fixed.flange);
+  connect(brake.support, fixed.flange);
+end Gearbox;
+"""
+
+
+def test_a_gear_and_its_bearing_both_locked_share_a_torque_the_equations_leave_open(msl_path, tmp_path):
+    """LossyGearDemo2's parts: at rest, the gear and the bearing both lock, and the torque they
+    share has no unique split (the mode's linear block is singular). Sparse QR refused the
+    pivot and the run failed at its start; any split holds, as OpenModelica's total-pivot
+    fallback takes it. The gear then slips and sticks with the sine: its ratio holds, it never
+    gives power back (efficiency 0.5 both ways), and the FMU validates."""
+    import mcl
+    from mcl.compile.fmu.export import build_fmu
+    from mcl.data import TimeSeries
+
+    (tmp_path / "Gearbox.mo").write_text(GEARBOX)
+    model = mcl.compile_model([tmp_path / "Gearbox.mo"], "Gearbox")
+    t = np.linspace(0.0, 2.0, 801)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    w_motor, w_load = res.output("w_motor"), res.output("w_load")
+    np.testing.assert_allclose(w_motor, 2 * w_load, atol=1e-9)
+    assert np.abs(w_load).max() > 1e-3                    # it moves, both ways
+    assert w_load.min() < 0 < w_load.max()
+    assert np.sum(np.abs(w_load) < 1e-9) > 50             # and sticks between
+    assert res.output("loss").min() > -1e-6 * np.abs(res.output("loss")).max()
+    build_fmu(model, tmp_path / "Gearbox.fmu")
+    assert validate_fmu(str(tmp_path / "Gearbox.fmu")) == []

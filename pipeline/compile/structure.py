@@ -44,6 +44,9 @@ DENSE_SOLVE_MAX = 400
 #: ... through LAPACK, which CasADi writes no C for: an FMU's model is built again with sparse QR
 #: (:func:`for_code`), whose generated C gives NaN at a singular point as LAPACK's does
 _dense_qr = "lapackqr"
+#: a block singular in some mode is solved with its nearest solution beside it (not in an
+#: FMU's C: a second solve of each such block, HeatingSystem's 20 MB of C against 16)
+_nearest = True
 #: a block whose coefficients change with the model's mode is solved symbolically only this
 #: small (by minors; see causalise)
 MODED_SYMBOLIC_MAX = 3
@@ -169,12 +172,12 @@ def reduce_index(dae: Dae):
 @contextlib.contextmanager
 def for_code():
     """ODEs built within solve every linear block by a solver CasADi generates C for."""
-    global _dense_qr
-    _dense_qr = "qr"
+    global _dense_qr, _nearest
+    _dense_qr, _nearest = "qr", False
     try:
         yield
     finally:
-        _dense_qr = "lapackqr"
+        _dense_qr, _nearest = "lapackqr", True
 
 
 def _blocks(sp: ca.Sparsity, nz: int):
@@ -238,6 +241,8 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     n_nonlinear = 0
     running = ca.vertcat(args[0], args[2])     # states and time (blocks that read a mode are not symbolic)
     stepped = read_through_steps(g, z)        # rows that may hide a step in z (their block's own, to check)
+    mode_names = {str(m) for m in ca.vertsplit(modes)} if modes is not None else set()
+    mode_at = [n for n, a in enumerate(ca.vertsplit(ca.vertcat(*args))) if str(a) in mode_names]
     for k, (rows, cols) in enumerate(blocks):
         gk, zk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[zs[c] for c in cols])
         prev = sorted(set().union(*[reads.get(r, set()) for r in rows]) - set(cols))
@@ -270,7 +275,10 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 # (a switch's block of a few unknowns, solved here for its modes: sparse, 20 % faster;
                 # dense QR there changed a lossy gear's rounding enough that its modes chattered)
                 how = _dense_qr if SYMBOLIC_SOLVE_MAX < len(cols) <= DENSE_SOLVE_MAX else "qr"
-                block = (lambda pv, fa=fa, how=how: -ca.solve(*fa(pv, *mx_args), how))
+                g0 = z_guess[cols] if nominal is None or _singular_in_a_mode(
+                    fa, _nominal_par(nominal, z_guess, prev)[:-len(z_guess)] if guess is None
+                    else _nominal_par(nominal, z_guess, prev), mode_at, len(prev)) else None
+                block = (lambda pv, fa=fa, how=how, g0=g0: _run_time_solve(*fa(pv, *mx_args), how, g0))
                 newton = None
         elif not torn:      # explicit in order (a step read an unknown known by then): no loop
             f = ca.Function(f"blk{k}", [zprev, *args], [whole])
@@ -513,6 +521,49 @@ def _or_nearest(sol: ca.SX, A: ca.SX, b: ca.SX, guess) -> ca.SX:
     nearest = g - ca.solve(ca.mtimes(A.T, A) + scale * ca.SX.eye(A.size2()), ca.mtimes(A.T, ca.mtimes(A, g) + b))
     s = ca.sum1(sol)
     return ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), sol, nearest)
+
+
+def _run_time_solve(A: ca.MX, b: ca.MX, how: str, guess) -> ca.MX:
+    """z of A z + b = 0 solved when the model runs (its coefficients change with a mode); with
+    ``guess`` (a block singular in some mode), where A is singular the least-squares solution
+    nearest it: a gear and its bearing both locked at rest share a torque the equations leave
+    open (any split holds), as OpenModelica's total-pivot fallback takes it. Sparse QR is told
+    not to refuse a pivot (its default fails the whole evaluation); what it gives is kept where
+    it solves the system with a size a regular matrix gives (|A| |z| <= 1e12 |b|), else NaN or
+    the nearest solution. Both are computed (a conditional that computes one keeps the
+    right-hand side from being fused into SX), so only where a mode can make A singular: the
+    second solve made a converter's calls 40 % slower."""
+    sol = -ca.solve(A, b, how, {"eps": -1.0} if how == "qr" else {})
+    size = ca.norm_inf(ca.mtimes(ca.fabs(A), ca.fabs(sol)))
+    scale = ca.norm_inf(b)
+    total = ca.sum1(sol)       # (a norm's fmax passes over NaN: the sum does not)
+    ok = ca.logic_and(ca.logic_and(total == total, ca.fabs(total) < np.inf),
+                      ca.logic_and(ca.norm_inf(ca.mtimes(A, sol) + b) <= 1e-8 * (scale + size), size <= 1e12 * scale))
+    if guess is None or not _nearest:
+        return ca.if_else(ok, sol, np.nan)
+    g = ca.DM(guess)
+    reg = 1e-12 * (1 + ca.sumsqr(A))
+    nearest = g - ca.solve(ca.mtimes(A.T, A) + reg * ca.MX.eye(A.size2()), ca.mtimes(A.T, ca.mtimes(A, g) + b), how)
+    return ca.if_else(ok, sol, nearest)
+
+
+def _singular_in_a_mode(fa: ca.Function, at: np.ndarray, mode_at: list[int], n_prev: int,
+                        samples: int = 48) -> bool:
+    """Whether the block's matrix (``fa``'s first output; its inputs the unknowns solved before
+    it, then the args, flat at ``at``) is singular for some values of the modes (the args'
+    entries ``mode_at``), drawn among -1..3 around the start values (a gear and its bearing
+    both locked)."""
+    rng = np.random.default_rng(0)
+    at = np.asarray(at, float)
+    modes = np.asarray(mode_at, int) + n_prev
+    sizes = [fa.nnz_in(i) for i in range(fa.n_in())]
+    for _ in range(samples):
+        v = at * (1 + 0.1 * rng.standard_normal(at.shape)) + 0.01 * rng.standard_normal(at.shape)
+        v[modes] = rng.integers(-1, 4, len(modes))
+        A = np.array(fa(*np.split(v, np.cumsum(sizes)[:-1]))[0])
+        if np.all(np.isfinite(A)) and np.linalg.cond(A) > 1e12:
+            return True
+    return False
 
 
 def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool = False,

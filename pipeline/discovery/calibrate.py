@@ -120,7 +120,8 @@ def _gradient(template, w, active, xs):
 
 
 def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dict, laws: list[str],
-              free, outputs, held=(), judged_on: TimeSeries | None = None, own_start: int | None = None) -> dict:
+              free, outputs, held=(), judged_on: TimeSeries | None = None, own_start: int | None = None,
+              start: dict | None = None) -> dict:
     """The laws' parameters ``laws`` refitted together with the nominal parameters ``free``
     (names, or "auto": those the data determine). Returns what was freed, what the data cannot
     determine, the values with standard errors, and the training and validation RMS (the
@@ -128,7 +129,9 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     also the calibrated ``params`` and their ``run`` on that record.
     Where the initial state is calibrated, the validation run starts from its own, fitted on
     the first ``own_start`` samples of ``validate`` (default: as many as ``train`` has; at most
-    a quarter of the record): the initial-state parameters ``free`` allows, not ``held``."""
+    a quarter of the record): the initial-state parameters ``free`` allows, not ``held``.
+    ``start``: values the fit starts from instead of ``params`` (a calibration of the same law
+    on fewer samples: the Wiener-Hammerstein's final one then settles in a few steps)."""
     from ..services import simulate
 
     nominal = [n for n in model.ode.p_names if n not in laws and n not in held and np.isfinite(params[n])]
@@ -149,14 +152,16 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     log.info("      calibration: %s refitted with the laws%s", ", ".join(determined) or "nothing",
              f"; not determined by the data: {', '.join(undetermined)}" if undetermined else "")
     names = laws + determined
+    # (only what this fit frees: a value held here stays the model's)
+    begin = {**params, **{n: float(start[n]) for n in names if n in (start or {}) and np.isfinite(start[n])}}
     # the initial state is a nuisance: the laws and the physical parameters are fitted first
     # from the start as given, then everything from there. Fitted together from the start, a
     # long record's initial state can lead the fit into a worse optimum that absorbs drift
     # (EMPS: 1.9 against 1.5 mm on training, 8.3 against 5.2 mm on the test record)
     # (the second fit starts next to its optimum: a third of the first's simulations)
     initial = set(getattr(model, "initial_parameters", ())) & set(determined)
-    start = _refit(model, train, params, [n for n in names if n not in initial]) if initial else params
-    new = _refit(model, train, start, names, REFIT_BUDGET // 3 if initial else REFIT_BUDGET)
+    first = _refit(model, train, begin, [n for n in names if n not in initial]) if initial else begin
+    new = _refit(model, train, first, names, REFIT_BUDGET // 3 if initial else REFIT_BUDGET)
     r2, J2 = jacobian(model, train, new, names)
     cov = covariance(r2, J2) if r2 is not None else np.full((len(names), len(names)), np.nan)
     se = np.sqrt(np.maximum(np.diag(cov), 0.0))

@@ -191,6 +191,8 @@ class Causes:
         if not scored:
             return bests
         value, chosen = min(scored, key=lambda x: x[0])
+        # (the final calibration, on more of the record, starts where the chosen law's ended)
+        start = next(cal["params"] for law, cal in zip(laws, done) if law is chosen)
         for v, law in sorted(scored, key=lambda x: x[0]):
             log.debug("      calibrated %s %+.3g: %s", law["component"], v - value,
                       law.get("equation") or spec_name(law["template"]))
@@ -200,11 +202,12 @@ class Causes:
         # the laws the calibrated data do not choose between, named with the one chosen
         others = alternatives(chosen, scored, value)
         if same(chosen, best):
-            return [{**best, "alternatives": others, "calibrated_score": value}]
+            return [{**best, "alternatives": others, "calibrated_score": value, "_calibrated_start": start}]
         env = best["_signals"][best["component"]].env() if best["component"] in best["_signals"] else None
         decided = {k: best[k] for k in ("equivalents", "role", "pair", "_signals", "_base", "_round") if k in best}
         return [{**chosen, **decided, "delta": best["delta"] + best["score"] - chosen["score"],
-                 "effect_kind": effect_kind(chosen, env), "calibrated_score": value, "alternatives": others}]
+                 "effect_kind": effect_kind(chosen, env), "calibrated_score": value, "alternatives": others,
+                 "_calibrated_start": start}]
 
     def find(self, nominal: Base, val0) -> tuple[list[dict], Base]:
         found, base, val = [], nominal, val0
@@ -265,7 +268,9 @@ def _calibrated(ctx: Calibration, k: int) -> dict | None:
                      held + names + [n for c in ctx.found for n in c.get("_names", ())])
     with quiet():
         cal = calibrate(ext.model, ctx.train, None, ext.model.parameters, names, ctx.free, ctx.outputs, held)
-    return {"train_rms": cal.get("train_rms"), "k": len(names) + len(cal.get("freed", ()))}
+    fitted = names + list(cal.get("freed", ()))
+    return {"train_rms": cal.get("train_rms"), "k": len(fitted),
+            "params": {n: cal["params"][n] for n in fitted} if "params" in cal else {}}
 
 
 def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, force: bool = False,
@@ -413,9 +418,10 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
         held = [n for law in laws for n in law["names"] if n not in names]
         held += replaced([b["component"] for b in found], base.model, held + names)
         hidden = internal(spec, base.model)
+        start = {k: v for b in found for k, v in b.get("_calibrated_start", {}).items()}
         cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
                         spec.free, outputs, held + (hidden if spec.free == "auto" else []), judged_on=whole,
-                        own_start=spec.max_samples)
+                        own_start=spec.max_samples, start=start)
         report["calibration"] = {k: v for k, v in cal.items() if k not in ("params", "run")}
         if "params" in cal:          # the model delivered (:func:`modelica.calibrated_class`)
             report["_calibrated"] = {"params": cal["params"], "run": cal["run"], "free": spec.free,
