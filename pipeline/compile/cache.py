@@ -28,7 +28,7 @@ from pathlib import Path
 log = logging.getLogger(__name__)
 
 MIN_SECONDS = 0.5          # quicker compiles are not worth a disk entry
-FORMAT = 11                # bump when what a compiled model holds changes (events 2, checks 3, fixed algebraics 4, state events 5, start values 6, DAE and structure 7, symbolic blocks 8, Newton form 9, assert relations 10, loop guesses 11)
+FORMAT = 12                # bump when what a compiled model holds changes (events 2, checks 3, fixed algebraics 4, state events 5, start values 6, DAE and structure 7, symbolic blocks 8, Newton form 9, assert relations 10, loop guesses 11, functions in one file 12)
 MAX_ENTRIES = 200
 MAX_FMUS = 50
 
