@@ -138,8 +138,10 @@ class CompiledModel:
         # its own, and an FMU's C held every copy (HeatingSystem's 20 MB, 2 compiled fresh)
         present = [f for f in _FUNCTIONS if getattr(o, f) is not None]     # zero: only a model with state events
         packer = ca.FileSerializer(str(d / "functions.casadi"))
-        packer.pack([getattr(o, f) for f in present])
-        del packer           # (its destructor closes the file)
+        try:
+            packer.pack([getattr(o, f) for f in present])
+        finally:
+            del packer       # (its destructor closes the file)
         meta = dict(name=self.name, info=self.info, x_names=o.x_names, u_names=o.u_names,
                     p_names=o.p_names, y_names=o.y_names, p_values=o.p_values.tolist(),
                     u_start=o.u_start.tolist(), probe_names=o.probe_names, index=o.index,
@@ -161,6 +163,8 @@ class CompiledModel:
         meta = json.loads((d / "model.json").read_text())
         if "functions" in meta:
             packed = ca.FileDeserializer(str(d / "functions.casadi")).unpack()
+            if len(packed) != len(meta["functions"]):
+                raise ValueError(f"{d}: {len(packed)} functions saved for {len(meta['functions'])} names")
             funcs = {f: _fresh(g) for f, g in zip(meta["functions"], packed)}
         else:        # (saved one by one, by earlier versions)
             funcs = {f: _fresh(ca.Function.load(str(d / f"{f}.casadi"))) for f in _FUNCTIONS

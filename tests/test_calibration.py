@@ -146,18 +146,22 @@ def test_a_held_out_record_is_judged_from_its_own_initial_state(tmp_path):
     assert out["validation_rms"] < 2e-3, out        # the noise; from the training start, 0.31
 
 
-def test_a_calibration_starts_where_a_shorter_one_ended_and_moves_only_what_it_frees(tmp_path):
+def test_a_calibration_starts_where_a_shorter_one_ended_and_moves_only_what_it_frees(tmp_path, monkeypatch):
     """The final calibration starts from the search's (``start``): the same optimum, the values
     before it still the model's own, and a value in ``start`` for a parameter this fit does not
     free (lag.T) is not carried into the model."""
     from mcl import compile_model
+    from mcl.discovery import calibrate as module
     from mcl.discovery.calibrate import calibrate
 
     (tmp_path / "Lag.mo").write_text(LAG)
     model = compile_model([tmp_path / "Lag.mo"], "Lag", libraries=[msl_path()]).with_outputs(["u", "y"])
     train = lag_record(1, 0.0)
+    starts, refit = [], module._refit
+    monkeypatch.setattr(module, "_refit", lambda m, d, params, names, *a: starts.append(dict(params)) or refit(m, d, params, names, *a))
     out = calibrate(model, train, None, model.parameters, [], ["lag.k"], ["y"],
                     start={"lag.k": 1.98, "lag.T": 0.7})
+    assert starts[0]["lag.k"] == 1.98 and starts[0]["lag.T"] == 0.5
     assert abs(out["values"]["lag.k"]["after"] - 2.0) < 0.01 and out["values"]["lag.k"]["before"] == 1.0
     assert out["params"]["lag.T"] == 0.5 and "lag.T" not in out["values"]
 

@@ -44,9 +44,6 @@ DENSE_SOLVE_MAX = 400
 #: ... through LAPACK, which CasADi writes no C for: an FMU's model is built again with sparse QR
 #: (:func:`for_code`), whose generated C gives NaN at a singular point as LAPACK's does
 _dense_qr = "lapackqr"
-#: a block singular in some mode is solved with its nearest solution beside it (not in an
-#: FMU's C: a second solve of each such block, HeatingSystem's 20 MB of C against 16)
-_nearest = True
 #: a block whose coefficients change with the model's mode is solved symbolically only this
 #: small (by minors; see causalise)
 MODED_SYMBOLIC_MAX = 3
@@ -172,12 +169,12 @@ def reduce_index(dae: Dae):
 @contextlib.contextmanager
 def for_code():
     """ODEs built within solve every linear block by a solver CasADi generates C for."""
-    global _dense_qr, _nearest
-    _dense_qr, _nearest = "qr", False
+    global _dense_qr
+    _dense_qr = "qr"
     try:
         yield
     finally:
-        _dense_qr, _nearest = "lapackqr", True
+        _dense_qr = "lapackqr"
 
 
 def _blocks(sp: ca.Sparsity, nz: int):
@@ -528,38 +525,56 @@ def _run_time_solve(A: ca.MX, b: ca.MX, how: str, guess) -> ca.MX:
     ``guess`` (a block singular in some mode), where A is singular the least-squares solution
     nearest it: a gear and its bearing both locked at rest share a torque the equations leave
     open (any split holds), as OpenModelica's total-pivot fallback takes it. Sparse QR is told
-    not to refuse a pivot (its default fails the whole evaluation); what it gives is kept where
-    it solves the system with a size a regular matrix gives (|A| |z| <= 1e12 |b|), else NaN or
-    the nearest solution. Both are computed (a conditional that computes one keeps the
-    right-hand side from being fused into SX), so only where a mode can make A singular: the
-    second solve made a converter's calls 40 % slower."""
-    sol = -ca.solve(A, b, how, {"eps": -1.0} if how == "qr" else {})
-    size = ca.norm_inf(ca.mtimes(ca.fabs(A), ca.fabs(sol)))
-    scale = ca.norm_inf(b)
-    total = ca.sum1(sol)       # (a norm's fmax passes over NaN: the sum does not)
-    ok = ca.logic_and(ca.logic_and(total == total, ca.fabs(total) < np.inf),
-                      ca.logic_and(ca.norm_inf(ca.mtimes(A, sol) + b) <= 1e-8 * (scale + size), size <= 1e12 * scale))
-    if guess is None or not _nearest:
-        return ca.if_else(ok, sol, np.nan)
+    not to refuse a pivot (its default fails the whole evaluation). A result is kept where it
+    solves the block, its rows scaled to unit sum, with a size a regular matrix gives
+    (|A| |z| <= 1e12 |b|, row by row); else the nearest solution where it solves the block
+    (a singular block may have none: a junction whose ports are all closed), else NaN, which
+    the event iteration and the solver report. Both solves are computed (a conditional that
+    computes one keeps the right-hand side from being fused into SX), so only where a mode can
+    make A singular: the second solve made a converter's calls 40 % slower."""
+    rows = 1.0 / (ca.sum2(ca.fabs(A)) + 1e-300)       # (the checks in each row's own scale)
+    An, bn = ca.mtimes(ca.diag(rows), A), b * rows
+    opts = {"eps": -1.0} if how == "qr" else {}
+
+    def solves(z, size_max=True):
+        size = ca.norm_inf(ca.mtimes(ca.fabs(An), ca.fabs(z)))
+        scale = ca.norm_inf(bn)
+        total = ca.sum1(z)       # (a norm's fmax passes over NaN: the sum does not)
+        ok = ca.logic_and(ca.logic_and(total == total, ca.fabs(total) < np.inf),
+                          ca.norm_inf(ca.mtimes(An, z) + bn) <= 1e-8 * (scale + size))
+        return ca.logic_and(ok, size <= 1e12 * scale) if size_max else ok
+
+    sol = -ca.solve(A, b, how, opts)
+    if guess is None:
+        return ca.if_else(solves(sol), sol, np.nan)
     g = ca.DM(guess)
-    reg = 1e-12 * (1 + ca.sumsqr(A))
-    nearest = g - ca.solve(ca.mtimes(A.T, A) + reg * ca.MX.eye(A.size2()), ca.mtimes(A.T, ca.mtimes(A, g) + b), how)
-    return ca.if_else(ok, sol, nearest)
+    reg = 1e-12 * (1 + ca.sumsqr(An))
+    nearest = g - ca.solve(ca.mtimes(An.T, An) + reg * ca.MX.eye(A.size2()), ca.mtimes(An.T, ca.mtimes(An, g) + bn), how, opts)
+    return ca.if_else(solves(sol), sol, ca.if_else(solves(nearest, False), nearest, np.nan))
 
 
 def _singular_in_a_mode(fa: ca.Function, at: np.ndarray, mode_at: list[int], n_prev: int,
                         samples: int = 48) -> bool:
     """Whether the block's matrix (``fa``'s first output; its inputs the unknowns solved before
-    it, then the args, flat at ``at``) is singular for some values of the modes (the args'
-    entries ``mode_at``), drawn among -1..3 around the start values (a gear and its bearing
-    both locked)."""
+    it, then the args, flat at ``at``) is singular for some values of the modes it reads (the
+    args' entries ``mode_at``): at their start values, then every combination of 0 and 1 where
+    they are few (else random ones), then draws among -1..3, the other entries near their start
+    values (a gear and its bearing both locked)."""
     rng = np.random.default_rng(0)
-    at = np.asarray(at, float)
-    modes = np.asarray(mode_at, int) + n_prev
+    at = np.where(np.isfinite(np.asarray(at, float)), at, 1.0)
     sizes = [fa.nnz_in(i) for i in range(fa.n_in())]
-    for _ in range(samples):
-        v = at * (1 + 0.1 * rng.standard_normal(at.shape)) + 0.01 * rng.standard_normal(at.shape)
-        v[modes] = rng.integers(-1, 4, len(modes))
+    reads = np.concatenate([np.asarray(ca.DM(fa.sparsity_jac(i, 0), 1)).any(axis=0) if sizes[i] else np.zeros(0, bool)
+                            for i in range(fa.n_in())])
+    modes = np.asarray([k for k in np.asarray(mode_at, int) + n_prev if reads[k]], int)
+    if not modes.size:
+        return False
+    combos = ([at[modes]] + ([np.array(c, float) for c in itertools.product((0.0, 1.0), repeat=len(modes))]
+                             if len(modes) <= 6 else list(rng.integers(0, 2, (samples, len(modes))).astype(float)))
+              + list(rng.integers(-1, 4, (samples, len(modes))).astype(float)))
+    for k, combo in enumerate(combos):
+        v = at if k == 0 else at * (1 + 0.1 * rng.standard_normal(at.shape)) + 0.01 * rng.standard_normal(at.shape)
+        v = v.copy()
+        v[modes] = combo
         A = np.array(fa(*np.split(v, np.cumsum(sizes)[:-1]))[0])
         if np.all(np.isfinite(A)) and np.linalg.cond(A) > 1e12:
             return True
