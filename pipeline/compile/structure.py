@@ -272,9 +272,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 # (a switch's block of a few unknowns, solved here for its modes: sparse, 20 % faster;
                 # dense QR there changed a lossy gear's rounding enough that its modes chattered)
                 how = _dense_qr if SYMBOLIC_SOLVE_MAX < len(cols) <= DENSE_SOLVE_MAX else "qr"
-                g0 = z_guess[cols] if nominal is None or _singular_in_a_mode(
-                    fa, _nominal_par(nominal, z_guess, prev)[:-len(z_guess)] if guess is None
-                    else _nominal_par(nominal, z_guess, prev), mode_at, len(prev)) else None
+                # (fa's inputs at the start values: the guesses last, where it takes them)
+                at = None if nominal is None else _nominal_par(nominal, z_guess, prev)[:sum(a.numel() for a in [zprev, *args])]
+                g0 = z_guess[cols] if at is None or _singular_in_a_mode(fa, at, mode_at, len(prev)) else None
                 block = (lambda pv, fa=fa, how=how, g0=g0: _run_time_solve(*fa(pv, *mx_args), how, g0))
                 newton = None
         elif not torn:      # explicit in order (a step read an unknown known by then): no loop
@@ -513,11 +513,23 @@ def _or_nearest(sol: ca.SX, A: ca.SX, b: ca.SX, guess) -> ca.SX:
     flow: its enthalpy appears only multiplied by the flows) the least-squares solution nearest
     the start values: the part of z the equations do not fix stays there, as nothing reads it
     then but through a zero."""
+    return ca.if_else(_all_finite(sol), sol, _nearest(A, b, guess, ca.solve))
+
+
+def _nearest(A, b, guess, solve):
+    """The least-squares solution of A z + b = 0 nearest ``guess`` (SX or MX; ``solve(M, r)``
+    solves M x = r): Tikhonov's, regularised just enough that the normal equations are never
+    singular."""
     g = ca.DM(guess)
-    scale = 1e-12 * (1 + ca.sumsqr(A))
-    nearest = g - ca.solve(ca.mtimes(A.T, A) + scale * ca.SX.eye(A.size2()), ca.mtimes(A.T, ca.mtimes(A, g) + b))
-    s = ca.sum1(sol)
-    return ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), sol, nearest)
+    reg = 1e-12 * (1 + ca.sumsqr(A))
+    return g - solve(ca.mtimes(A.T, A) + reg * type(A).eye(A.size2()), ca.mtimes(A.T, ca.mtimes(A, g) + b))
+
+
+def _all_finite(z):
+    """Whether every entry of ``z`` is finite, as an expression (through the sum: a norm's fmax
+    passes over NaN)."""
+    s = ca.sum1(z)
+    return ca.logic_and(s == s, ca.fabs(s) < np.inf)
 
 
 def _run_time_solve(A: ca.MX, b: ca.MX, how: str, guess) -> ca.MX:
@@ -539,17 +551,13 @@ def _run_time_solve(A: ca.MX, b: ca.MX, how: str, guess) -> ca.MX:
     def solves(z, size_max=True):
         size = ca.norm_inf(ca.mtimes(ca.fabs(An), ca.fabs(z)))
         scale = ca.norm_inf(bn)
-        total = ca.sum1(z)       # (a norm's fmax passes over NaN: the sum does not)
-        ok = ca.logic_and(ca.logic_and(total == total, ca.fabs(total) < np.inf),
-                          ca.norm_inf(ca.mtimes(An, z) + bn) <= 1e-8 * (scale + size))
+        ok = ca.logic_and(_all_finite(z), ca.norm_inf(ca.mtimes(An, z) + bn) <= 1e-8 * (scale + size))
         return ca.logic_and(ok, size <= 1e12 * scale) if size_max else ok
 
     sol = -ca.solve(A, b, how, opts)
     if guess is None:
         return ca.if_else(solves(sol), sol, np.nan)
-    g = ca.DM(guess)
-    reg = 1e-12 * (1 + ca.sumsqr(An))
-    nearest = g - ca.solve(ca.mtimes(An.T, An) + reg * ca.MX.eye(A.size2()), ca.mtimes(An.T, ca.mtimes(An, g) + bn), how, opts)
+    nearest = _nearest(An, bn, guess, lambda M, r: ca.solve(M, r, how, opts))
     return ca.if_else(solves(sol), sol, ca.if_else(solves(nearest, False), nearest, np.nan))
 
 
@@ -572,8 +580,7 @@ def _singular_in_a_mode(fa: ca.Function, at: np.ndarray, mode_at: list[int], n_p
                              if len(modes) <= 6 else list(rng.integers(0, 2, (samples, len(modes))).astype(float)))
               + list(rng.integers(-1, 4, (samples, len(modes))).astype(float)))
     for k, combo in enumerate(combos):
-        v = at if k == 0 else at * (1 + 0.1 * rng.standard_normal(at.shape)) + 0.01 * rng.standard_normal(at.shape)
-        v = v.copy()
+        v = at.copy() if k == 0 else at * (1 + 0.1 * rng.standard_normal(at.shape)) + 0.01 * rng.standard_normal(at.shape)
         v[modes] = combo
         A = np.array(fa(*np.split(v, np.cumsum(sizes)[:-1]))[0])
         if np.all(np.isfinite(A)) and np.linalg.cond(A) > 1e12:
