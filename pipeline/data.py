@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import io
 import numbers
 import os
 import re
@@ -199,6 +200,13 @@ def _cell(text: str) -> float:
     raise ValueError(text)
 
 
+def _delimiter(text: str) -> str:
+    """The separator of a CSV's fields, read from its header: a comma, or the semicolon (with
+    decimal commas in the numbers) or tab a spreadsheet set to a European locale writes."""
+    header = next((line for line in text.splitlines() if line.strip()), "")
+    return max(",;\t", key=header.count) if any(c in header for c in ";\t") else ","
+
+
 def read_csv(path) -> TimeSeries:
     """Read a CSV time series; errors name the file and line."""
     from .outputs import check_input
@@ -206,7 +214,9 @@ def read_csv(path) -> TimeSeries:
     path = check_input(path, "data file")
     try:
         with path.open(newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
+            text = fh.read()
+        delimiter = _delimiter(text)
+        rows = list(csv.reader(io.StringIO(text, newline=""), delimiter=delimiter))
     except UnicodeDecodeError as exc:
         raise DataError(f"not UTF-8 text ({exc.reason} at byte {exc.start}); save the CSV as UTF-8",
                         where=str(path)) from None
@@ -232,7 +242,7 @@ def read_csv(path) -> TimeSeries:
             raise DataError(f"{len(row)} fields, the header has {len(header)}", where=f"{path}:{i}")
         for j, cell in enumerate(row):
             try:
-                data[i - 2, j] = _cell(cell)        # blank: not measured
+                data[i - 2, j] = _cell(cell if delimiter == "," else cell.replace(",", "."))   # blank: not measured
             except ValueError:
                 raise DataError(f"column '{header[j]}': '{cell}' is not a number",
                                 where=f"{path}:{i}") from None
