@@ -533,10 +533,6 @@ class Algorithm1(Fitter):
 STALL = 10
 #: simulations over which a fit with ``settle`` must gain its share of the cost to go on
 SETTLE = 8
-#: the share a settling fit must gain over SETTLE simulations (half a percent of the RMS): on
-#: the Silverbox, 57 of a calibration's 60 simulations gained 3 %, stepping and stepping back
-#: along the valley where kf, ks and M.m trade off
-SETTLED = 0.01
 
 
 class LevenbergMarquardt(Fitter):

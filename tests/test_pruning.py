@@ -1,10 +1,8 @@
 """Backward elimination of a law's terms: the joint estimate that lets several be dropped in one
 refit, checked on linear least squares (where it is exact)."""
 import numpy as np
-import pytest
 
-from mcl.data import TimeSeries
-from mcl.discovery.fitters import _group_to_drop, _joint_increase, horizons
+from mcl.discovery.fitters import _group_to_drop, _joint_increase
 from mcl.stats import criterion, gram_inverse
 
 
@@ -36,18 +34,3 @@ def test_the_terms_the_data_do_not_need_are_dropped_together_and_no_others():
     group = _group_to_drop(w, H_inv, est, rss, bic.score(rss, 500, 6, 6),
                            lambda r, m: bic.score(r, 500, 6 - m, 6))
     assert sorted(group) == [1, 3, 4]
-
-
-def test_the_growing_windows_are_measured_by_how_far_the_outputs_have_moved():
-    """A record quiet for its first half (the Wiener-Hammerstein training data are): its first
-    window holds an eighth of the outputs' movement, not an eighth of the samples, which a fit
-    could not learn from; a record that moves evenly is cut by samples, as before."""
-    t = np.linspace(0.0, 10.0, 2001)
-    rng = np.random.default_rng(1)
-    quiet = np.where(t < 5.0, 1e-3 * rng.standard_normal(t.size), np.sin(7.0 * t))
-    data = TimeSeries(t, np.c_[rng.standard_normal(t.size), quiet], ["u", "y"], "test")
-    ends = [len(w.time) for w in horizons(data, ["y"])]
-    assert ends[-1] == t.size and ends == sorted(ends)
-    assert 1000 < ends[0] < 1200          # past the quiet half, an eighth of the movement into the rest
-    even = TimeSeries(t, np.c_[np.sin(7.0 * t)], ["y"], "test")
-    assert [len(w.time) for w in horizons(even, ["y"])] == pytest.approx([250, 500, 1000, 2001], abs=25)

@@ -268,19 +268,16 @@ def fit_task(ctx: Context, item) -> dict:
         fit = FitOutcome(*fit_and_prune(model, ctx.train, names, w0, 2 * ctx.budget, ctx.criterion, give_up=give_up,
                                         held=held, prunable=prunable, algorithm=ctx.algorithm,
                                         limits=ctx.limits))
-    elif shape:
-        # the shape stage (a network, then distilled laws with fitted scales) always simulates,
-        # from a law already fitted: it refines the best law and is not stopped for being behind
-        # it; a network has many parameters and one chance, so it gets three fits' budget
-        terms = getattr(laws[0].template, "terms", None)
-        fit = FitOutcome(*fit_and_prune(model, ctx.train, names, w0, ctx.budget * (3 if item.index == NEURAL_INDEX else 1),
-                                        ctx.criterion, prune=bool(terms), n_terms=len(terms or names),
-                                        algorithm=ctx.algorithm, limits=ctx.limits, informed=True))
     else:
+        # the shape stage (a network, then distilled laws with fitted scales) always simulates:
+        # it refines the best law and is not stopped for being behind it; a network has many
+        # parameters and one chance, so it gets three fits' budget
         template = laws[0].template
-        fit = registry().fitter(ctx.method).fit(model, ctx.train, names, w0, template, ctx.criterion, ctx.budget,
-                                                give_up=give_up, prune=bool(getattr(template, "terms", None)),
-                                                algorithm=ctx.algorithm, limits=ctx.limits)
+        fitter = registry().fitter("simulation" if shape else ctx.method)
+        fit = fitter.fit(model, ctx.train, names, w0, template, ctx.criterion,
+                         ctx.budget * (3 if item.index == NEURAL_INDEX else 1), give_up=give_up,
+                         prune=bool(getattr(template, "terms", None)),
+                         algorithm=ctx.algorithm, limits=ctx.limits)
     res = fit.result if fit.result is not None else simulate(model, ctx.train, dict(zip(names, fit.w)))
     out = {"component": item.component, "template": item.spec, "rss": fit.rss, "score": fit.score,
            "simulations": fit.simulations, "pruning": fit.path, "visited": fit.visited if len(laws) == 1 else [],

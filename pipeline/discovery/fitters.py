@@ -21,7 +21,6 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..errors import MclError
-from ..fit import SETTLED
 from ..stats import criterion as criterion_of, gram_inverse, rss as rss_of
 
 #: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
@@ -102,8 +101,7 @@ class FullDiscretisationFitter(CandidateFitter):
 
 def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion,
                   give_up=None, prune: bool = True, n_terms: int | None = None, progress=None,
-                  held=None, prunable=None, algorithm: str = "levenberg-marquardt", limits: dict | None = None,
-                  informed: bool = False):
+                  held=None, prunable=None, algorithm: str = "levenberg-marquardt", limits: dict | None = None):
     """LM fit of the law parameters, then backward elimination of terms.
 
     ``held`` marks the parameters kept at their start value (each law's scale: G(w) = 0 and
@@ -111,12 +109,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     remove (default the first ``n_terms`` but the held); ``prune=False`` keeps every parameter (a
     network has no terms to remove). ``give_up`` (see :class:`mcl.fit.LevenbergMarquardt`)
     stops a candidate that cannot win (and its ``settled()``, where it has one, skips the refits
-    on growing windows once another law fits to the noise); ``progress`` hears of each better RSS.
-    ``informed``: the start is already a law fitted to the data (the shape stage's network,
-    started at the best polynomial law, and the laws distilled from it): no refits on growing
-    windows (they start far from the nominal law no more, and they cost the Wiener-Hammerstein
-    run 100 simulations a fit for nothing), and a network, which only shows the shape, stops
-    once it has settled (it crawled 60 simulations for its last 1 %)."""
+    on growing windows once another law fits to the noise); ``progress`` hears of each better RSS."""
     from ..fit import FitProblem, fitter
 
     n = len(names)
@@ -143,8 +136,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         k = len(params)
         report = None if progress is None or not whole else (lambda cost: progress(cost * len(data.time), k, dictionary))
         stop = None if give_up is None or not whole else (lambda reach, now: give_up(reach, now, k, dictionary))
-        settle = SETTLED if informed and not prune else None
-        algo = fitter(algorithm, limit, tol=FIT_TOL, give_up=stop, progress=report, restore=restore, settle=settle)
+        algo = fitter(algorithm, limit, tol=FIT_TOL, give_up=stop, progress=report, restore=restore)
         res = algo.fit(problem, np.asarray(start)[free])
         w = np.where(held, w0, 0.0)
         w[free] = res.w
@@ -167,10 +159,10 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     record(problem, active)
     sims = res.simulations
     start = next((e.cost for e in problem.recorder.evaluations if e.feasible), None)
-    windows = horizons(data, model.output_names)
+    windows = horizons(data)
     # (not when another law already fits to the noise: this one could at best tie with it)
     settled = getattr(give_up, "settled", None)
-    if (not informed and len(windows) > 1 and start is not None and rss > 0.5 * start * len(data.time)
+    if (len(windows) > 1 and start is not None and rss > 0.5 * start * len(data.time)
             and not res.message.startswith("stopped") and not (settled and settled())):
         # hardly better than where it started: a law far from the nominal one moves resonances,
         # and a fit to the whole record falls into the local minima phase drift makes; fitted
@@ -295,20 +287,13 @@ def _group_to_drop(w: np.ndarray, H_inv: np.ndarray, est: np.ndarray, rss: float
     return best
 
 
-def horizons(data: TimeSeries, outputs=(), first: float = 1 / 8, min_samples: int = 100) -> list[TimeSeries]:
-    """The data up to where the measured ``outputs`` have gone through an eighth, a quarter and
-    a half of their movement (the sum of their squared steps, each output in its own scale), and
-    all of it; windows shorter than ``min_samples`` samples left out. Measured by movement, not
-    by time: the Wiener-Hammerstein record is quiet for its first half, and a fit to a quiet
-    window wanders where nothing holds it (to costs of 1e7, and back)."""
-    cols = [data.names.index(o) for o in outputs if o in data.names]
-    y = data.values[:, cols] if cols else data.values
-    steps = np.nan_to_num(np.diff(y, axis=0)) ** 2
-    moved = np.concatenate([[0.0], np.cumsum(steps / np.maximum(steps.sum(axis=0), 1e-300), axis=0).sum(axis=1)])
+def horizons(data: TimeSeries, first: float = 1 / 8, min_samples: int = 100) -> list[TimeSeries]:
+    """The data's first eighth, quarter, half and all of it (windows shorter than
+    ``min_samples`` samples left out)."""
     n, out, frac = len(data.time), [], first
     while frac < 1:
-        k = int(np.searchsorted(moved, frac * moved[-1])) + 1 if moved[-1] > 0 else int(n * frac)
-        if min_samples <= k < n:
+        k = int(n * frac)
+        if k >= min_samples:
             out.append(TimeSeries(data.time[:k], data.values[:k], data.names, data.source))
         frac *= 2
     return [*out, data]
