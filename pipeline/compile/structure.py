@@ -561,10 +561,11 @@ def _run_time_solve(A: ca.MX, b: ca.MX, how: str, guess) -> ca.MX:
     return ca.if_else(solves(sol), sol, ca.if_else(solves(nearest, False), nearest, np.nan))
 
 
-def _read(jac: ca.Sparsity, n: int) -> np.ndarray:
-    """Which of an input's ``n`` entries a Jacobian's sparsity ``jac`` reads (from its column
-    indices: made dense, an engine's block against all its inputs took more memory than there is)."""
-    out = np.zeros(n, bool)
+def _read(jac: ca.Sparsity) -> np.ndarray:
+    """Which of an input's entries (the columns of its Jacobian's sparsity ``jac``) are read:
+    from the column indices (made dense, EngineV6's block against all its inputs took more
+    memory than there is)."""
+    out = np.zeros(jac.size2(), bool)
     out[np.asarray(jac.get_triplet()[1], int)] = True
     return out
 
@@ -579,7 +580,7 @@ def _singular_in_a_mode(fa: ca.Function, at: np.ndarray, mode_at: list[int], n_p
     rng = np.random.default_rng(0)
     at = np.where(np.isfinite(np.asarray(at, float)), at, 1.0)
     sizes = [fa.nnz_in(i) for i in range(fa.n_in())]
-    reads = np.concatenate([_read(fa.sparsity_jac(i, 0), sizes[i]) for i in range(fa.n_in())])
+    reads = np.concatenate([_read(fa.sparsity_jac(i, 0)) if sizes[i] else np.zeros(0, bool) for i in range(fa.n_in())])
     modes = np.asarray([k for k in np.asarray(mode_at, int) + n_prev if reads[k]], int)
     if not modes.size:
         return False
