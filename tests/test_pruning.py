@@ -2,7 +2,8 @@
 refit, checked on linear least squares (where it is exact)."""
 import numpy as np
 
-from mcl.discovery.fitters import _group_to_drop, _joint_increase
+from mcl.data import TimeSeries
+from mcl.discovery.fitters import _group_to_drop, _joint_increase, horizons, moving
 from mcl.stats import criterion, gram_inverse
 
 
@@ -34,3 +35,16 @@ def test_the_terms_the_data_do_not_need_are_dropped_together_and_no_others():
     group = _group_to_drop(w, H_inv, est, rss, bic.score(rss, 500, 6, 6),
                            lambda r, m: bic.score(r, 500, 6 - m, 6))
     assert sorted(group) == [1, 3, 4]
+
+
+def test_the_growing_windows_leave_out_a_quiet_start():
+    """A record whose outputs hardly move for its first half (the Wiener-Hammerstein training
+    data): no refit on its first eighth, quarter or half, which hold nothing to learn from; a
+    record that moves from its start keeps all three."""
+    t = np.linspace(0.0, 10.0, 2001)
+    rng = np.random.default_rng(1)
+    y = np.where(t < 5.2, 1e-3 * rng.standard_normal(t.size), np.sin(7.0 * t))
+    data = TimeSeries(t, np.c_[rng.standard_normal(t.size), y], ["u", "y"], "test")
+    assert [len(w.time) for w in moving(horizons(data), ["y"])] == [2001]
+    even = TimeSeries(t, np.c_[np.sin(7.0 * t)], ["y"], "test")
+    assert [len(w.time) for w in moving(horizons(even), ["y"])] == [250, 500, 1000, 2001]
