@@ -56,9 +56,6 @@ FOLLOW_TOL = 1e-3         # a loop's solution off the one followed point to poin
 CALL_SHARE = 0.4
 #: output points of a run's first call (whose steps and seconds size the calls after it)
 FIRST_CALL = 8
-#: with a work budget, the time left sizes the calls only where it allows this many times fewer
-#: steps than the budget does
-TIME_MARGIN = 2.5
 
 
 #: a relation's value from lhs - rhs, by its operator
@@ -155,37 +152,40 @@ class _Budget:
 
     def call_size(self, n_points: int, share: float = CALL_SHARE, rest: bool = False) -> tuple[int, int, str | None]:
         """(points, steps per point, the bound that limited them) for the next call of at most
-        ``n_points`` points: the worst case of a call (every point using its steps) stays
-        within ``share`` of the time left and within the steps left. ``rest``: the call is the
-        rest of a run (not a retry, not a hop), which may go in one call as it has so far."""
+        ``n_points`` points. ``rest``: the call is the rest of a run (not a retry, not a hop).
+
+        With a work budget (a fit's runs) the rest of a run goes in one call whose points may
+        each take 8x the steps the points have taken so far, within the work left; a point that
+        needs more is retried alone. Without one, the rest goes in one call where the run, going
+        as it has so far, fits easily in the time left. Each call boundary is a solver restart,
+        so the calls must not follow the machine's load: the budget's steps size a fit's calls,
+        and the rate is measured in CPU seconds, which a loaded machine changes far less than
+        the wall clock (sized by the wall-clock rate, a loaded machine gave the
+        Wiener-Hammerstein fits 29 calls where a quiet one gave 3, and another law). The first
+        call, retries and hops, where a run that crawls shows itself, stay within ``share`` of
+        the time left at that rate; the wall time is checked between calls."""
         cap = self.opts.max_steps
-        if self.points and self.rate is not None:
-            # a run going as it has so far (4x its steps per point) fits in the call's share of
-            # the time left: one call for the rest, so that a run's numbers do not depend on how
-            # fast the machine was (calls sized by the measured rate put the solver's restarts
-            # where the machine's load put them: EMPS's fits and refit differed run to run)
-            expected = 4.0 * self.steps / self.points * n_points * self.rate
-            if expected <= share * max(self.opts.time_limit - self.clock.elapsed, 0.0):
-                if self.opts.max_work is None:
-                    return n_points, cap, None
-                # with a work budget, each point may take 8x the steps the points have taken,
-                # while the work left covers them all (a law that blows up still stops soon; a
-                # point that needs more is retried alone with what is left)
-                need = _pow2(min(max(64, int(8 * self.steps / self.points)), cap))
-                if rest and n_points * need <= self.opts.max_work - self.steps:
-                    return n_points, need, "work"
-        elif not self.points:        # the first call: a fixed few points, its cost then measured
+        if not self.points:          # the first call: a fixed few points, its cost then measured
             n_points = min(n_points, FIRST_CALL)
-        allowed, bound = math.inf, None
-        if self.rate is not None:
-            allowed, bound = share * max(self.opts.time_limit - self.clock.elapsed, 0.0) / self.rate, "time"
-        if self.opts.max_work is not None:
-            # a work budget sizes the calls unless the time left binds by far (the whole budget
-            # at the measured rate would take 2.5x the share): sized by a noisy rate, measured on
-            # a short first call, the restarts, and so a fit's path, followed the machine's load
-            work = max(self.opts.max_work - self.steps, 1)
-            if work <= TIME_MARGIN * allowed:
-                allowed, bound = work, "work"
+        budget = self.opts.max_work
+        by_time = (math.inf if self.rate is None
+                   else share * max(self.opts.time_limit - self.clock.elapsed, 0.0) / self.rate)
+        if self.points and rest:
+            if budget is not None:
+                work = max(budget - self.steps, 1)
+                need = _pow2(min(max(64, int(8 * self.steps / self.points)), cap))
+                if n_points * need <= work:
+                    return n_points, need, "work"
+                return self._split(n_points, work, "work")
+            if 4.0 * self.steps / self.points * n_points <= by_time:
+                return n_points, cap, None
+        if budget is not None and budget - self.steps <= by_time:
+            return self._split(n_points, max(budget - self.steps, 1), "work")
+        return self._split(n_points, by_time, "time")
+
+    def _split(self, n_points: int, allowed: float, bound: str) -> tuple[int, int, str | None]:
+        """A call of at most ``n_points`` points whose steps in all stay within ``allowed``."""
+        cap = self.opts.max_steps
         if n_points * cap <= allowed:
             return n_points, cap, None
         per_point = max(int(allowed // n_points), 1)
@@ -411,7 +411,7 @@ class _Plan:
         steps = steps or budget.call_size(1, 1.0)[1]
         integ = self.hop_integrator(steps, points, to_end)
         self.refresh(x, ta, p)
-        clock = Stopwatch(0)
+        clock = Stopwatch(0, cpu=True)
         try:
             xf = integ(x0=x, p=np.concatenate([p, self.tail, [ta, tb - ta]]))["xf"]
         finally:
@@ -441,7 +441,7 @@ class _Plan:
                 sub = sub[:1]        # (from an event's instant: to the next point, then evenly on)
             integ, extra = self.call_for(t0, sub, steps)
             self.refresh(x, t0, p)
-            clock = Stopwatch(0)
+            clock = Stopwatch(0, cpu=True)
             try:
                 xf = np.array(integ(x0=x, p=np.concatenate([p, self.tail, extra]))["xf"])
             except RuntimeError as exc:
@@ -502,7 +502,7 @@ class _Plan:
         f = self.ode.ode
         best = math.inf
         for _ in range(3):
-            clock = Stopwatch(0)
+            clock = Stopwatch(0, cpu=True)
             f(x[: self.nx], u, p, t)
             best = min(best, clock.elapsed)
         return max(40 * best, 2e-6)
