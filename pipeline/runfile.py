@@ -488,8 +488,8 @@ def _check_component(problems, key: str, model, name: str, model_name: str) -> N
     comps = structure.components
     if name not in comps:
         problems.add(key, f"no component '{name}' in {model_name}{did_you_mean(name, comps)}")
-    # (a block of the measuring chain is not searched by itself, but may be named)
-    elif name not in {c.name for c in structure.candidates()} and not comps[name].signal:
+    # (a block or a sensor of the measuring chain may be named)
+    elif name not in {c.name for c in structure.candidates()} and not (comps[name].signal or comps[name].sensor):
         c = comps[name]
         why = ("it has signal inputs or outputs (a source or a sensor)" if c.inputs else
                f"it has {len(c.connectors)} connector(s), not two of one kind with one potential and one flow each")

@@ -4,7 +4,8 @@
 
 SOURCE_DIR holds the files as the benchmarks distribute them (the paths each README names):
 ``dataBenchmark.csv`` (cascaded tanks), ``SNLS80mV.csv`` (Silverbox), ``DATA_EMPS.mat`` and
-``DATA_EMPS_PULSES.mat`` (EMPS), ``WienerHammerBenchmark.csv`` (Wiener-Hammerstein). OUT_DIR/<case>/ receives ``train.csv`` and one ``test*.csv`` per
+``DATA_EMPS_PULSES.mat`` (EMPS), ``WienerHammerBenchmark.csv`` (Wiener-Hammerstein), ``DATAPRBS.csv``
+(coupled electric drives). OUT_DIR/<case>/ receives ``train.csv`` and one ``test*.csv`` per
 test split of the benchmark's own protocol (the split in each case's README), each with a header
 ``time,u,y``: time in seconds from 0, u the measured input, y the measured output. Nothing is
 resampled; the Silverbox's test splits are the benchmark's index ranges. Files that are missing in
@@ -67,10 +68,20 @@ def wiener_hammerstein(src: Path, out: Path) -> None:
     write(out / "test.csv", u[100000:188000], y[100000:188000], dt)
 
 
+def coupled_drives(src: Path, out: Path) -> None:
+    import pandas as pd
+
+    d = pd.read_csv(src / "DATAPRBS.csv").dropna(axis=1, how="all")    # (each line ends with a comma)
+    u, y = d["u1"].to_numpy(float), d["z1"].to_numpy(float)           # the PRBS of amplitude 1
+    write(out / "train.csv", u[:300], y[:300], 0.02)                   # estimation: the first 300 samples
+    write(out / "test.csv", u[300:], y[300:], 0.02)                    # test: the last 200
+
+
 CASES = {"cascaded_tanks": (cascaded_tanks, ["dataBenchmark.csv"]),
          "silverbox": (silverbox, ["SNLS80mV.csv"]),
          "emps": (emps, ["DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"]),
-         "wh": (wiener_hammerstein, ["WienerHammerBenchmark.csv"])}
+         "wh": (wiener_hammerstein, ["WienerHammerBenchmark.csv"]),
+         "ced": (coupled_drives, ["DATAPRBS.csv"])}
 
 
 def main(argv: list[str]) -> int:

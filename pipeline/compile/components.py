@@ -10,6 +10,7 @@ declaration, for reports and the exported library.
 """
 from __future__ import annotations
 
+import dataclasses
 import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -41,8 +42,9 @@ class Component:
     parameters: list[str] = field(default_factory=list)   # its own parameters, qualified names
     inputs: list[str] = field(default_factory=list)       # its signal inputs and outputs
     declaration: str = ""                                 # the declaration as written, if found
-    kind: str = "physical"   # or "signal": a block with one Real input and one Real output
-    chain: bool = False      # a signal block that reads a model input or gives a model output
+    kind: str = "physical"   # or "signal": a block with one Real input and one Real output;
+    #                          or "sensor": connectors and one Real output, given out of the model
+    chain: bool = False      # a signal block or a sensor that reads a model input or gives a model output
 
     @property
     def signal(self) -> bool:
@@ -50,6 +52,13 @@ class Component:
         output Real y``): its law is its output as a function of its input; its connectors
         are the input and the output, in that order, without potential or flow variables."""
         return self.kind == "signal"
+
+    @property
+    def sensor(self) -> bool:
+        """A sensor whose one Real output the model gives out (a speed sensor, a pulse counter):
+        its law is what it reads out as a function of what it measures, the output as the model
+        wrote it (a counter blind to the direction reads |w|); ``inputs`` holds the output."""
+        return self.kind == "sensor"
 
     @property
     def two_connector(self) -> bool:
@@ -66,6 +75,8 @@ class Component:
     def across(self) -> tuple[str, str | None]:
         """Qualified potential variables of connectors a and b; a signal block's input (its
         'across value', against no second one: None)."""
+        if self.sensor:           # what it measures (its output as written)
+            return self.inputs[0], None
         a, b = self.connectors
         if self.signal:
             return f"{self.name}.{a.name}", None
@@ -74,6 +85,8 @@ class Component:
     def flow(self) -> tuple[str, str | None]:
         """Qualified flow variables of connectors a and b (each into the component); a signal
         block's output (what its law gives, as a flow law gives the flow: None for b)."""
+        if self.sensor:           # what it reads out
+            return self.inputs[0], None
         a, b = self.connectors
         if self.signal:
             return f"{self.name}.{b.name}", None
@@ -103,6 +116,14 @@ class Structure:
         physical = {c.name for c in self.components.values() if c.two_connector and not c.inputs}
         return [c for c in self.components.values()
                 if c.name in physical or (c.signal and not (physical and c.chain))]
+
+    def measuring_chain(self) -> list[Component]:
+        """The measuring chain of a model with physical components: its sensors and the signal
+        blocks that read a model input or give a model output. Questioned only where no
+        component of the plant explains the misfit (a pulse counter blind to the direction)."""
+        plant = {c.name for c in self.candidates()}
+        return [c for c in self.components.values()
+                if c.name not in plant and (c.sensor or (c.signal and c.chain))]
 
     def net_of(self, connector: str) -> int | None:
         for k, net in enumerate(self.nets):
@@ -247,12 +268,27 @@ def structure_of(flat: dict, model: str, classes: dict[str, str] | None = None) 
         signals = [n for n, v in own if _kind(v.get("causality")) in ("Input", "Output")]
         comps[name] = Component(name, classes.get(name, ""), conns, _parameters(own), signals)
     outer = _joined_to_model(flat)
+    for name, y in _sensors(variables, flat.get("variable_type_names", {}) or {}, comps, outer).items():
+        comps[name] = dataclasses.replace(comps[name], inputs=[y], kind="sensor", chain=True)
     for name, (u, y) in _signal_blocks(flat, children, owners).items():
         conns = [Connector(u, "input Real", (), ()), Connector(y, "output Real", (), ())]
         ends = [f"{name}.{u}", f"{name}.{y}"]
         comps[name] = Component(name, classes.get(name, ""), conns, _parameters(_own(variables, name)), ends,
                                 kind="signal", chain=any(e in outer for e in ends))
     return Structure(model, dict(sorted(comps.items(), key=lambda kv: _natural(kv[0]))), _nets(flat, connectors))
+
+
+def _sensors(variables: dict, types: dict, comps: dict, outer: set) -> dict[str, str]:
+    """{component: its output} for the components with connectors, no input and one scalar Real
+    output, which the model gives out (connected to one of the model's outputs)."""
+    out = {}
+    for name, c in comps.items():
+        ins = [n for n in c.inputs if _kind(variables[n].get("causality")) == "Input"]
+        outs = [n for n in c.inputs if _kind(variables[n].get("causality")) == "Output"
+                and split_name(n)[:-1] == split_name(name) and "[" not in split_name(n)[-1]]
+        if not ins and len(outs) == 1 and len(c.inputs) == 1 and outs[0] in outer and types.get(outs[0], "Real") == "Real":
+            out[name] = outs[0]
+    return out
 
 
 def _own(variables: dict, name: str) -> list[tuple[str, dict]]:

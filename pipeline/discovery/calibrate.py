@@ -154,6 +154,8 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     names = laws + determined
     # (only what this fit frees: a value held here stays the model's)
     begin = {**params, **{n: float(start[n]) for n in names if n in (start or {}) and np.isfinite(start[n])}}
+    if begin != params and not _rss(model, train, begin, outputs) <= _rss(model, train, params, outputs):
+        begin = params        # (a start calibrated with other parameters free can be far worse)
     # the initial state is a nuisance: the laws and the physical parameters are fitted first
     # from the start as given, then everything from there. Fitted together from the start, a
     # long record's initial state can lead the fit into a worse optimum that absorbs drift
@@ -186,6 +188,15 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
             out["validation_initial_state"] = seen
     out["params"], out["run"] = new, sim
     return out
+
+
+def _rss(model, data: TimeSeries, params: dict, outputs) -> float:
+    """The residual sum of squares of a run of ``model`` with ``params`` on ``data`` (inf when
+    it fails)."""
+    from ..services import simulate
+
+    run = simulate(model, data, params, options=FIT_OPTIONS)
+    return float(np.nansum(residual(data, model, run, outputs) ** 2)) if run.ok else np.inf
 
 
 def _own_start(model, head: TimeSeries, params: dict, states: list[str]) -> tuple[dict, list[str]]:

@@ -119,7 +119,7 @@ def unit_of(x) -> float:
     return 1.0 if 0.3 <= s <= 3.0 else s
 
 
-def families(role: str, env: dict | None = None, signal: bool = False) -> list[dict]:
+def families(role: str, env: dict | None = None, signal: bool = False, sensor: bool = False) -> list[dict]:
     """The template specs tried for a component of this role. A law in the rate also gets
     Coulomb-like friction terms tanh(dv/s), the dissipative element's classic non-polynomial
     part, at two fixed scales (a twentieth and a quarter of the rate's nominal span: the law
@@ -129,7 +129,13 @@ def families(role: str, env: dict | None = None, signal: bool = False) -> list[d
     one, and an open-loop position drifts). A signal block's law is static, its output in its
     input, with saturation terms tanh(v/s) at the same two fixed scales of the input's span:
     the effect a block diagram most often lacks (an amplifier's or a valve's limits, which a
-    cubic cannot follow beyond its knee)."""
+    cubic cannot follow beyond its knee). A sensor's law is its reading in what it measures,
+    with those terms, a zero offset and |v|: a counter blind to the direction (a pulse
+    counter's speed), a rectifying transducer."""
+    if sensor:
+        out = families("static", env, signal=True)
+        out[0]["rhs"] = ["1", "v", "abs(v)", *out[0]["rhs"][1:]]
+        return out
     out = [dict(f) for f in ([STATIC] if signal else FAMILIES[role])]
     span = float(np.max(np.abs(env["dv"]))) if env is not None and np.any(env["dv"]) else 1.0
     if signal:
@@ -201,6 +207,7 @@ _SHAPE_WORDS = {"tanh({x}/{s})": "Coulomb-like friction or saturation", "sinh({x
                 "{x} - {s}*tanh({x}/{s})": "a dead zone", "tanh({x}/{s})*exp(-({x}/{s})^2)": "the Stribeck effect",
                 "sqrt(abs({x}))*tanh({x}/{s})": "a square root (an orifice)",
                 _TORRICELLI: "a square root of the level above an opening (Torricelli)",
+                "abs({x})": "a reading blind to the sign (a counter that cannot tell the direction)",
                 **{k: "a knee on one side (a diode's, a clamp's or a stop's)" for k in _KNEES}}
 
 
@@ -239,16 +246,19 @@ def _slots(pattern: str) -> list[str]:
     return [g for g in ("s", "w") if "{" + g + "}" in pattern]
 
 
-def basis(x: np.ndarray, name: str) -> list[tuple[str, tuple | None]]:
+def basis(x: np.ndarray, name: str, sensor: bool = False) -> list[tuple[str, tuple | None]]:
     """Candidate terms in the variable ``name`` for a law visited over ``x``, as (pattern, scales):
     polynomials, |x| x, and the shapes of friction, saturation and exponential laws at scales
     spread over the visited span (the scale of a chosen shape is then fitted); knees on either
     side at a few places and widths; in a connector's own potential (va, vb) also a constant (an
     outflow that starts above the bottom); in a variable that stays above 0 (a level) also
     Torricelli's square root of its height above an opening, the opening's height s fitted (the
-    level's datum is rarely the opening's)."""
+    level's datum is rarely the opening's). A sensor's reading (``sensor``) also gets a constant
+    (its zero) and |x| (a counter blind to the direction)."""
     span = float(np.max(np.abs(x))) or 1.0
     terms = [(t, None) for t in ("{x}", "{x}^2", "{x}^3", "{x}*abs({x})", "sqrt(abs({x}))*sign({x})")]
+    if sensor:
+        terms[:0] = [("1", None), ("abs({x})", None)]
     shapes = [(shape, (k * span,)) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
     shapes += [(knee, (k * span, w * span)) for knee in _KNEES for k in (0.1, 0.3, 0.6) for w in (0.03, 0.15)]
     if name in ("va", "vb"):
@@ -304,7 +314,7 @@ def _fit_scales(chosen, x, f, name):
 
 
 def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
-                  refine_best: int = 6) -> list[tuple[list[str], np.ndarray, float]]:
+                  refine_best: int = 6, sensor: bool = False) -> list[tuple[list[str], np.ndarray, float]]:
     """Sparse laws f(x) ~ sum_k c_k phi_k(x) over :func:`basis`, the best of one, two, ...
     ``max_terms`` terms: every subset is fitted by least squares at the grid's scales, the
     ``refine_best`` best of each size get their shapes' scales fitted. Returns (terms, c, rms
@@ -316,7 +326,7 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
     x, f = np.asarray(x, float), np.asarray(f, float)
     ok = np.isfinite(f)
     x, f = x[ok], f[ok]
-    terms = basis(x, name)
+    terms = basis(x, name, sensor)
     Phi = np.column_stack([_values(t, x, name) for t in terms])
     usable = [k for k in range(len(terms))
               if np.all(np.isfinite(Phi[:, k])) and (np.ptp(Phi[:, k]) > 0 or terms[k][0] == "1")]

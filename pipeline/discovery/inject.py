@@ -159,15 +159,15 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
     external = _external_rows(dae, comp)
     rows = ca.vertsplit(dae.residual) if dae.residual.numel() else []
     exprs = dict(dae.exprs)
-    if mode == "parallel" and comp.signal:      # what the rest of the model reads of its output
+    if mode == "parallel" and (comp.signal or comp.sensor):   # what the rest reads of its output
         old, new, pick = fa, fa + D, external
         exprs[comp.flow()[0]] = fa + D
     elif mode == "parallel":
         old, new = ca.vertcat(fa, fb), ca.vertcat(fa + D, fb - D)
         pick = external
         exprs[comp.flow()[0]], exprs[comp.flow()[1]] = fa + D, fb - D
-    elif comp.signal:
-        raise UnsupportedConstruct(f"{comp.name} is a signal block: its law gives its output")
+    elif comp.signal or comp.sensor:
+        raise UnsupportedConstruct(f"{comp.name} is a signal block or a sensor: its law gives its output")
     else:
         old, new = xa, xa - D
         pick = [k for k in range(len(rows)) if k not in set(external)]

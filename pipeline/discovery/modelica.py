@@ -15,6 +15,7 @@ initial equations, modifiers, annotations).
 """
 from __future__ import annotations
 
+import bisect
 import dataclasses
 import html
 import re
@@ -178,12 +179,12 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
 
     template = registry().template(cause["template"])
     lib = _library(libraries, sources)
+    if comp.sensor and template.explicit == "i" and hasattr(template, "terms"):
+        return _sensor_class(cause, comp, template, lib, libraries, sources, scope, units or {}, data)
     interface = interface_of(comp, lib) if template.explicit == "i" and hasattr(template, "terms") else None
     if interface is None:
         return _template_class(cause, comp, template, libraries, sources, scope)
     from .words import parity, words
-
-    from ..templates import Monomial, scaled_power
 
     wd = words(comp)
     local = lambda q: q.split(".", 1)[-1] if not q.startswith("der(") else f"der({q[4:-1].split('.', 1)[-1]})"
@@ -198,9 +199,24 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
             return _template_class(cause, comp, template, libraries, sources, scope)
         w = w.copy()
         w[:len(signs)] *= signs * signs[0]
-    scales = dict(zip(template.scales, w[len(template.terms):])) if getattr(template, "scales", None) else {}
     u = {"y": (units or {}).get(wd.flow), "v": (units or {}).get(wd.across), "i": (units or {}).get(wd.flow)}
     u["va"] = u["vb"] = (units or {}).get(wd.potentials[0]) or u["v"]
+    params, rhs = _terms(template, w, names, u)
+    law = f"{names['i']} = {' + '.join(rhs) or '0'};"
+    icon = icon_of(comp.cls, lib)
+    doc = _documentation(cause, data)
+    annotation = f"  annotation({icon + ', ' if icon else ''}Documentation(info=\"{doc}\"));"
+    return (f'{"block" if comp.signal else "model"} {cause["learned_class"]} "{comp.cls.split(".")[-1]} {comp.name} as learned by mcl: '
+            f'{html.escape(cause["law"]["equation"])}"\n  extends {interface};\n' + "\n".join(params)
+            + f"\nequation\n  {law}\n{annotation}\nend {cause['learned_class']};\n")
+
+
+def _terms(template, w, names: dict, u: dict) -> tuple[list[str], list[str]]:
+    """(parameter declarations, terms c_k*x_k) of a law in the class's own variable ``names``
+    (for v, dv, i, va, vb), its coefficients ``w`` (then its scales), units by ``u``."""
+    from ..templates import Monomial, scaled_power
+
+    scales = dict(zip(template.scales, w[len(template.terms):])) if getattr(template, "scales", None) else {}
     params, rhs = [], []
     for k, (term, c) in enumerate(zip(template.terms[1:], w[1:len(template.terms)]), start=1):
         if c == 0:
@@ -219,13 +235,34 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
         unit_mod = f'(unit="{unit}")' if unit else ""
         params.append(f'  parameter Real {pname}{unit_mod} = {float(c)!r} "coefficient of {html.escape(text)}";')
         rhs.append(f"{pname}*{text}" if text != "1" else pname)
-    law = f"{names['i']} = {' + '.join(rhs) or '0'};"
+    return params, rhs
+
+
+def _sensor_class(cause: dict, comp, template, lib, libraries, sources, scope: str, units: dict, data: str) -> str:
+    """A sensor's learned law as a class with the nominal sensor's connectors, in which the
+    nominal sensor (``measured``) measures and the output is the law of its reading: the
+    nominal class's own equations stay as written, whatever the sensor measures."""
+    classes = connector_classes(comp, libraries, sources, scope)
+    out = comp.inputs[0].split(".")[-1]
+    ports = [c.name for c in comp.connectors]
+    missing = [n for n in (*ports, out) if n not in classes]
+    if missing:
+        raise ValueError(f"the connector classes of {comp.name} ({comp.cls or 'class unknown'}) are not found")
+    nominal = lib.resolve(comp.cls, scope) if scope else None
+    nominal = nominal.name if nominal is not None else comp.cls
+    unit = units.get(comp.inputs[0])
+    params, rhs = _terms(template, np.asarray(cause["w"], float), {"v": f"measured.{out}", "i": out},
+                         {"y": unit, "v": unit, "i": unit})
     icon = icon_of(comp.cls, lib)
     doc = _documentation(cause, data)
-    annotation = f"  annotation({icon + ', ' if icon else ''}Documentation(info=\"{doc}\"));"
-    return (f'{"block" if comp.signal else "model"} {cause["learned_class"]} "{comp.cls.split(".")[-1]} {comp.name} as learned by mcl: '
-            f'{html.escape(cause["law"]["equation"])}"\n  extends {interface};\n' + "\n".join(params)
-            + f"\nequation\n  {law}\n{annotation}\nend {cause['learned_class']};\n")
+    decls = [f'  {classes[n]} {n} "as the nominal sensor\'s";' for n in ports]
+    decls.append(f'  {classes[out]} {out} "the reading, by the learned law";')
+    decls.append(f'  {nominal} measured "what the sensor measures (the nominal sensor)";')
+    equations = [f"  connect({n}, measured.{n});" for n in ports] + [f"  {out} = {' + '.join(rhs) or '0'};"]
+    return (f'model {cause["learned_class"]} "{comp.cls.split(".")[-1]} {comp.name} as learned by mcl: '
+            f'{html.escape(cause["law"]["equation"])}"\n' + "\n".join(decls + params) + "\nequation\n"
+            + "\n".join(equations) + f"\n  annotation({icon + ', ' if icon else ''}Documentation(info=\"{doc}\"));"
+            f"\nend {cause['learned_class']};\n")
 
 
 def _documentation(cause: dict, data: str) -> str:
@@ -266,6 +303,17 @@ def _template_class(cause: dict, comp, template, libraries, sources, scope: str 
     note = "; " + cause["law"]["note"]
     return template.modelica_class(cause["learned_class"], dataclasses.replace(comp, connectors=conns),
                                    np.asarray(cause["w"]), note, learned=True)
+
+
+def _quoted(text: str):
+    """Whether a position of ``text`` is inside a string or a comment."""
+    spans = [m.span() for m in re.finditer(r'"(?:\\.|[^"\\])*"|//[^\n]*|/\*.*?\*/', text, re.S)]
+    starts = [a for a, _ in spans]
+
+    def inside(k: int) -> bool:
+        j = bisect.bisect_right(starts, k) - 1
+        return j >= 0 and k < spans[j][1]
+    return inside
 
 
 def _statement_end(text: str, start: int) -> int:
@@ -314,8 +362,11 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
     body_end = head.end() + (end.start() if end else len(text) - head.end())
     decl = re.compile(rf"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)"
                       rf"([A-Za-z_][\w.]*)(\s+){re.escape(component)}\b")
+    quoted = _quoted(text)
     for m in decl.finditer(text, head.end(), body_end):
         if m.group(4) in ("connect", "end", "equation", "import", "extends", "parameter", "constant"):
+            continue
+        if quoted(m.start(4)):      # (a class's description: "... a counter reads ...")
             continue
         stop = _statement_end(text, m.end())
         rest = text[m.end():stop]

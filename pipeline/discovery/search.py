@@ -46,7 +46,7 @@ def balanced(base: Base, train: TimeSeries, comp) -> bool:
     (a one-port: resistor, spring, damper, capacitor); a mass or an inertia stores it."""
     from ..simulation import prepare_inputs
 
-    if comp.signal:               # a block's output is what its law gives: nothing stored
+    if comp.signal or comp.sensor:     # a block's output is what its law gives: nothing stored
         return True
     ode, res = base.model.ode, base.result
     fa, fb = comp.flow()
@@ -248,7 +248,8 @@ def _ranked(cands: list[dict]) -> list[dict]:
     return sorted((c for c in cands if c.get("score") is not None), key=lambda c: c["score"])
 
 
-def _at_noise(c: dict, sigma: float) -> bool:
+def at_noise(c: dict, sigma: float) -> bool:
+    """Whether a fitted candidate's training RMS is within 1.2x the noise ``sigma``."""
     return c.get("train_rms") is not None and c["train_rms"] < 1.2 * sigma
 
 
@@ -279,12 +280,12 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     from ..services import registry
 
     done = _ranked(cands)
-    if not done or _at_noise(done[0], sigma):
+    if not done or at_noise(done[0], sigma):
         return []
     items = potential_items(fit.ctx, done)
     out = fit(items) if items else []
     done = _ranked(cands + out)
-    if _at_noise(done[0], sigma) or done[0].get("family") == "potentials":
+    if at_noise(done[0], sigma) or done[0].get("family") == "potentials":
         return out
     one = [c for c in done if c.get("family") in ("static", "rate", "absolute")
            and c.get("law_variable") in ("v", "dv", "va", "vb")]
@@ -294,8 +295,12 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     log.info("      shape of %s's law in %s: neural fit, then a sparse law distilled from it", best["component"], var)
     poly = registry().template(best["template"])
     xs = np.linspace(*(best.get("law_range") or [-1.0, 1.0]), 201)
+    curve = poly.curve(np.asarray(best["w"]) * np.asarray(best["active"]), xs)
+    if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(curve))):      # (a law that overflows on its range)
+        log.info("      no shape stage: %s's best law is not finite over its range", best["component"])
+        return out
     spec = {"name": "neural", "hidden": 4, "x": var, "coupled": False, "family": "reference"}
-    start = registry().template(spec).fit_curve(xs, poly.curve(np.asarray(best["w"]) * np.asarray(best["active"]), xs))
+    start = registry().template(spec).fit_curve(xs, curve)
     neural = fit([Item(best["component"], NEURAL_INDEX, {**spec, "start": start.tolist()})])
     out += neural
     n = neural[0]
@@ -303,7 +308,8 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
         return out
     template = registry().template(n["template"])
     xs = np.linspace(*n["law_range"], 201)
-    laws = distillations(xs, template.curve(np.asarray(n["w"]), xs), var)
+    laws = distillations(xs, template.curve(np.asarray(n["w"]), xs), var,
+                         sensor=fit.ctx.base.structure.components[best["component"]].sensor)
     items = [Item(best["component"], SHAPE_INDEX + k,
                   {"name": "polynomial", "lhs": ["i"], "rhs": law["terms"], "scales": law["scales"],
                    "start": [1.0, *map(float, law["c"])], "family": "shape"})
@@ -361,11 +367,15 @@ def limits(base: Base, steps: int) -> dict:
     return out
 
 
-def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: float, resid) -> Round:
+def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: float, resid,
+           chain: bool = False, beat: float | None = None) -> Round:
     """The candidate components with their law families (or the pinned templates), screened in
     one pass, the promising ones (and pairs of them, when no single law comes near the noise)
-    fitted, then the shape stage."""
-    comps = [c for c in base.structure.candidates() if c.name not in base.excluded]
+    fitted, then the shape stage. ``chain``: the measuring chain's components instead of the
+    plant's; ``beat``: the score a law must be predicted to beat by more than EQUAL to be fitted
+    (the plant's best: a sensor's or an input's law is fitted only where it could win)."""
+    pool = base.structure.measuring_chain() if chain else base.structure.candidates()
+    comps = [c for c in pool if c.name not in base.excluded]
     if spec.unknown != "auto":       # the pinned component, once (a later round has no other)
         comps = [c for c in [base.structure.components[spec.unknown]] if c.name not in base.excluded]
     stores = [c.name for c in comps if not balanced(base, train, c)]
@@ -375,9 +385,10 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
     if not comps:
         return Round([], [], [], {}, {}, None)
     signals = law_signals(base.model, base.result.states, base.result.time, train, comps)
-    roles = {c.name: "static" if c.signal else role_of(signals[c.name].env()) for c in comps}
+    roles = {c.name: "static" if c.signal or c.sensor else role_of(signals[c.name].env()) for c in comps}
     items = [Item(c.name, k, t) for c in comps
-             for k, t in enumerate(spec.templates or families(roles[c.name], signals[c.name].env(), c.signal))]
+             for k, t in enumerate(spec.templates or families(roles[c.name], signals[c.name].env(), c.signal,
+                                                               c.sensor))]
     templates = {it.key: reg.template(it.spec) for it in items}
     modes = {}
     for it in items:
@@ -389,6 +400,13 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
     criterion = criterion_of(spec.criterion)
     keep = promising(screening, spec.screen, ratio=10.0 if spec.early_stop else np.inf,
                      score=lambda rss, k: criterion.score(rss, n_obs, k))
+    if beat is not None:
+        from .verdict import EQUAL
+
+        keep = [k for k in keep if screening[k].get("predicted_rss") is not None
+                and criterion.score(screening[k]["predicted_rss"], n_obs, screening[k].get("n_params", 1) - 1)
+                < beat - EQUAL]
+        pairs = []
     for k, s_ in enumerate(screening):
         if k not in keep and s_.get("predicted_rss") is not None:
             s_["not_fitted"] = "screening predicts it cannot compete"

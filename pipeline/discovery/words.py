@@ -42,6 +42,11 @@ class Words:
 
 
 def words(comp) -> Words:
+    if comp.sensor:          # its reading in what it measures
+        y = comp.inputs[0]
+        x = f"{comp.name}.measured"
+        return Words(x, f"der({x})", y, False, f"{x} is what {comp.name} measures ({y} as the model wrote it), "
+                     f"{y} what it reads out", (x, "0"))
     a, b = comp.connectors
     if comp.signal:          # a block: its output in its input
         u, y = (f"{comp.name}.{c.name}" for c in (a, b))
