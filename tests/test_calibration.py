@@ -183,3 +183,16 @@ def test_a_calibrated_model_that_does_not_compile_leaves_the_laws_alone_delivere
                           {"params": {"k": 2.0}, "run": "the calibrated run"})
     assert files["model"] == "M" and ext.name == "M" and run is None
     assert "the calibrated model does not compile" in files["notes"][0] and "nosuch" in files["notes"][0]
+
+
+def test_a_calibration_starts_from_the_first_start_not_far_behind_the_best():
+    """The starts in their order of preference (the rounds' calibrations merged, the last
+    round's, the laws as found): the first whose RSS is within 10x the least; one far worse
+    (a merged start that cost 2000x the laws as found) is passed over."""
+    from mcl.discovery.calibrate import _first_good
+
+    merged, last, found = {"k": 1}, {"k": 2}, {"k": 3}
+    rss = {1: 959.6, 2: 1151.5, 3: 413.3}
+    assert _first_good([merged, last, found], lambda s: rss[s["k"]]) is merged      # 2.3x: kept
+    rss = {1: 335.0, 2: 0.30, 3: 0.15}
+    assert _first_good([merged, last, found], lambda s: rss[s["k"]]) is last        # 2000x: passed over

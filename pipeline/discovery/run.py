@@ -452,13 +452,13 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
         held = [n for law in laws for n in law["names"] if n not in names]
         held += replaced([b["component"] for b in found], base.model, held + names)
         hidden = internal(spec, base.model)
-        # the last cause's calibration started from the causes before it as found: a consistent
-        # start (theirs each freed other parameters; merged, they made the coupled drives'
-        # start 7000x worse than the laws as found)
-        start = found[-1].get("_calibrated_start", {})
+        # each round's calibration of its cause, merged (the tanks' two outlets), and the last
+        # cause's alone (it started from the causes before it as found): the better is taken
+        last = found[-1].get("_calibrated_start", {})
+        starts = [{k: v for b in found for k, v in b.get("_calibrated_start", {}).items()}, last]
         cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
                         spec.free, outputs, held + (hidden if spec.free == "auto" else []), judged_on=whole,
-                        own_start=spec.max_samples, start=start)
+                        own_start=spec.max_samples, starts=starts)
         report["calibration"] = {k: v for k, v in cal.items() if k not in ("params", "run")}
         if "params" in cal:          # the model delivered (:func:`modelica.calibrated_class`)
             report["_calibrated"] = {"params": cal["params"], "run": cal["run"], "free": spec.free,
