@@ -147,8 +147,8 @@ def test_a_held_out_record_is_judged_from_its_own_initial_state(tmp_path):
 
 
 def test_a_calibration_starts_where_a_shorter_one_ended_and_moves_only_what_it_frees(tmp_path, monkeypatch):
-    """The final calibration starts from the search's (``start``): the same optimum, the values
-    before it still the model's own, and a value in ``start`` for a parameter this fit does not
+    """The final calibration starts from the search's (``starts``): the same optimum, the values
+    before it still the model's own, and a value in a start for a parameter this fit does not
     free (lag.T) is not carried into the model."""
     from mcl import compile_model
     from mcl.discovery import calibrate as module
@@ -160,7 +160,7 @@ def test_a_calibration_starts_where_a_shorter_one_ended_and_moves_only_what_it_f
     starts, refit = [], module._refit
     monkeypatch.setattr(module, "_refit", lambda m, d, params, names, *a: starts.append(dict(params)) or refit(m, d, params, names, *a))
     out = calibrate(model, train, None, model.parameters, [], ["lag.k"], ["y"],
-                    start={"lag.k": 1.98, "lag.T": 0.7})
+                    starts=[{"lag.k": 1.98, "lag.T": 0.7}])
     assert starts[0]["lag.k"] == 1.98 and starts[0]["lag.T"] == 0.5
     assert abs(out["values"]["lag.k"]["after"] - 2.0) < 0.01 and out["values"]["lag.k"]["before"] == 1.0
     assert out["params"]["lag.T"] == 0.5 and "lag.T" not in out["values"]
