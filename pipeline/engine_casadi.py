@@ -173,7 +173,7 @@ class _Budget:
         if self.points and rest:
             if budget is not None:
                 work = max(budget - self.steps, 1)
-                need = _pow2(min(max(64, int(8 * self.steps / self.points)), cap))
+                need = self._need()
                 if n_points * need <= work:
                     return n_points, need, "work"
                 return self._split(n_points, work, "work")
@@ -183,6 +183,11 @@ class _Budget:
             return self._split(n_points, max(budget - self.steps, 1), "work")
         return self._split(n_points, by_time, "time")
 
+    def _need(self) -> int:
+        """Steps per point of a call whose points may each take 8x the steps the points have
+        taken so far (at least 64, at most the cap; a power of 2: few integrators are built)."""
+        return _pow2(min(max(64, int(8 * self.steps / self.points)), self.opts.max_steps))
+
     def _split(self, n_points: int, allowed: float, bound: str) -> tuple[int, int, str | None]:
         """A call of at most ``n_points`` points whose steps in all stay within ``allowed``."""
         cap = self.opts.max_steps
@@ -191,8 +196,8 @@ class _Budget:
         per_point = max(int(allowed // n_points), 1)
         if per_point >= 256:          # fewer steps per point: most calls need few
             return n_points, _pow2(min(per_point, cap)), bound
-        if self.points:               # points that may each take 8x the steps they have taken
-            need = _pow2(min(max(64, int(8 * self.steps / self.points)), cap))
+        if self.points:
+            need = self._need()
             if allowed >= 2 * need:   # (each call is a restart: small steps, fresh Jacobians)
                 return min(n_points, int(allowed // need)), need, bound
         n = max(1, int(allowed // min(cap, 4096)))

@@ -119,8 +119,9 @@ class Structure:
 
     def measuring_chain(self) -> list[Component]:
         """The measuring chain of a model with physical components: its sensors and the signal
-        blocks that read a model input or give a model output. Questioned only where no
-        component of the plant explains the misfit (a pulse counter blind to the direction)."""
+        blocks that read a model input or give a model output. Questioned in the search for the
+        first cause, where its laws could beat the plant's (a pulse counter blind to the
+        direction)."""
         plant = {c.name for c in self.candidates()}
         return [c for c in self.components.values()
                 if c.name not in plant and (c.sensor or (c.signal and c.chain))]
@@ -283,11 +284,12 @@ def _sensors(variables: dict, types: dict, comps: dict, outer: set) -> dict[str,
     output, which the model gives out (connected to one of the model's outputs)."""
     out = {}
     for name, c in comps.items():
-        ins = [n for n in c.inputs if _kind(variables[n].get("causality")) == "Input"]
-        outs = [n for n in c.inputs if _kind(variables[n].get("causality")) == "Output"
-                and split_name(n)[:-1] == split_name(name) and "[" not in split_name(n)[-1]]
-        if not ins and len(outs) == 1 and len(c.inputs) == 1 and outs[0] in outer and types.get(outs[0], "Real") == "Real":
-            out[name] = outs[0]
+        if len(c.inputs) != 1:       # (its signals, inputs and outputs, nested ones too)
+            continue
+        y = c.inputs[0]
+        if (_kind(variables[y].get("causality")) == "Output" and split_name(y)[:-1] == split_name(name)
+                and "[" not in split_name(y)[-1] and y in outer and types.get(y, "Real") == "Real"):
+            out[name] = y
     return out
 
 

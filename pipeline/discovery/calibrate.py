@@ -133,8 +133,9 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     the first ``own_start`` samples of ``validate`` (default: as many as ``train`` has; at most
     a quarter of the record): the initial-state parameters ``free`` allows, not ``held``.
     ``starts``: values the fit may start from instead of ``params`` (calibrations of the same
-    laws on fewer samples: the Wiener-Hammerstein's final one then settles in a few steps); the
-    one of least RSS on ``train``, ``params`` among them, is taken."""
+    laws on fewer samples: the Wiener-Hammerstein's final one then settles in a few steps), in
+    order of preference, ``params`` last: the first not far behind the best on ``train`` is
+    taken (:func:`_first_good`)."""
     from ..services import simulate
 
     nominal = [n for n in model.ode.p_names if n not in laws and n not in held and np.isfinite(params[n])]

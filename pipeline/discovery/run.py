@@ -122,7 +122,7 @@ class Causes:
         run took twice as long for it)."""
         bests = self._round(base, val_base)
         chain = [c.name for c in base.structure.measuring_chain() if c.name not in base.excluded]
-        first = sum(not r["label"].endswith("chain") for r in self.rounds) == 1
+        first = self._plant_rounds() == 1
         if not (chain and first) or self.spec.unknown != "auto" or (bests and at_noise(bests[0], self.sigma)):
             return bests
         log.info("      the measuring chain is searched (%s)", ", ".join(chain))
@@ -140,8 +140,12 @@ class Causes:
         self._verdict = verdict
         return bests
 
+    def _plant_rounds(self) -> int:
+        """Rounds searched so far on the plant (a round of the measuring chain shares its number)."""
+        return sum(not r["chain"] for r in self.rounds)
+
     def _round(self, base: Base, val_base, chain: bool = False, beat: float | None = None) -> list[dict]:
-        number = sum(not r["label"].endswith("chain") for r in self.rounds) + (0 if chain else 1)
+        number = self._plant_rounds() + (0 if chain else 1)
         label = f"round{number}" + ("chain" if chain else "")
         rpart = self.part / label
         (rpart / "candidates").mkdir(parents=True, exist_ok=True)
@@ -164,8 +168,8 @@ class Causes:
                 log.info("      round %d%s: %s", number, " (measuring chain)" if chain else "", why)
             return [{**b, "_signals": found.signals, "_base": base, "_round": label} for b in bests]
 
-        entry = {"label": label, "round": number, "screening": found.screening, "pairs": found.pairs,
-                 "candidates": cands, "roles": found.roles}
+        entry = {"label": label, "round": number, "chain": chain, "screening": found.screening,
+                 "pairs": found.pairs, "candidates": cands, "roles": found.roles}
         self.rounds.append(entry)
         self._verdict = verdict
         bests = verdict()
@@ -452,8 +456,9 @@ def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate
         held = [n for law in laws for n in law["names"] if n not in names]
         held += replaced([b["component"] for b in found], base.model, held + names)
         hidden = internal(spec, base.model)
-        # each round's calibration of its cause, merged (the tanks' two outlets), and the last
-        # cause's alone (it started from the causes before it as found): the better is taken
+        # each round's calibration of its cause, merged (the tanks' two outlets), then the last
+        # cause's alone (it started from the causes before it as found), then the laws as found:
+        # the first not far behind the best of them is taken (calibrate._first_good)
         last = found[-1].get("_calibrated_start", {})
         starts = [{k: v for b in found for k, v in b.get("_calibrated_start", {}).items()}, last]
         cal = calibrate(base.model, whole.head(CALIBRATION_SPAN * spec.max_samples), validate, params, names,
