@@ -301,12 +301,13 @@ def select_orders(u, y, fit_and_run, grid, window: int):
 
 # -- the discovery columns -------------------------------------------------------------------------
 
-def mcl_discovery(case: Case, train, tests: dict) -> dict | None:
-    """mcl's discovery on ``case`` (its model from parts; trained on the training split only, the
-    test splits unseen): {"law": {test: rms}, "joint": {test: rms}, "cpu_s", "cause"} for the
-    learned law alone and for the law refitted with the nominal parameters (``free: auto``);
-    None for a case without a model from parts (the columns print n/a). ``train`` and each of
-    ``tests`` are (time, u, y) of a split."""
+def mcl_discovery(case: Case, train, tests: dict, written: str = "parts") -> dict | None:
+    """mcl's discovery on ``case`` (its model from parts; with ``written="equations"`` the nominal
+    model as equations; trained on the training split only, the test splits unseen): {"law":
+    {test: rms}, "joint": {test: rms}, "cpu_s", "cause"} for the learned law alone and for the
+    law refitted with the nominal parameters (``free: auto``); None for a case without a model
+    from parts (the columns print n/a). ``train`` and each of ``tests`` are (time, u, y) of a
+    split."""
     if case.parts is None:
         return None
     import tempfile
@@ -315,6 +316,8 @@ def mcl_discovery(case: Case, train, tests: dict) -> dict | None:
     from mcl.discovery.run import cpu_seconds
 
     source, model, initial = case.parts
+    if written == "equations":
+        source, model, initial = case.source, case.model, lambda y0, _params: case.initial(y0)
     t, u, y = train
     c0, w0 = cpu_seconds(), time.perf_counter()    # the workers' CPU too
     with tempfile.TemporaryDirectory() as tmp:

@@ -26,6 +26,7 @@ class CasadiCompiler(Compiler):
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
         from mcl.compile import cache as compile_cache, rumoca_frontend, structure
         from mcl.compile.dae import eliminate_aliases
+        from mcl.compile.equations import with_equations
         from mcl.model import CompiledModel
 
         libraries = (options or {}).get("libraries", ())
@@ -40,7 +41,7 @@ class CasadiCompiler(Compiler):
         raw = rumoca_frontend.to_dae(ir, located, model)
         dae = eliminate_aliases(raw)
         ode = structure.build_ode(dae, model)
-        components = _components(ir, located, model, prep.files, libraries)
+        components = with_equations(_components(ir, located, model, prep.files, libraries), raw)
         seconds = time.perf_counter() - start
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],

@@ -14,7 +14,7 @@ import real_data  # noqa: E402
 pytestmark = pytest.mark.slow
 
 
-def discovered(name: str) -> dict:
+def discovered(name: str, written: str = "parts") -> dict:
     root = real_data.data_root()
     if root is None or not (root / name / "train.csv").exists():
         pytest.skip(f"real benchmark data '{name}' not found (../shared/real or MCL_REAL_DATA)")
@@ -22,7 +22,7 @@ def discovered(name: str) -> dict:
         pytest.skip("the MSL is not on MODELICAPATH nor at ../shared/msl")
     case = real_data.CASES[name]
     return real_data.mcl_discovery(case, real_data.load(case, root, "train.csv"),
-                                   {split: real_data.load(case, root, split) for split in case.tests})
+                                   {split: real_data.load(case, root, split) for split in case.tests}, written)
 
 
 def test_the_tanks_outflow_is_named_and_the_joint_refit_reaches_the_good_models():
@@ -31,6 +31,14 @@ def test_the_tanks_outflow_is_named_and_the_joint_refit_reaches_the_good_models(
     assert "Torricelli" in found["cause"], found["cause"]          # with its kind of law: a square root
     assert found["joint"]["test.csv"] < 0.45                     # the good models' range: 0.34-0.45 V
     assert found["joint"]["test.csv"] < found["law"]["test.csv"]   # the grey-box refit adds to the law
+
+
+def test_the_tanks_written_as_equations_are_named_by_their_outflow_equations():
+    """The engineer's first model, equations only (q1 = (h1 + h_op)/R1, ...): the outflow
+    equations are the candidates, and the joint refit reaches the good models."""
+    found = discovered("cascaded_tanks", written="equations")
+    assert found["cause"].split()[0] in ("q1", "q2"), found["cause"]
+    assert found["joint"]["test.csv"] < 0.45, found["joint"]
 
 
 def test_the_silverbox_spring_is_named_and_the_joint_refit_reaches_the_good_models():

@@ -43,15 +43,31 @@ class Component:
     inputs: list[str] = field(default_factory=list)       # its signal inputs and outputs
     declaration: str = ""                                 # the declaration as written, if found
     kind: str = "physical"   # or "signal": a block with one Real input and one Real output;
-    #                          or "sensor": connectors and one Real output, given out of the model
+    #                          or "sensor": connectors and one Real output, given out of the model;
+    #                          or "equation": the user's own y = g(x) (compile/equations.py)
     chain: bool = False      # a signal block or a sensor that reads a model input or gives a model output
+    rows: list = field(default_factory=list)   # a term's balances: their rows in the compiled DAE
 
     @property
     def signal(self) -> bool:
         """A signal block (``Gain``, ``Limiter``, a user's ``block`` with ``input Real u;
         output Real y``): its law is its output as a function of its input; its connectors
-        are the input and the output, in that order, without potential or flow variables."""
-        return self.kind == "signal"
+        are the input and the output, in that order, without potential or flow variables. The
+        user's own equation y = g(x) is one too (:attr:`equation`)."""
+        return self.kind in ("signal", "equation", "term")
+
+    @property
+    def equation(self) -> bool:
+        """The user's own equation y = g(x) (or g(xa - xb)), named by y: ``inputs`` holds x (or
+        xa, xb) and y, the variables as the model names them."""
+        return self.kind == "equation"
+
+    @property
+    def term(self) -> bool:
+        """A term of the user's own balances (``k*x`` in ``m*der(v) = u - k*x``; a flow written in
+        the balances of both tanks it joins), rows ``rows`` of the compiled DAE: ``inputs`` holds
+        its unknown and its text, ``cls`` says "term k*x"."""
+        return self.kind == "term"
 
     @property
     def sensor(self) -> bool:
@@ -77,6 +93,10 @@ class Component:
         'across value', against no second one: None)."""
         if self.sensor:           # what it measures (its output as written)
             return self.inputs[0], None
+        if self.equation:
+            return self.inputs[0], (self.inputs[1] if len(self.inputs) == 3 else None)
+        if self.term:
+            return self.inputs[0], None
         a, b = self.connectors
         if self.signal:
             return f"{self.name}.{a.name}", None
@@ -87,12 +107,16 @@ class Component:
         block's output (what its law gives, as a flow law gives the flow: None for b)."""
         if self.sensor:           # what it reads out
             return self.inputs[0], None
+        if self.equation or self.term:
+            return self.inputs[-1], None
         a, b = self.connectors
         if self.signal:
             return f"{self.name}.{b.name}", None
         return f"{self.name}.{a.name}.{a.flow[0]}", f"{self.name}.{b.name}.{b.flow[0]}"
 
     def owns(self, variable: str) -> bool:
+        if self.equation or self.term:
+            return variable == self.name
         return variable.startswith(self.name + ".")
 
 
@@ -110,10 +134,11 @@ class Structure:
     def candidates(self) -> list[Component]:
         """The components whose law discovery may question: two connectors of one kind, no
         signal inputs or outputs (sources and sensors are the measurement, not the plant), and
-        the static signal blocks of one input and one output (a block diagram's elements). In a
-        model with such physical components, a block that reads a model input or gives a model
+        the static signal blocks of one input and one output (a block diagram's elements) and the
+        user's own equations y = g(x). In a model with such physical components (or equations), a block that reads a model input or gives a model
         output (the gain of a driver, of a sensor) is the measuring chain, as sensors are."""
-        physical = {c.name for c in self.components.values() if c.two_connector and not c.inputs}
+        physical = {c.name for c in self.components.values()
+                    if (c.two_connector and not c.inputs) or ((c.equation or c.term) and not c.chain)}
         return [c for c in self.components.values()
                 if c.name in physical or (c.signal and not (physical and c.chain))]
 
@@ -156,7 +181,8 @@ class Structure:
         for n, c in d["components"].items():
             conns = [Connector(k["name"], k["cls"], tuple(k["potential"]), tuple(k["flow"])) for k in c["connectors"]]
             comps[n] = Component(c["name"], c["cls"], conns, list(c["parameters"]), list(c["inputs"]),
-                                 c.get("declaration", ""), c.get("kind", "physical"), c.get("chain", False))
+                                 c.get("declaration", ""), c.get("kind", "physical"), c.get("chain", False),
+                                 list(c.get("rows", [])))
         return cls(d["model"], comps, [list(n) for n in d["nets"]])
 
     def draw(self, path) -> Path:

@@ -22,7 +22,7 @@ from ..data import TimeSeries
 from ..errors import MclError
 from ..stats import criterion as criterion_of, rms
 from .fitters import residual
-from .inject import NominalForm, compiled, mode_of, nominal_of, with_law
+from .inject import NominalForm, compiled, mode_of, nominal_of, own_nominal, with_law
 from .screen import law_signals
 
 #: family indices of the shape stage (after any family list)
@@ -303,7 +303,7 @@ def _law_result(ctx: Context, law: Law, model, res, w, active) -> dict:
            "family": getattr(template, "family", "") or template.name, "law_variable": template.law_variable,
            "mode": mode_of(template), "parameter_names": law.names,
            "nominal_form": law.nominal.coefficients if law.nominal else None,
-           "nominal_exact": bool(law.nominal.exact) if law.nominal else None,
+           "nominal_exact": bool(law.nominal.exact or own_nominal(comp, template)) if law.nominal else None,
            "w0": law.w0.tolist(), "w": np.asarray(w).tolist(), "active": np.asarray(active).tolist(),
            "equation": template.equation(np.asarray(w) * np.asarray(active)),
            "terms": [str(m) for m in getattr(template, "terms", [])]}

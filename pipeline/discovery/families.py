@@ -146,6 +146,10 @@ def families(role: str, env: dict | None = None, signal: bool = False, sensor: b
             f["rhs"] = ["1", *f["rhs"], f"tanh(dv/{0.05 * span:.3g})", f"tanh(dv/{0.25 * span:.3g})"]
         if f.get("family") == "static" and env is not None and _constant(env):
             f["rhs"] = ["1", *f["rhs"]]       # the nominal law has a constant: so may the law
+    if signal and env is not None and np.min(env["v"]) > 0:
+        # a block's input (an equation's variable) that stays above 0, a level: the outflow it
+        # drives may go with its square root (Torricelli, an orifice to the open)
+        out.append({"name": "polynomial", "lhs": ["i"], "rhs": ["1", "sqrt(abs(v))*sign(v)"], "family": "static"})
     if role == "absolute":
         from ..templates import scaled
 

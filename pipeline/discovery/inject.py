@@ -108,6 +108,13 @@ def mode_of(template) -> str:
     return "series" if template.explicit == "v" else "parallel"
 
 
+def own_nominal(comp: Component, template) -> bool:
+    """Whether a law of ``template`` at ``comp`` takes the nominal law's place as the model writes
+    it (a user's equation or a term of a balance, whose law is known as an expression): the rest
+    of the model sees exactly the candidate law, and the Modelica written for it is the law."""
+    return template.explicit == "i" and (comp.equation or comp.term)
+
+
 def qualified(component: str, names: list[str], taken) -> list[str]:
     """Parameter names of a candidate law: ``R1.w2``, or ``R1.mcl_w2`` where the component has
     a parameter of that name already."""
@@ -137,7 +144,9 @@ def with_law(dae: Dae, comp: Component, template, w0, nominal: NominalForm | Non
     w = ca.SX.sym("w", len(names))
     ws = ca.vertsplit(w)
     if explicit:
-        f_nom = sum((c * (1.0 if v == "1" else env[v]) for v, c in nominal.coefficients.items()), ca.SX(0))
+        # (the nominal law as the model writes it, where it is known: the rest sees exactly the law)
+        f_nom = env["nominal"] if own_nominal(comp, template) else \
+            sum((c * (1.0 if v == "1" else env[v]) for v, c in nominal.coefficients.items()), ca.SX(0))
         law = D - (template.sx_explicit(ws, env) - f_nom)
     else:
         law = template.sx_residual(ws, env)
@@ -148,6 +157,8 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
     """The new unknown D put at ``comp``'s terminals, and the law's variables as expressions:
     v (the across value the rest of the model sees), i (the flow into connector a), va and vb
     (the potentials of connectors a and b)."""
+    if comp.term:
+        return _term_deviation(dae, comp)
     names = [n for n in (*comp.across(), *comp.flow()) if n is not None]
     for n in names:
         s = dae.exprs.get(n)
@@ -176,10 +187,33 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
             rows[k] = ca.substitute(rows[k], old, new)
     i = fa + D if mode == "parallel" else fa
     env = {"v": xa - xb, "i": i, "va": xa, "vb": xb}
+    if comp.equation:       # its nominal law: the equation solved for its variable (affine in it)
+        row = next(rows[k] for k in range(len(rows)) if k not in set(external) and ca.depends_on(rows[k], fa))
+        env["nominal"] = ca.substitute(-row / ca.jacobian(row, fa), fa, ca.SX(0))
     exprs[f"{comp.name}.{ACROSS}"], exprs[f"{comp.name}.{FLOW}"], exprs[f"{comp.name}.{DEVIATION}"] = xa - xb, i, D
     dae = dataclasses.replace(dae, residual=ca.vertcat(*rows) if rows else ca.SX(0, 1), exprs=exprs,
                               z=ca.vertcat(dae.z, D), z_names=[*dae.z_names, f"{comp.name}.{DEVIATION}"],
                               z_start=ca.vertcat(dae.z_start, ca.SX(0)))
+    return dae, D, env
+
+
+def _term_deviation(dae: Dae, comp: Component) -> tuple[Dae, ca.SX, dict]:
+    """The deviation D added to a term of the user's balance (k*x in m*der(v) = u - k*x: the
+    balance reads k*x + D), and the law's variables: v the term's unknown, i the term with D."""
+    from ..compile.equations import term_of
+
+    if comp.inputs[0] not in dae.exprs:
+        raise ModelicaError(f"{comp.inputs[0]} is not a variable of the compiled model: {comp.cls} cannot take a law")
+    term, _ = term_of(dae, comp)
+    D = ca.SX.sym(f"{comp.name}.{DEVIATION}")
+    rows = ca.vertsplit(dae.residual)
+    for k in comp.rows:
+        rows[k] = rows[k] + term_of(dae, comp, k)[1] * D
+    x = dae.exprs[comp.inputs[0]]
+    env = {"v": x, "i": term + D, "va": x, "vb": ca.SX(0), "nominal": term}
+    exprs = {**dae.exprs, f"{comp.name}.{ACROSS}": x, f"{comp.name}.{FLOW}": term + D, f"{comp.name}.{DEVIATION}": D}
+    dae = dataclasses.replace(dae, residual=ca.vertcat(*rows), exprs=exprs, z=ca.vertcat(dae.z, D),
+                              z_names=[*dae.z_names, f"{comp.name}.{DEVIATION}"], z_start=ca.vertcat(dae.z_start, ca.SX(0)))
     return dae, D, env
 
 
@@ -188,12 +222,14 @@ def _external_rows(dae: Dae, comp: Component) -> list[int]:
     connections, the other components' and the user's own equations)."""
     unknowns = ca.vertcat(dae.x, dae.dx, dae.z)
     names = [*dae.x_names, *dae.x_names, *dae.z_names]
+    if comp.equation:     # its own row reads its variables only, no derivative (a balance may read x')
+        names = [*dae.x_names, *(f"der({n})" for n in dae.x_names), *dae.z_names]
     sp = ca.jacobian_sparsity(dae.residual, unknowns) if dae.residual.numel() else None
     if sp is None:
         return []
     rows, cols = sp.get_triplet()
     foreign = np.zeros(dae.residual.numel(), bool)
-    outside = np.array([not comp.owns(n) for n in names])
+    outside = np.array([n not in comp.inputs for n in names] if comp.equation else [not comp.owns(n) for n in names])
     foreign[np.asarray(rows)[outside[np.asarray(cols, int)]]] = True
     return [int(k) for k in np.flatnonzero(foreign)]
 

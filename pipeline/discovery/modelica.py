@@ -178,6 +178,8 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
     from ..services import registry
 
     template = registry().template(cause["template"])
+    if (comp.equation or comp.term) and template.explicit == "i" and hasattr(template, "terms"):
+        return _equation_block(cause, comp, template, units or {}, data)
     lib = _library(libraries, sources)
     if comp.sensor and template.explicit == "i" and hasattr(template, "terms"):
         return _sensor_class(cause, comp, template, lib, libraries, sources, scope, units or {}, data)
@@ -236,6 +238,96 @@ def _terms(template, w, names: dict, u: dict) -> tuple[list[str], list[str]]:
         params.append(f'  parameter Real {pname}{unit_mod} = {float(c)!r} "coefficient of {html.escape(text)}";')
         rhs.append(f"{pname}*{text}" if text != "1" else pname)
     return params, rhs
+
+
+def _equation_block(cause: dict, comp, template, units: dict, data: str) -> str:
+    """The law learned for the user's own equation y = g(x) as a block: y = f(u), u the x the
+    equation read (or xa - xb); the model's equation is rewritten to read it (:func:`rewritten`)."""
+    w = np.asarray(cause["w"], float)
+    xa, xb = comp.across()
+    u = {"y": units.get(comp.flow()[0]), "v": units.get(xa), "i": units.get(comp.flow()[0])}
+    if comp.term:
+        u["y"] = u["i"] = None
+    params, rhs = _terms(template, w, {"v": "u", "i": "y"}, {**u, "va": u["v"], "vb": u["v"]})
+    doc = _documentation(cause, data)
+    reads = f"{xa} - {xb}" if xb else xa
+    return (f'block {cause["learned_class"]} "{comp.flow()[0]} = f({reads}) as learned by mcl: '
+            f'{html.escape(cause["law"]["equation"])}"\n'
+            f'  extends Modelica.Blocks.Interfaces.SISO;\n' + "\n".join(params)
+            + f"\nequation\n  y = {' + '.join(rhs) or '0'};\n  annotation(Documentation(info=\"{doc}\"));\n"
+            f"end {cause['learned_class']};\n")
+
+
+def law_instance(comp) -> str:
+    """The instance of the learned block that a rewritten equation of ``comp`` reads."""
+    return f"{comp.name}_law"
+
+
+def _class_span(text: str, model_short: str):
+    """(the match of class ``model_short``'s head in ``text``, or None; where its body ends)."""
+    head = re.search(rf"(?m)(?:^|[\s;])(?:(?:partial|encapsulated|final)\s+)*(?:model|block|class)\s+{re.escape(model_short)}\b",
+                     text)
+    if not head:
+        return None, len(text)
+    end = re.search(rf"\bend\s+{re.escape(model_short)}\s*;", text[head.end():])
+    return head, head.end() + (end.start() if end else len(text) - head.end())
+
+
+def rewritten(text: str, model_short: str, comp, new_class: str, unknowns) -> str | None:
+    """``text`` with ``comp``'s equation in class ``model_short`` (the one statement that names
+    its variable and what it reads, and no other unknown of ``unknowns``) given by an instance of
+    the learned block ``new_class``, declared before the equation section; None when that
+    equation is not found there."""
+    head, body_end = _class_span(text, model_short)
+    if not head:
+        return None
+    quoted = _quoted(text)
+    sections = [m for m in re.finditer(r"(?<![\w.])(initial\s+)?equation\b", text[:body_end])
+                if m.start() > head.end() and not quoted(m.start())]
+    xa, xb = comp.across()
+    needs = {comp.name, xa, *([xb] if xb else [])} if comp.equation else {xa}
+    others = set(unknowns) - needs
+    # a term of a balance: its text, whatever the spacing (k*x, k * x)
+    pattern = (r"(?<![\w.])" + r"\s*".join(re.escape(t) for t in re.findall(r"\w+(?:\.\w+)*|\S", comp.inputs[1]))
+               + r"(?![\w.(\[])") if comp.term else None
+    found = []          # a term's balances: (section, start, stop, the statement rewritten)
+    for sec in (m for m in sections if not m.group(1)):
+        start = sec.end()
+        while start < body_end:
+            stop = min(_statement_end(text, start), body_end)
+            statement = re.sub(r'"(?:\\.|[^"\\])*"|//[^\n]*|/\*.*?\*/', " ", text[start:stop], flags=re.S)
+            if re.match(r"\s*(?:initial\s+)?(?:equation|algorithm|protected|public)\b", statement):
+                break
+            words = set(re.findall(r"(?<![\w.])[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*", statement))
+            inst = law_instance(comp)
+            original = text[start:stop]
+            if pattern and "der" in words and len(re.findall(pattern, statement)) == 1 == len(re.findall(pattern, original)):
+                indent = re.match(r"\s*", original).group(0).split("\n")[-1] or "  "
+                new = re.sub(pattern, f"{inst}.y", original) + (f"\n{indent}{inst}.u = {xa};" if not found else "")
+                found.append((sec, start, stop, new, indent))
+            if comp.equation and needs <= words and not words & others and "der" not in words and "=" in statement:
+                reads = f"{xa} - {xb}" if xb else xa
+                indent = re.match(r"\s*", text[start:stop]).group(0).split("\n")[-1] or "  "
+                new = f"\n{indent}{inst}.u = {reads};\n{indent}{comp.name} = {inst}.y;"
+                return _declared_before(text, head, sec, quoted, indent,
+                                        f'{new_class} {inst} "the law of {comp.name} learned by mcl"', start, new, stop)
+            start = stop
+    if not found or len(found) != len(comp.rows):     # (each balance the term is in, or none)
+        return None
+    for _sec, start, stop, new, _ in reversed(found[1:]):
+        text = text[:start] + new + text[stop:]
+    sec, start, stop, new, indent = found[0]
+    return _declared_before(text, head, sec, quoted, indent,
+                            f'{new_class} {inst} "the law of {comp.inputs[1]} learned by mcl"', start, new, stop)
+
+
+def _declared_before(text, head, sec, quoted, indent, declaration, start, new, stop) -> str:
+    """``text`` with the statement at ``start:stop`` replaced by ``new`` and ``declaration``
+    added where the class's declarations end (before its first section)."""
+    first = next(m.start() for m in re.finditer(r"(?<![\w.])(?:initial\s+)?(?:equation|algorithm)\b", text[:sec.end()])
+                 if m.start() > head.end() and not quoted(m.start()))
+    line = text.rfind("\n", 0, first) + 1
+    return text[:line] + f"{indent}{declaration};\n" + text[line:start] + new + text[stop:]
 
 
 def _sensor_class(cause: dict, comp, template, lib, libraries, sources, scope: str, units: dict, data: str) -> str:
@@ -354,12 +446,9 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
     ``new_class``: of its modification only what modifies the learned class's own variables
     ``keep`` stays (a start value, fixed = true; the nominal class's parameters go), its
     comment and annotation stay. None when that declaration is not in the class."""
-    head = re.search(rf"(?m)(?:^|[\s;])(?:(?:partial|encapsulated|final)\s+)*(?:model|block|class)\s+{re.escape(model_short)}\b",
-                     text)
+    head, body_end = _class_span(text, model_short)
     if not head:
         return None
-    end = re.search(rf"\bend\s+{re.escape(model_short)}\s*;", text[head.end():])
-    body_end = head.end() + (end.start() if end else len(text) - head.end())
     decl = re.compile(rf"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)"
                       rf"([A-Za-z_][\w.]*)(\s+){re.escape(component)}\b")
     quoted = _quoted(text)
@@ -405,12 +494,13 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
             classes.append(write(cause))
             if calibrated and "." not in comp.name:     # the class's own parameters at their calibrated values
                 before, after = _parameter_values(classes[-1]), _parameter_values(write({**cause, "w": calibrated["w"][k]}))
-                law_values.update({f"{comp.name}.{n}": v for n, v in after.items() if before.get(n) != v})
+                inst = law_instance(comp) if comp.equation or comp.term else comp.name
+                law_values.update({f"{inst}.{n}": v for n, v in after.items() if before.get(n) != v})
         except ValueError as exc:
             notes.append(str(exc))
             continue
         if "." not in comp.name:
-            swaps.append((comp.name, f"{LEARNED_PACKAGE}.{cause['learned_class']}"))
+            swaps.append((comp, f"{LEARNED_PACKAGE}.{cause['learned_class']}"))
     short = spec.model_name.split(".")[-1]
     sources, model_name, extra = [], spec.model_name, ""
     if spec.sources:
@@ -430,25 +520,31 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
             extra, model_name = text, f"{LEARNED_PACKAGE}.{short}"
         files = []
     swapped = set()
-    for name, cls in swaps:
+    dae = base.model.dae
+    unknowns = [*dae.x_names, *dae.z_names, *dae.u_names] if dae is not None else []
+    for comp, cls in swaps:
+        name = comp.name
+        change = ((lambda text, owner: rewritten(text, owner, comp, cls, unknowns)) if comp.equation or comp.term
+                  else (lambda text, owner: redeclared(text, owner, name, cls)))
         done = False
         for owner in _class_and_bases(short, [f.read_text(errors="replace") for f in files] + [extra]):
             for f in files:
-                new = redeclared(f.read_text(errors="replace"), owner, name, cls)
+                new = change(f.read_text(errors="replace"), owner)
                 if new is not None:
                     f.write_text(new)
                     done = True
                     break
             if extra and not done:
-                new = redeclared(extra, owner, name, cls)
+                new = change(extra, owner)
                 if new is not None:
                     extra, done = new, True
             if done:
                 break
         if done:
-            swapped.add(name)
+            swapped.add(law_instance(comp) if comp.equation or comp.term else name)
         else:
-            notes.append(f"the declaration of {name} is not in {spec.model_name}'s own text: the model is not rewritten for it")
+            what = "equation" if comp.equation or comp.term else "declaration"
+            notes.append(f"the {what} of {name} is not in {spec.model_name}'s own text: the model is not rewritten for it")
     if calibrated:
         # (a learned class's values only where the model declares the component with it)
         law_values = {n: v for n, v in law_values.items() if n.rsplit(".", 1)[0] in swapped}

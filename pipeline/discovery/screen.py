@@ -15,6 +15,7 @@ components.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import casadi as ca
@@ -52,6 +53,8 @@ def law_signals(model, states: np.ndarray, time: np.ndarray, inputs, components)
         xa, xb = c.across()
         fa, _ = c.flow()
         v_name, i_name = f"{c.name}.{ACROSS}", f"{c.name}.{FLOW}"
+        if v_name not in ode.probe_names and c.term:    # (its value is the term's, of v: below)
+            fa = xa
         names.append(((v_name, None, i_name) if v_name in ode.probe_names else (xa, xb, fa), (xa, xb)))
     X, U, P, T = ode.probe.mx_in()
     Ud = ca.MX.sym("ud", U.numel())
@@ -78,7 +81,23 @@ def law_signals(model, states: np.ndarray, time: np.ndarray, inputs, components)
     out = {}
     for k, c in enumerate(components):
         out[c.name] = Signals(Q[2 * k], Q[2 * k + 1], dQ[2 * k], dQ[2 * k + 1], V[2 * k], V[2 * k + 1])
+        if c.term and f"{c.name}.{ACROSS}" not in ode.probe_names:
+            out[c.name] = _term_signals(model, c, out[c.name], p)
     return out
+
+
+def _term_signals(model, comp, sig: Signals, p: np.ndarray) -> Signals:
+    """A term of the user's balance along the run: i its value at v (its unknown), di = i'(v) dv."""
+    from ..compile.equations import term_of
+
+    dae = model.dae
+    term, _ = term_of(dae, comp)
+    x = dae.exprs[comp.inputs[0]]
+    values = dict(zip(model.ode.p_names, p))
+    pv = [values.get(n, v) for n, v in zip(dae.p_names, np.asarray(dae.p_values, float))]
+    fun = ca.Function("term", [x, dae.p], [term, ca.jacobian(term, x)])
+    i, slope = (np.asarray(a, float).ravel() for a in fun.map(len(sig.v))(sig.v[None], np.repeat(np.asarray(pv)[:, None], len(sig.v), 1)))
+    return dataclasses.replace(sig, i=i, di=slope * sig.dv)
 
 
 @dataclass

@@ -47,6 +47,14 @@ def words(comp) -> Words:
         x = f"{comp.name}.measured"
         return Words(x, f"der({x})", y, False, f"{x} is what {comp.name} measures ({y} as the model wrote it), "
                      f"{y} what it reads out", (x, "0"))
+    if comp.term:            # a term of the user's balance, in its unknown
+        x, label = comp.inputs
+        return Words(x, f"der({x})", label, False, f"{label} is a term of a balance of the model, in {x}", (x, "0"))
+    if comp.equation:        # the user's own equation: its variable in what it reads
+        xa, xb = comp.across()
+        y = comp.flow()[0]
+        x = f"({xa} - {xb})" if xb else xa
+        return Words(x, f"der({x})", y, False, f"{y} is given by an equation of the model in {x}", (xa, xb or "0"))
     a, b = comp.connectors
     if comp.signal:          # a block: its output in its input
         u, y = (f"{comp.name}.{c.name}" for c in (a, b))

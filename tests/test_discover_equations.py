@@ -1,0 +1,222 @@
+"""A model written with equations, not parts: the user's own constitutive equations (Fs = k*x,
+q12 = (h1 - h2)/R) are the components discovery questions, each named by the variable it gives;
+so are the terms of its balances (k*x in m*der(v) = kf*u - d*v - k*x), each named by its text.
+
+The data come from the true systems' ODEs written by hand and solved by SciPy: a Duffing
+oscillator (its spring hardens, k x + k3 x^3) and two tanks joined at the bottom (the flow
+between them goes with the square root of the level difference).
+"""
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from helpers import discovered, needs_msl
+
+pytestmark = [needs_msl()]
+
+OSCILLATOR = """
+model Oscillator "a mass on a spring and a damper, pushed by a force proportional to the input"
+  import Modelica.Units.SI;
+  input Real u "drive voltage";
+  output Real y "displacement sensor";
+  parameter SI.Mass m = 1;
+  parameter SI.TranslationalSpringConstant k = 4 "spring stiffness";
+  parameter SI.TranslationalDampingConstant d = 0.3;
+  parameter Real kf = 1 "force per volt";
+  SI.Position x "displacement";
+  SI.Velocity v;
+  SI.Force Fs "spring force";
+  SI.Force Fd "damper force";
+initial equation
+  x = 0;
+  v = 0;
+equation
+  der(x) = v;
+  m*der(v) = kf*u - Fs - Fd;
+  Fs = k*x;
+  Fd = d*v;
+  y = x;
+end Oscillator;
+"""
+
+
+def oscillator_data(path, seed: int, k3: float) -> None:
+    """The displacement (noise 2 mm) of m x'' + d x' + k x + k3 x^3 = u under a multisine."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 40, 801)
+    a, w, ph = rng.uniform(0.6, 1.0, 3), np.array([0.7, 1.9, 3.3]), rng.uniform(0, 2 * np.pi, 3)
+
+    def u(s):
+        return sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph))
+
+    def rhs(s, z):
+        x, v = z
+        return [v, u(s) - 0.3 * v - 4 * x - k3 * x**3]
+
+    sol = solve_ivp(rhs, (0, 40), [0, 0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.02)
+    y = sol.y[0] + rng.normal(0, 0.002, len(t))
+    path.write_text("time,u,y\n" + "\n".join(f"{p:.10g},{q:.10g},{r:.10g}" for p, q, r in zip(t, u(t), y)) + "\n")
+
+
+def test_a_hardening_spring_written_as_an_equation_is_named_and_put_back(tmp_path):
+    """The spring's equation Fs = k*x is the cause, its law cubic in x; the extended model gives
+    Fs by the learned block and reproduces the fit."""
+    oscillator_data(tmp_path / "train.csv", 1, 3.0)
+    oscillator_data(tmp_path / "validate.csv", 2, 3.0)
+    report = discovered(tmp_path, "Oscillator.mo", "Oscillator", OSCILLATOR)
+    cause = report["causes"][0]
+    assert cause["component"] == "Fs", report["cause"]
+    assert "x^3" in cause["law"]["equation"], cause["law"]["equation"]
+    assert report["gain"]["validation_rms_after"] < 0.1 * report["gain"]["validation_rms_before"], report["gain"]
+    extended = (tmp_path / "out" / "extended" / "Oscillator.mo").read_text()
+    assert "Fs_law.u = x;" in extended and "Fs = Fs_law.y;" in extended, extended
+    assert "Fs = k*x" not in extended
+    assert report["extended"]["recompiled_difference"] < 1e-3, report["extended"]
+
+
+def test_the_equations_of_a_right_model_are_left_alone(tmp_path):
+    """Null case: data from the linear oscillator itself; no cause."""
+    oscillator_data(tmp_path / "train.csv", 3, 0.0)
+    oscillator_data(tmp_path / "validate.csv", 4, 0.0)
+    report = discovered(tmp_path, "Oscillator.mo", "Oscillator", OSCILLATOR)
+    assert not report["causes"], report["cause"]
+
+
+TANKS = """
+model Tanks "two tanks joined at the bottom by a pipe; the second drains through a valve"
+  import Modelica.Units.SI;
+  input Real u "pump flow, l/s";
+  output Real y "level of tank 1";
+  parameter SI.Area A1 = 1, A2 = 1;
+  parameter Real R12 = 2 "pipe resistance, linear";
+  parameter Real R2 = 4 "valve resistance";
+  SI.Height h1(start = 1, fixed = true), h2(start = 0.5, fixed = true);
+  Real q12 "flow from tank 1 into tank 2";
+  Real q2 "outflow";
+equation
+  A1*der(h1) = u - q12;
+  A2*der(h2) = q12 - q2;
+  q12 = (h1 - h2)/R12;
+  q2 = h2/R2;
+  y = h1;
+end Tanks;
+"""
+
+
+def tank_data(path, seed: int) -> None:
+    """Level 1 (noise 1 mm) where the pipe's flow is 0.5 sign(dh) sqrt(|dh|)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 200, 801)
+    a, w, ph = rng.uniform(0.1, 0.2, 2), np.array([0.05, 0.13]), rng.uniform(0, 2 * np.pi, 2)
+
+    def u(s):
+        return 0.3 + sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph))
+
+    def rhs(s, z):
+        h1, h2 = z
+        dh = h1 - h2
+        q12 = 0.5 * np.sign(dh) * np.sqrt(abs(dh))
+        return [u(s) - q12, q12 - h2 / 4]
+
+    sol = solve_ivp(rhs, (0, 200), [1, 0.5], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.5)
+    y = sol.y[0] + rng.normal(0, 0.001, len(t))
+    path.write_text("time,u,y\n" + "\n".join(f"{p:.10g},{q:.10g},{r:.10g}" for p, q, r in zip(t, u(t), y)) + "\n")
+
+
+def test_a_law_in_a_difference_of_levels_is_named_in_that_difference(tmp_path):
+    """q12 = (h1 - h2)/R12 reads a difference: the cause is q12 with its law in h1 - h2."""
+    tank_data(tmp_path / "train.csv", 1)
+    tank_data(tmp_path / "validate.csv", 2)
+    report = discovered(tmp_path, "Tanks.mo", "Tanks", TANKS)
+    cause = report["causes"][0]
+    assert cause["component"] == "q12", report["cause"]
+    assert "(h1 - h2)" in cause["law"]["equation"], cause["law"]["equation"]
+    assert report["gain"]["validation_rms_after"] < 0.2 * report["gain"]["validation_rms_before"], report["gain"]
+
+
+def test_which_equations_are_laws():
+    """A law gives one variable in one other (or a difference) and parameters; not a balance,
+    an alias or an equation of time; v = R*i gives v."""
+    from mcl.services import compile_model
+
+    text = """
+model M
+  input Real u;
+  output Real y;
+  parameter Real R = 2, C = 1, a = 3;
+  Real x(start = 0, fixed = true), v, i, w, z;
+equation
+  C*der(x) = i;
+  v = R*i;
+  v = u - x;
+  w = a*sin(time);
+  z = x;
+  y = a*z + w;
+end M;
+"""
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "M.mo").write_text(text)
+        model = compile_model([Path(tmp) / "M.mo"], "M")
+    laws = {c.name: c for c in model.structure.components.values() if c.equation}
+    assert set(laws) == {"v"}, laws
+    assert laws["v"].across() == ("i", None) and laws["v"].flow() == ("v", None)
+
+
+BALANCE = """
+model Balance "the oscillator as one balance: m x'' = kf u - d x' - k x"
+  input Real u;
+  output Real y;
+  parameter Real m = 1, k = 4, d = 0.3, kf = 1;
+  Real x(start = 0, fixed = true), v(start = 0, fixed = true);
+equation
+  der(x) = v;
+  m*der(v) = kf*u - d*v - k * x "Newton";
+  y = x;
+end Balance;
+"""
+
+
+def test_a_term_of_a_balance_is_named_and_put_back(tmp_path):
+    """The spring's term k*x of the balance is the cause, cubic in x; the extended model's
+    balance reads the learned block in its place, and reproduces the fit."""
+    oscillator_data(tmp_path / "train.csv", 1, 3.0)
+    oscillator_data(tmp_path / "validate.csv", 2, 3.0)
+    report = discovered(tmp_path, "Balance.mo", "Balance", BALANCE)
+    cause = report["causes"][0]
+    assert cause["component"] == "k_x", report["cause"]
+    assert cause["law"]["equation"].startswith("k*x = ") and "x^3" in cause["law"]["equation"], cause["law"]
+    assert report["gain"]["validation_rms_after"] < 0.1 * report["gain"]["validation_rms_before"], report["gain"]
+    extended = (tmp_path / "out" / "extended" / "Balance.mo").read_text()
+    assert 'm*der(v) = kf*u - d*v - k_x_law.y "Newton";' in extended and "k_x_law.u = x;" in extended, extended
+    assert report["extended"]["recompiled_difference"] < 1e-3, report["extended"]
+
+
+def test_which_terms_are_laws():
+    """A term of parameters and one unknown, which no other term of its balance reads; one flow
+    written in two balances is one term; a factor of a sum of several terms is taken apart."""
+    from mcl.services import compile_model
+
+    text = """
+model T
+  input Real u;
+  parameter Real A = 1, R = 2, h0 = 0.1, m = 2, k = 3;
+  Real h1(start = 1, fixed = true), h2(start = 0, fixed = true), x(start = 0, fixed = true), v(start = 0, fixed = true);
+equation
+  A*der(h1) = u - (h1 + h0)/R;
+  A*der(h2) = (h1 + h0)/R - h2*h2;
+  der(x) = v;
+  der(v) = (u - k*x - v*v)/m;
+end T;
+"""
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "T.mo").write_text(text)
+        model = compile_model([Path(tmp) / "T.mo"], "T")
+    terms = {c.cls: c for c in model.structure.components.values() if c.term}
+    assert set(terms) == {"term (h1 + h0)/R", "term k*x"}, terms
+    assert len(terms["term (h1 + h0)/R"].rows) == 2 and terms["term k*x"].across() == ("x", None)
