@@ -220,3 +220,26 @@ end T;
     terms = {c.cls: c for c in model.structure.components.values() if c.term}
     assert set(terms) == {"term (h1 + h0)/R", "term k*x"}, terms
     assert len(terms["term (h1 + h0)/R"].rows) == 2 and terms["term k*x"].across() == ("x", None)
+
+
+def test_an_equation_of_an_array_element_is_rewritten():
+    """q[2]'s equation (an if-expression) is found by its subscripted names and given by an
+    instance whose name is an identifier; q[1]'s equation is left as written."""
+    from mcl.compile.components import Component, Connector
+    from mcl.discovery.modelica import rewritten
+
+    text = """model B
+  parameter Real R[2] = {2, 3};
+  Real h[2](each start = 0, each fixed = true), q[2];
+equation
+  der(h[1]) = 1 - q[1];
+  der(h[2]) = q[1] - q[2];
+  q[1] = h[1]/R[1];
+  q[2] = if h[ 2] > 0 then h[2]/R[2] else 0;
+end B;
+"""
+    conns = [Connector("h[2]", "input Real", (), ()), Connector("q[2]", "output Real", (), ())]
+    comp = Component("q[2]", "equation", conns, ["R[2]"], ["h[2]", "q[2]"], kind="equation")
+    out = rewritten(text, "B", comp, "Learned.q_2__polynomial", ["h[1]", "h[2]", "q[1]", "q[2]"])
+    assert "Learned.q_2__polynomial q_2__law" in out and "q_2__law.u = h[2];" in out and "q[2] = q_2__law.y;" in out
+    assert "q[1] = h[1]/R[1];" in out and "if h[ 2] > 0" not in out

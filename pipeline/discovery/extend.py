@@ -185,6 +185,10 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
         fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu", experiment=train)
         files["fmu"] = str(fmu.relative_to(part))
         check = simulate(ext.with_outputs(train.names), train)
+        if not check.ok:      # a stiff learned law: the tolerance its fit simulated it at (as with_causes)
+            from .fitters import FIT_OPTIONS
+
+            check = simulate(ext.with_outputs(train.names), train, options=FIT_OPTIONS)
         if check.ok and y_ref is not None:
             y_check = check.outputs[:, [ext.with_outputs(train.names).output_names.index(o) for o in outputs]]
             files["recompiled_difference"] = float(np.max(np.abs(y_check - y_ref)))

@@ -260,7 +260,7 @@ def _equation_block(cause: dict, comp, template, units: dict, data: str) -> str:
 
 def law_instance(comp) -> str:
     """The instance of the learned block that a rewritten equation of ``comp`` reads."""
-    return f"{comp.name}_law"
+    return re.sub(r"\W", "_", f"{comp.name}_law")       # (q[2]: q_2__law)
 
 
 def _class_span(text: str, model_short: str):
@@ -298,7 +298,8 @@ def rewritten(text: str, model_short: str, comp, new_class: str, unknowns) -> st
             statement = re.sub(r'"(?:\\.|[^"\\])*"|//[^\n]*|/\*.*?\*/', " ", text[start:stop], flags=re.S)
             if re.match(r"\s*(?:initial\s+)?(?:equation|algorithm|protected|public)\b", statement):
                 break
-            words = set(re.findall(r"(?<![\w.])[A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*", statement))
+            words = set(re.sub(r"\s+(?=\[)|(?<=\[)\s+|\s+(?=\])", "", w) for w in re.findall(
+                r"(?<![\w.])[A-Za-z_]\w*(?:\s*\[[^\]]*\])?(?:\.[A-Za-z_]\w*(?:\s*\[[^\]]*\])?)*", statement))
             inst = law_instance(comp)
             original = text[start:stop]
             if pattern and "der" in words and len(re.findall(pattern, statement)) == 1 == len(re.findall(pattern, original)):
