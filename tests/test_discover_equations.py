@@ -243,3 +243,27 @@ end B;
     out = rewritten(text, "B", comp, "Learned.q_2__polynomial", ["h[1]", "h[2]", "q[1]", "q[2]"])
     assert "Learned.q_2__polynomial q_2__law" in out and "q_2__law.u = h[2];" in out and "q[2] = q_2__law.y;" in out
     assert "q[1] = h[1]/R[1];" in out and "if h[ 2] > 0" not in out
+
+
+def test_a_square_root_law_runs_from_empty_tanks(tmp_path):
+    """sqrt(|h|)*tanh(h/s) at h = 0 (a learned outflow as the extended model writes it; the
+    second of two tanks that start empty stays at 0 while the first fills) differentiates to
+    inf * 0 in plain arithmetic: the compiled model runs all the same."""
+    from mcl.data import TimeSeries
+    from mcl.services import compile_model, simulate
+
+    (tmp_path / "Empty.mo").write_text("""model Empty
+  input Real u;
+  output Real y;
+  Real h1(start = 0, fixed = true), h2(start = 0, fixed = true);
+equation
+  der(h1) = u - h1/2;
+  der(h2) = h1/2 - 0.6*sqrt(abs(h2))*tanh(h2/0.0025);
+  y = h2;
+end Empty;
+""")
+    model = compile_model([tmp_path / "Empty.mo"], "Empty")
+    t = np.linspace(0, 60, 121)
+    run = simulate(model, TimeSeries(t, np.ones((len(t), 1)), ["u"]))
+    assert run.ok, run.reason
+    assert abs(run.output("y")[-1] - (1 / 0.6) ** 2) < 0.05 * (1 / 0.6) ** 2     # its level where in = out

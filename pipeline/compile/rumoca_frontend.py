@@ -52,7 +52,9 @@ _VARIABLE_KINDS = {"state", "algebraic", "output", "input", "parameter", "consta
 _FUNCTIONS = {
     "sin": ca.sin, "cos": ca.cos, "tan": ca.tan, "asin": ca.asin, "acos": ca.acos, "atan": ca.atan,
     "atan2": ca.atan2, "sinh": ca.sinh, "cosh": ca.cosh, "tanh": ca.tanh, "exp": lambda a: ca.exp(ca.fmin(a, EXP_MAX)), "log": ca.log,
-    "log10": ca.log10, "sqrt": ca.sqrt, "abs": ca.fabs, "sign": ca.sign, "floor": ca.floor,
+    # sqrt offset by 1e-200, as in mcl's templates: sqrt(|h|)*tanh(h/s) at h = 0 (a tank that
+    # starts empty, a learned outflow) differentiates to inf * 0 = NaN, offset to 5e99 * 0 = 0
+    "log10": ca.log10, "sqrt": lambda a: ca.sqrt(a + 1e-200), "abs": ca.fabs, "sign": ca.sign, "floor": ca.floor,
     "ceil": ca.ceil, "min": lambda a, *b: ca.fmin(a, b[0]) if b else ca.mmin(a),
     "max": lambda a, *b: ca.fmax(a, b[0]) if b else ca.mmax(a), "sum": lambda a: ca.sum1(flat(a)), "size": modelica_size,
     "ones": lambda *n: ca.SX.ones(*dims_of(*n)), "zeros": lambda *n: ca.SX.zeros(*dims_of(*n)),
