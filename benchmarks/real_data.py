@@ -327,7 +327,9 @@ def mcl_discovery(case: Case, train, tests: dict, written: str = "parts") -> dic
         extended = d.extended_model()
         cal = d.report_.get("calibration") or {}
         joint = {**{k: v["after"] for k, v in (cal.get("values") or {}).items()}, **(cal.get("laws") or {})}
-        out = {"law": {}, "joint": {}, "cause": d.cause_["effect"] if d.cause_ else None}
+        out = {"law": {}, "joint": {}, "cause": d.cause_["effect"] if d.cause_ else None,
+               # the written model against the one fitted in process (the table measures the written one)
+               "recompiled_difference": (d.report_.get("extended") or {}).get("recompiled_difference")}
         model = Nominal(case, extended)     # each split's initial state fitted on its window, as for the nominal
         for key, params in (("law", {}), ("joint", joint)):
             for name, (tt, uu, yy) in tests.items():

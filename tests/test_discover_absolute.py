@@ -291,3 +291,36 @@ def test_an_opening_above_the_levels_datum_is_torricellis_law_with_its_height(tm
     assert np.max(np.abs(fs - above(xs))) / np.max(above(xs)) < 0.03, law["equation"]
     g = report["gain"]
     assert g["validation_rms_after"] < 0.2 * g["validation_rms_before"], g
+
+
+def test_a_law_the_nominal_form_misses_is_exactly_what_the_rest_of_the_model_sees(tmp_path):
+    """A law in the difference h_a - h_b at the outlet whose nominal law is affine in h_a: no
+    form in the law's variables is the nominal law, and the flow the tanks see is the law
+    itself, as the learned class written for it states it (before, it was the nominal flow
+    plus the law minus a fit of the nominal one: the written model differed from the fitted
+    one by 1.2 V on the real tanks)."""
+    from mcl import compile_model, read_csv, simulate
+    from mcl.discovery.candidates import Item, start_of
+    from mcl.discovery.families import families
+    from mcl.discovery.inject import compiled, mode_of, rate_variables, with_law
+    from mcl.discovery.screen import law_signals
+
+    tanks_data(tmp_path / "train.csv", 1, TORRICELLI)
+    (tmp_path / "Tanks.mo").write_text(TANKS)
+    data = read_csv(tmp_path / "train.csv")
+    model = compile_model([tmp_path / "Tanks.mo"], "Tanks.Cascade", libraries=[MSL]).with_outputs(data.names)
+    nominal = simulate(model, data)
+    comp = model.structure.components["Outlet1"]
+    signals = law_signals(model, nominal.states, nominal.time, data, [comp])
+    spec = next(s for s in families("static", signals["Outlet1"].env()) if "v^3" in s["rhs"])
+    template, w0, form = start_of(SimpleNamespace(signals=signals), Item("Outlet1", 0, spec))
+    assert not form.exact and "va" not in template.uses
+    rates = rate_variables(model.dae, [comp], {comp.name: mode_of(template)})[comp.name]
+    dae, names = with_law(model.dae, comp, template, w0, form, rates)
+    seen = ["Outlet1.mcl_v", "Outlet1.mcl_i"]
+    w = np.asarray(w0, float) * 1.3
+    run = simulate(compiled(dae, model.name, outputs=[*data.names, *seen], info=model.info,
+                            structure=model.structure), data, dict(zip(names, w)))
+    assert run.ok, run.reason
+    v, i = run.output(seen[0]), run.output(seen[1])
+    np.testing.assert_allclose(i, template.flow_of(w, v), atol=1e-9 * np.max(np.abs(i)))

@@ -80,7 +80,7 @@ def describe(best: dict, base, spec, train, signals) -> dict:
                  if on and t not in nominal_terms]
     effect = f"{comp.name} follows {law}" + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else "")
     if best.get("nominal_exact") is False:
-        effect += " (its nominal law is not linear: the learned terms are a deviation from it)"
+        effect += " (in place of its nominal law, which is not linear in the law's variables)"
     equivalents = best.get("equivalents", [])
     if equivalents:
         effect += "; equivalent: " + ", ".join(f"{e['component']} ({e['reason']})" for e in equivalents)

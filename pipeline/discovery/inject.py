@@ -14,12 +14,13 @@ changes one component's law there, and only there, by a deviation ``D`` at its t
   of the across value.
 
 The law's equation fixes D. For a law that gives its variable explicitly (i = f_w(v, dv)), D =
-f_w(...) - f_nom(...), with f_nom the nominal law's own linear form in the law's variables
-(fitted along the nominal run; for a law that reads the connectors' own potentials va, vb, an
-affine form with its constant: a tank's outlet linearised about its operating level, q = (h_a +
-h_op)/R): when the nominal law is linear (or affine), what the rest of the model sees is exactly
-f_w, the candidate law, and at the start w0 (the law fitted to the nominal one) D = 0: the
-candidate's first simulation is the nominal model. An implicit law G(v, i, ...) = 0
+f_w(...) - f_nom(...), with f_nom the nominal law: its own linear form in the law's variables
+where that is exact (fitted along the nominal run; for a law that reads the connectors' own
+potentials va, vb, an affine form with its constant), else the flow the component's own
+equations give (a tank's outlet q = (h_a + h_op)/R under a law in h_a - h_b). What the rest of
+the model sees is exactly f_w, the candidate law, as its learned class states it; at the start
+w0 (the law fitted to the nominal one) the candidate's first simulation is the nominal model
+where the nominal law is in the family, and close to it otherwise. An implicit law G(v, i, ...) = 0
 replaces the terminal behaviour outright. The law's derivatives (dv, di) are new states tied to
 the across value or the flow; index reduction differentiates those ties as it does any
 constraint. Everything else the user wrote (initial equations, start values, parameters, other
@@ -144,13 +145,24 @@ def with_law(dae: Dae, comp: Component, template, w0, nominal: NominalForm | Non
     w = ca.SX.sym("w", len(names))
     ws = ca.vertsplit(w)
     if explicit:
-        # (the nominal law as the model writes it, where it is known: the rest sees exactly the law)
-        f_nom = env["nominal"] if own_nominal(comp, template) else \
-            sum((c * (1.0 if v == "1" else env[v]) for v, c in nominal.coefficients.items()), ca.SX(0))
-        law = D - (template.sx_explicit(ws, env) - f_nom)
+        law = D - (template.sx_explicit(ws, env) - _nominal_law(comp, template, nominal, env))
     else:
         law = template.sx_residual(ws, env)
     return _add(dae, rows=[law], p=(w, names, np.asarray(w0, float))), names
+
+
+def _nominal_law(comp: Component, template, nominal: NominalForm, env: dict):
+    """f_nom in D = f_w - f_nom: the nominal law as the model writes it where it is known (a
+    user's equation, a term), else its linear form where that is exact (then the same law, in
+    the law's own variables), else the component's own flow as its equations give it (a law
+    the linear form misses: an outlet affine in its upstream level, q = (h_a + h_op)/R, for a
+    law in h_a - h_b). Either way the rest of the model sees exactly the candidate law f_w, as
+    the learned class written for it states it."""
+    if own_nominal(comp, template):
+        return env["nominal"]
+    if nominal.exact or "own" not in env:
+        return sum((c * (1.0 if v == "1" else env[v]) for v, c in nominal.coefficients.items()), ca.SX(0))
+    return env["own"]
 
 
 def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
@@ -187,6 +199,8 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
             rows[k] = ca.substitute(rows[k], old, new)
     i = fa + D if mode == "parallel" else fa
     env = {"v": xa - xb, "i": i, "va": xa, "vb": xb}
+    if mode == "parallel":        # the flow its own equations still give (the nominal law's)
+        env["own"] = fa
     if comp.equation:       # its nominal law: the equation solved for its variable (affine in it)
         row = next(rows[k] for k in range(len(rows)) if k not in set(external) and ca.depends_on(rows[k], fa))
         env["nominal"] = ca.substitute(-row / ca.jacobian(row, fa), fa, ca.SX(0))

@@ -65,7 +65,8 @@ def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
     for best in bests:
         template = registry().template(best["template"])
         comp = base.structure.components[best["component"]]
-        nominal = NominalForm(best["nominal_form"], 0.0) if best.get("nominal_form") is not None else None
+        nominal = (NominalForm(best["nominal_form"], 0.0 if best.get("nominal_exact", True) else 1.0)
+                   if best.get("nominal_form") is not None else None)
         rates = rate_variables(dae, [comp], {comp.name: mode_of(template)})[comp.name]
         dae, best["_names"] = with_law(dae, comp, template, np.asarray(best["w"]) * np.asarray(best["active"]),
                                        nominal, rates, active=best["active"])
