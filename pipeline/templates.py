@@ -589,7 +589,10 @@ class PolynomialTemplate(Template):
         text = f"{side(w[:k], self.lhs)} = {side(w[k:n], self.rhs)}"
         for name, value in zip(self.scales, w[n:]):      # scales by their fitted values
             text = re.sub(rf"\b{name}\b", f"{value:.{digits}g}", text)
-        return text
+        for r in rename.values():       # an across value written as a difference: once in parentheses
+            if r.startswith("(") and r.endswith(")"):
+                text = text.replace(f"({r})", r)
+        return re.sub(r"([+-])([+-])(?=[0-9.])", lambda g: "-" if g[1] != g[2] else "+", text)   # x+-0.1: x-0.1
 
 
 class MemoryTemplate(PolynomialTemplate):
