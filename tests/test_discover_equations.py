@@ -179,18 +179,30 @@ end Balance;
 """
 
 
-def test_a_term_of_a_balance_is_named_and_put_back(tmp_path):
+def test_a_term_of_a_balance_is_named_and_put_back(tmp_path, monkeypatch):
     """The spring's term k*x of the balance is the cause, cubic in x; the extended model's
-    balance reads the learned block in its place, and reproduces the fit."""
+    balance reads the learned block in its place, and reproduces the fit. The model uses no
+    library, and none is on the path: the learned block declares its own input and output (it
+    extended the MSL's SISO, and the written model did not compile without the MSL)."""
+    import json
+
+    from mcl.cli import main
+
     oscillator_data(tmp_path / "train.csv", 1, 3.0)
     oscillator_data(tmp_path / "validate.csv", 2, 3.0)
-    report = discovered(tmp_path, "Balance.mo", "Balance", BALANCE)
+    monkeypatch.delenv("MODELICAPATH", raising=False)
+    (tmp_path / "Balance.mo").write_text(BALANCE)
+    (tmp_path / "run.yaml").write_text("model: {sources: [Balance.mo], name: Balance}\n"
+                                       "data: {train: train.csv, validate: validate.csv}\noutput: out\n")
+    assert main(["--quiet", "run", str(tmp_path / "run.yaml")]) == 0
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
     cause = report["causes"][0]
     assert cause["component"] == "k_x", report["cause"]
     assert cause["law"]["equation"].startswith("k*x = ") and "x^3" in cause["law"]["equation"], cause["law"]
     assert report["gain"]["validation_rms_after"] < 0.1 * report["gain"]["validation_rms_before"], report["gain"]
     extended = (tmp_path / "out" / "extended" / "Balance.mo").read_text()
     assert 'm*der(v) = kf*u - d*v - k_x_law.y "Newton";' in extended and "k_x_law.u = x;" in extended, extended
+    assert "input Real u" in extended and "Modelica." not in extended, extended
     assert report["extended"]["recompiled_difference"] < 1e-3, report["extended"]
 
 

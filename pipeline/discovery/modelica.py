@@ -179,7 +179,8 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
 
     template = registry().template(cause["template"])
     if (comp.equation or comp.term) and template.explicit == "i" and hasattr(template, "terms"):
-        return _equation_block(cause, comp, template, units or {}, data)
+        lib = _library(libraries, sources)
+        return _equation_block(cause, comp, template, units or {}, data, lib.find(SISO) is not None)
     lib = _library(libraries, sources)
     if comp.sensor and template.explicit == "i" and hasattr(template, "terms"):
         return _sensor_class(cause, comp, template, lib, libraries, sources, scope, units or {}, data)
@@ -240,9 +241,14 @@ def _terms(template, w, names: dict, u: dict) -> tuple[list[str], list[str]]:
     return params, rhs
 
 
-def _equation_block(cause: dict, comp, template, units: dict, data: str) -> str:
+SISO = "Modelica.Blocks.Interfaces.SISO"
+
+
+def _equation_block(cause: dict, comp, template, units: dict, data: str, siso: bool = True) -> str:
     """The law learned for the user's own equation y = g(x) as a block: y = f(u), u the x the
-    equation read (or xa - xb); the model's equation is rewritten to read it (:func:`rewritten`)."""
+    equation read (or xa - xb); the model's equation is rewritten to read it (:func:`rewritten`).
+    The block extends the MSL's SISO where the MSL is found (its icon and connectors), else
+    declares its input and output (a model of plain equations needs no library)."""
     w = np.asarray(cause["w"], float)
     xa, xb = comp.across()
     u = {"y": units.get(comp.flow()[0]), "v": units.get(xa), "i": units.get(comp.flow()[0])}
@@ -253,7 +259,9 @@ def _equation_block(cause: dict, comp, template, units: dict, data: str) -> str:
     reads = f"{xa} - {xb}" if xb else xa
     return (f'block {cause["learned_class"]} "{comp.flow()[0]} = f({reads}) as learned by mcl: '
             f'{html.escape(cause["law"]["equation"])}"\n'
-            f'  extends Modelica.Blocks.Interfaces.SISO;\n' + "\n".join(params)
+            + (f'  extends {SISO};\n' if siso else
+               '  input Real u "what the equation reads";\n  output Real y "what it gives";\n')
+            + "\n".join(params)
             + f"\nequation\n  y = {' + '.join(rhs) or '0'};\n  annotation(Documentation(info=\"{doc}\"));\n"
             f"end {cause['learned_class']};\n")
 
