@@ -26,7 +26,7 @@ class CasadiCompiler(Compiler):
     def compile(self, sources: list[Path], model: str, options: dict | None = None):
         from mcl.compile import cache as compile_cache, rumoca_frontend, structure
         from mcl.compile.dae import eliminate_aliases
-        from mcl.compile.equations import with_equations
+        from mcl.compile.equations import user_instances, with_equations
         from mcl.model import CompiledModel
 
         libraries = (options or {}).get("libraries", ())
@@ -41,7 +41,9 @@ class CasadiCompiler(Compiler):
         raw = rumoca_frontend.to_dae(ir, located, model)
         dae = eliminate_aliases(raw)
         ode = structure.build_ode(dae, model)
-        components = with_equations(_components(ir, located, model, prep.files, libraries), raw)
+        parts = _components(ir, located, model, prep.files, libraries)
+        components = with_equations(parts, raw, user_instances(raw, parts, _classes_of(located, model, prep.files,
+                                                                                        libraries)))
         seconds = time.perf_counter() - start
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
@@ -65,6 +67,22 @@ def _components(ir: dict, located, model: str, user_files, libraries):
     for name, comp in structure.components.items():
         comp.cls = classes.get(name, comp.cls)
     return structure
+
+
+def _classes_of(located, model: str, user_files, libraries):
+    """paths -> {path: (its class, whether a library on the path holds it)}, for the instances
+    whose declarations are found (the user's files first)."""
+    from mcl.compile.components import declared_classes
+    from mcl.compile.library import available, library_path
+
+    user = {str(f): f.read_text(encoding="utf-8", errors="replace") for f in user_files}
+    rest = {p: t for p, t in located.files.values() if p not in user}
+    libs = set(available(library_path(libraries)))
+
+    def classes_of(paths):
+        found = declared_classes(paths, model, {**user, **rest}, libraries) if paths else {}
+        return {n: (c, c.split(".")[0] in libs) for n, c in found.items()}
+    return classes_of
 
 
 class PymocaCompiler(Compiler):

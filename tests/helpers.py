@@ -57,6 +57,11 @@ def discovered(directory: Path, source: str, name: str, text: str) -> dict:
     return json.loads((directory / "out" / "report.json").read_text())
 
 
+def write_uy(path: Path, t, u, y) -> None:
+    """A data file of columns time, u and y (10 significant digits)."""
+    path.write_text("time,u,y\n" + "\n".join(f"{a:.10g},{b:.10g},{c:.10g}" for a, b, c in zip(t, u, y)) + "\n")
+
+
 def multisine(t, parts=((2.0, 0.5, 0.0), (0.5, 2.1, 0.3))):
     """Sum of sines a*sin(w t + phi): a smooth input known in closed form."""
     return sum(a * np.sin(w * t + phi) for a, w, phi in parts)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import discovered, msl_path, needs_msl
+from helpers import discovered, msl_path, needs_msl, write_uy
 
 MSL = msl_path()
 pytestmark = [needs_msl()]
@@ -197,7 +197,7 @@ def chain_data(path, seed):
 
     sol = solve_ivp(rhs, (0, 10), [0, 0, 0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.01)
     y = sol.y[1] + rng.normal(0, 0.002, len(t))
-    path.write_text("time,u,y\n" + "\n".join(f"{a:.10g},{b:.10g},{c:.10g}" for a, b, c in zip(t, u(t), y)) + "\n")
+    write_uy(path, t, u(t), y)
 
 
 @pytest.mark.slow

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import discovered, needs_msl
+from helpers import discovered, needs_msl, write_uy
 
 pytestmark = [needs_msl()]
 
@@ -55,7 +55,7 @@ def oscillator_data(path, seed: int, k3: float) -> None:
 
     sol = solve_ivp(rhs, (0, 40), [0, 0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.02)
     y = sol.y[0] + rng.normal(0, 0.002, len(t))
-    path.write_text("time,u,y\n" + "\n".join(f"{p:.10g},{q:.10g},{r:.10g}" for p, q, r in zip(t, u(t), y)) + "\n")
+    write_uy(path, t, u(t), y)
 
 
 def test_a_hardening_spring_written_as_an_equation_is_named_and_put_back(tmp_path):
@@ -120,7 +120,7 @@ def tank_data(path, seed: int) -> None:
 
     sol = solve_ivp(rhs, (0, 200), [1, 0.5], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.5)
     y = sol.y[0] + rng.normal(0, 0.001, len(t))
-    path.write_text("time,u,y\n" + "\n".join(f"{p:.10g},{q:.10g},{r:.10g}" for p, q, r in zip(t, u(t), y)) + "\n")
+    write_uy(path, t, u(t), y)
 
 
 def test_a_law_in_a_difference_of_levels_is_named_in_that_difference(tmp_path):
@@ -279,3 +279,66 @@ end Empty;
     run = simulate(model, TimeSeries(t, np.ones((len(t), 1)), ["u"]))
     assert run.ok, run.reason
     assert abs(run.output("y")[-1] - (1 / 0.6) ** 2) < 0.05 * (1 / 0.6) ** 2     # its level where in = out
+
+
+SUBMODELS = """
+model Tank "an open tank draining through its outlet"
+  parameter Real A = 1 "cross-section";
+  parameter Real R = 2.5 "outlet resistance";
+  input Real qin "inflow";
+  output Real qout "outflow";
+  Real h(start = 0.2, fixed = true) "level";
+equation
+  A*der(h) = qin - qout;
+  qout = h/R "the outlet, linear";
+end Tank;
+
+model Cascade "two tanks of the engineer's own class, joined by their inputs and outputs"
+  input Real u "pump voltage";
+  output Real y "lower level";
+  parameter Real kp = 0.3;
+  Tank upper(R = 2.5), lower "the lower tank";
+equation
+  upper.qin = kp*u;
+  lower.qin = upper.qout;
+  y = lower.h;
+end Cascade;
+"""
+
+
+def cascade_data(path, seed: int) -> None:
+    """The lower level (noise 2 mm) of two tanks, the upper one draining as 0.6 sqrt(h)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 200, 1001)
+    a, w, ph = rng.uniform(0.5, 1.0, 3), np.array([0.03, 0.07, 0.15]), rng.uniform(0, 2 * np.pi, 3)
+
+    def u(s):
+        return 1.0 + sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph)) / 3
+
+    def rhs(s, z):
+        h1, h2 = np.maximum(z, 0.0)
+        q1 = 0.6 * np.sqrt(h1)
+        return [0.3 * u(s) - q1, q1 - h2 / 2.5]
+
+    sol = solve_ivp(rhs, (0, 200), [0.2, 0.2], t_eval=t, rtol=1e-10, atol=1e-12)
+    y = sol.y[1] + rng.normal(0, 0.002, len(t))
+    write_uy(path, t, u(t), y)
+
+
+def test_an_equation_of_the_engineers_own_submodel_is_named_and_put_back_for_that_instance(tmp_path):
+    """Tanks of the engineer's own class (input and output Reals, no connectors): the upper
+    tank's outlet equation (qout = h/R in class Tank) is the cause, with its square root; the
+    extended model declares that tank alone of a copy of Tank whose equation reads the learned
+    block (the two tanks were declared together). Before, such a model had no candidate."""
+    cascade_data(tmp_path / "train.csv", 1)
+    cascade_data(tmp_path / "validate.csv", 2)
+    report = discovered(tmp_path, "Cascade.mo", "Cascade", SUBMODELS)
+    cause = report["causes"][0]
+    assert cause["component"] == "upper.qout", report["cause"]
+    assert "sqrt(abs(upper.h))" in cause["law"]["equation"], cause["law"]["equation"]
+    assert report["gain"]["validation_rms_after"] < 0.2 * report["gain"]["validation_rms_before"], report["gain"]
+    extended = (tmp_path / "out" / "extended" / "Cascade.mo").read_text()
+    assert "Tank_upper upper(R = 2.5);" in extended and 'Tank lower "the lower tank";' in extended, extended
+    assert "qout_law.u = h;" in extended and "qout = qout_law.y;" in extended
+    assert extended.count("qout = h/R") == 1         # the class Tank itself stays as written
+    assert report["extended"]["recompiled_difference"] < 1e-3, report["extended"]

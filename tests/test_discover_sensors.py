@@ -10,7 +10,7 @@ ODE written by hand and solved by SciPy, the reading |w| plus noise.
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from helpers import discovered, needs_msl
+from helpers import discovered, needs_msl, write_uy
 
 pytestmark = [needs_msl()]
 
@@ -57,7 +57,7 @@ def drive_data(path, seed: int, reading) -> None:
 
     sol = solve_ivp(rhs, (0, 12), [0, 0, 0], t_eval=t, rtol=1e-10, atol=1e-12, max_step=0.01)
     y = reading(sol.y[2]) + rng.normal(0, 0.01, len(t))
-    path.write_text("time,u,y\n" + "\n".join(f"{a:.10g},{b:.10g},{c:.10g}" for a, b, c in zip(t, u(t), y)) + "\n")
+    write_uy(path, t, u(t), y)
 
 
 def test_a_counter_blind_to_the_direction_is_named_with_its_law(tmp_path):

@@ -502,9 +502,14 @@ def _class_text_from(text: str, short: str, start: int) -> str:
     return text[start: start + end.start()] if end else text[start:]
 
 
+#: another instance of a declaration of several: its name, subscripts, modifiers, binding and comment
+_OTHER = r'[A-Za-z_]\w*\s*(?:\[[^\]]*\])?\s*(?:\([^;]*?\))?\s*(?:=[^,;"]*)?(?:"[^"]*"\s*)?'
+
+
 def _declared_type(body: str, inst: str) -> str | None:
-    m = re.search(rf"(?:^|[;\s]){_DECL_PREFIX}([A-Za-z_][\w.]*)\s*(?:\[[^\]]*\]\s*)?\s+{re.escape(inst)}\s*(?:\[[^\]]*\])?\s*[(;\"=]",
-                  body)
+    # (one of several declared together: Tank t1, t2;)
+    m = re.search(rf"(?:^|[;\s]){_DECL_PREFIX}([A-Za-z_][\w.]*)\s*(?:\[[^\]]*\]\s*)?\s+(?:{_OTHER},\s*)*"
+                  rf"{re.escape(inst)}\s*(?:\[[^\]]*\])?\s*[(;\"=,]", body)
     if m and m.group(1) not in ("end", "extends", "import", "connect", "equation", "algorithm"):
         return m.group(1)
     return None

@@ -2,7 +2,9 @@
 
 An engineer's small model is often a handful of equations (two tanks: two balances, two outflow
 laws, a pump and a sensor; an oscillator: m*der(v) = kf*u - d*v - k*x) with no part that
-discovery could question. Two kinds of the model's own (top-level) equations hold its laws:
+discovery could question. Two kinds of the model's own equations (top-level, or of an instance
+of the user's own class that is not a part: a ``Tank`` of Real inputs and outputs) hold its
+laws:
 
 - an equation that gives one algebraic variable as a function of one other (or of the
   difference of two) and of parameters, ``q1 = (h1 + h_op)/R1``: a component of kind
@@ -25,10 +27,31 @@ import numpy as np
 from .components import Component, Connector, Structure, split_name
 
 
-def with_equations(structure: Structure, dae) -> Structure:
+def user_instances(dae, structure: Structure, classes_of) -> set[str]:
+    """The instances of the user's own classes that are not parts (a ``Tank`` of a level, an
+    inflow and an outflow declared ``input Real``/``output Real``, no connectors): their
+    equations are the user's as much as the model's own are. ``classes_of(paths)`` gives each
+    instance path's class and whether a library holds it ({path: (class, in a library)});
+    an instance of a library class, a component or anything inside one is not the user's, nor
+    is anything inside those."""
+    parts = {c.name for c in structure.components.values()}
+    paths = {tuple(split_name(n)[:-1]) for n in [*dae.x_names, *dae.z_names, *dae.u_names, *dae.p_names]}
+    own: set[str] = set()
+    level = sorted({p[:1] for p in paths if p})
+    while level:
+        names = [".".join(p) for p in level]
+        found = classes_of([n for n in names if not any(n == c or n.startswith(c + ".") for c in parts)])
+        kept = [p for p, n in zip(level, names) if n in found and not found[n][1]]
+        own.update(".".join(p) for p in kept)
+        level = sorted({q[:len(p) + 1] for p in kept for q in paths if len(q) > len(p) and q[:len(p)] == p})
+    return own
+
+
+def with_equations(structure: Structure, dae, own: set[str] = frozenset()) -> Structure:
     """``structure`` with the user's constitutive equations of ``dae`` added as components: the
     equations that give a variable (:func:`equation_laws`), the terms of the balances
-    (:func:`term_laws`)."""
+    (:func:`term_laws`). ``own``: the instances whose equations are the user's, besides the
+    model's own (:func:`user_instances`)."""
     rows = ca.vertsplit(dae.residual) if dae.residual.numel() else []
     if not rows:
         return structure
@@ -38,9 +61,10 @@ def with_equations(structure: Structure, dae) -> Structure:
     for r, c in zip(*sp.get_triplet()):
         reads[r].append(c)
     plain = [*dae.x_names, *dae.x_names, *dae.z_names, *dae.u_names]      # (der(x) as x)
-    # the model's own variables are its top-level ones; a part's (a PI controller's state, a
-    # tank's level inside a Tank) are its class's, whose equations are not the user's here
-    of_parts = [len(split_name(n)) > 1 for n in plain]
+    # the model's own variables are its top-level ones and those of its instances of the user's
+    # own classes; a part's (a PI controller's state, a tank's level inside a Tank with
+    # connectors) are its class's, whose equations are not the user's here
+    of_parts = [".".join(split_name(n)[:-1]) not in {"", *own} for n in plain]
     mine = [k for k in range(len(rows)) if not all(of_parts[c] for c in reads[k])]
     for comp in [*equation_laws(dae, rows, reads, mine, of_parts),
                  *term_laws(dae, rows, reads, mine, of_parts, structure)]:
@@ -146,7 +170,7 @@ def term_laws(dae, rows, reads, mine, of_parts, structure: Structure) -> list[Co
             if label in seen:           # the same flow in two balances (out of one tank, into the next)
                 seen[label].rows.append(k)
                 continue
-            name = re.sub(r"\W+", "_", label).strip("_") or "term"
+            name = _term_name(label, [n for _, n in r])
             while name in taken:
                 name += "_"
             taken.add(name)
@@ -155,6 +179,16 @@ def term_laws(dae, rows, reads, mine, of_parts, structure: Structure) -> list[Co
             out.append(Component(name, f"term {label}", conns, params, [x, label], kind="term", rows=[k]))
             seen[label] = out[-1]
     return out
+
+
+def _term_name(label: str, names: list[str]) -> str:
+    """A term's component name: its text as an identifier (``k*x``: ``k_x``), after the
+    instance all its names are of (``upper.k*upper.h``: ``upper.k_h``)."""
+    heads = {tuple(split_name(n)[:-1]) for n in names}
+    inst = ".".join(next(iter(heads))) if len(heads) == 1 else ""
+    if inst:
+        label = re.sub(rf"(?<![\w.]){re.escape(inst)}\.", "", label)
+    return (f"{inst}." if inst else "") + (re.sub(r"\W+", "_", label).strip("_") or "term")
 
 
 def additive_terms(expr, moving) -> list[tuple]:

@@ -438,16 +438,66 @@ def _statement_end(text: str, start: int) -> int:
 
 
 def _arguments(text: str) -> list[str]:
-    """The top-level comma-separated arguments of a modification."""
-    out, depth, cur = [], 0, ""
+    """The top-level comma-separated arguments of a modification (or the declarators of a
+    declaration of several; commas in strings are theirs)."""
+    out, depth, cur, quote = [], 0, "", False
     for ch in text:
-        depth += {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0)
-        if ch == "," and depth == 0:
+        quote ^= ch == '"'
+        depth += 0 if quote else {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0)
+        if ch == "," and depth == 0 and not quote:
             out.append(cur)
             cur = ""
         else:
             cur += ch
     return [a for a in [*out, cur] if a.strip()]
+
+
+def retyped(text: str, model_short: str, inst: str, new_class: str) -> str | None:
+    """``text`` with instance ``inst`` of class ``model_short`` declared of ``new_class``, its
+    modification and comment kept; one of several declared together (``Tank t1, t2;``) gets a
+    declaration of its own. None when its declaration is not in the class."""
+    head, body_end = _class_span(text, model_short)
+    if not head:
+        return None
+    quoted = _quoted(text)
+    decl = re.compile(r"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)([A-Za-z_][\w.]*)(\s+)")
+    for m in decl.finditer(text, head.end(), body_end):
+        if m.group(4) in ("connect", "end", "equation", "import", "extends", "parameter", "constant") or quoted(m.start(4)):
+            continue
+        stop = _statement_end(text, m.end())
+        items = _arguments(text[m.end():stop - 1])
+        k = next((j for j, a in enumerate(items) if re.match(rf"\s*{re.escape(inst)}\b(?!\.)", a)), None)
+        if k is None:
+            continue
+        if len(items) == 1:
+            return text[:m.start(4)] + new_class + text[m.end(4):]
+        rest = ", ".join(a.strip() for j, a in enumerate(items) if j != k)
+        return (text[:m.end()] + rest + f";\n{m.group(2)}{m.group(3)}{new_class} {items[k].strip()};" + text[stop:])
+    return None
+
+
+def with_instance_class(text: str, cls_short: str, copy_short: str) -> str | None:
+    """``text`` with a copy of class ``cls_short`` named ``copy_short`` right after it (in the
+    same scope, so that its names resolve as the original's): one instance's class, for a law
+    learned in that instance's own equation. None when the class is not in ``text``."""
+    head, body_end = _class_span(text, cls_short)
+    if not head:
+        return None
+    end = re.compile(rf"end\s+{re.escape(cls_short)}\s*;").match(text, body_end)
+    if end is None:
+        return None
+    start = text.rfind("\n", 0, head.end()) + 1
+    body = text[start:end.start()]
+    body = re.sub(rf"\b(model|block|class)(\s+){re.escape(cls_short)}\b", rf"\g<1>\g<2>{copy_short}", body, count=1)
+    return text[:end.end()] + "\n" + body + f"end {copy_short};" + text[end.end():]
+
+
+def local_component(comp, inst: str):
+    """``comp`` (an equation or a term inside instance ``inst``) in the names of ``inst``'s class."""
+    strip = (lambda s: re.sub(rf"(?<![\w.]){re.escape(inst)}\.", "", s))
+    return dataclasses.replace(comp, name=strip(comp.name), cls=strip(comp.cls),
+                               connectors=[dataclasses.replace(c, name=strip(c.name)) for c in comp.connectors],
+                               parameters=[strip(n) for n in comp.parameters], inputs=[strip(n) for n in comp.inputs])
 
 
 def redeclared(text: str, model_short: str, component: str, new_class: str, keep=("v", "i")) -> str | None:
@@ -494,21 +544,21 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
     notes, classes, swaps, law_values = [], [], [], {}
     for k, cause in enumerate(causes):
         comp = base.structure.components[cause["component"]]
-        if "." in comp.name:
+        own = comp.equation or comp.term      # (a user's equation may be its instance's: t1.qout = t1.h/t1.R)
+        if "." in comp.name and not own:
             notes.append(f"{comp.name} is inside a component: its learned class is in the package, "
                          "the model is not rewritten for it")
         write = lambda c: learned_class(c, comp, spec.libraries, spec.sources, base.model.info.get("units", {}),
                                         data, scope=spec.model_name)
         try:
             classes.append(write(cause))
-            if calibrated and "." not in comp.name:     # the class's own parameters at their calibrated values
+            if calibrated and ("." not in comp.name or own):     # the class's own parameters at their calibrated values
                 before, after = _parameter_values(classes[-1]), _parameter_values(write({**cause, "w": calibrated["w"][k]}))
-                inst = law_instance(comp) if comp.equation or comp.term else comp.name
-                law_values.update({f"{inst}.{n}": v for n, v in after.items() if before.get(n) != v})
+                law_values[comp.name] = {n: v for n, v in after.items() if before.get(n) != v}
         except ValueError as exc:
             notes.append(str(exc))
             continue
-        if "." not in comp.name:
+        if "." not in comp.name or own:
             swaps.append((comp, f"{LEARNED_PACKAGE}.{cause['learned_class']}"))
     short = spec.model_name.split(".")[-1]
     sources, model_name, extra = [], spec.model_name, ""
@@ -528,7 +578,8 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
         else:
             extra, model_name = text, f"{LEARNED_PACKAGE}.{short}"
         files = []
-    swapped = set()
+    swapped = {}        # component -> the instance path its learned class is declared with
+    copies = {}         # instance -> the copy of its class its own laws are written in
     dae = base.model.dae
     unknowns = [*dae.x_names, *dae.z_names, *dae.u_names] if dae is not None else []
     for comp, cls in swaps:
@@ -549,14 +600,19 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
                     extra, done = new, True
             if done:
                 break
+        path = (law_instance(comp) if comp.equation or comp.term else name) if done else None
+        if not done and (comp.equation or comp.term) and files:     # the equation of an instance's class
+            path = _rewritten_in_instance(comp, cls, files, spec.model_name, unknowns, copies)
+            done = path is not None
         if done:
-            swapped.add(law_instance(comp) if comp.equation or comp.term else name)
+            swapped[name] = path
         else:
             what = "equation" if comp.equation or comp.term else "declaration"
             notes.append(f"the {what} of {name} is not in {spec.model_name}'s own text: the model is not rewritten for it")
     if calibrated:
         # (a learned class's values only where the model declares the component with it)
-        law_values = {n: v for n, v in law_values.items() if n.rsplit(".", 1)[0] in swapped}
+        law_values = {f"{swapped[c]}.{n}": v for c, values in law_values.items() if c in swapped
+                      for n, v in values.items()}
         text, more = calibrated_class(short, model_name, {**calibrated["values"], **law_values}, calibrated["params"],
                                       calibrated["free"])
         classes.append(text)
@@ -569,6 +625,50 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
     package.write_text(f'package {LEARNED_PACKAGE} "Components learned by mcl"\n{indented}\n'
                        + (f"  {uses};\n" if uses else "") + f"end {LEARNED_PACKAGE};\n")
     return [*sources, package], model_name, package, notes
+
+
+def _rewritten_in_instance(comp, cls: str, files: list[Path], model: str, unknowns, made: dict) -> str | None:
+    """``comp``'s equation or term written in its instance's class (``t1.qout = t1.h/t1.R`` is
+    ``qout = h/R`` in class Tank) rewritten in a copy of that class for that instance alone
+    (``Tank_t1``, beside Tank), which the model then declares the instance of. Returns the
+    learned block's instance path (``t1.qout_law``), None where not done. ``made``: the copies
+    made so far, by instance (a second law of the same instance goes into the same copy)."""
+    from ..compile.components import declared_classes, split_name
+
+    path = split_name(comp.inputs[0])
+    if len(path) != 2 or "[" in path[0]:
+        return None
+    inst = path[0]
+    texts = {str(f): f.read_text(errors="replace") for f in files}
+    local = local_component(comp, inst)
+    mine = [n[len(inst) + 1:] for n in unknowns if n.startswith(inst + ".")]
+    if inst in made:
+        for f in files:
+            new = rewritten(texts[str(f)], made[inst], local, cls, mine)
+            if new is not None:
+                f.write_text(new)
+                return f"{inst}.{law_instance(local)}"
+        return None
+    owner = declared_classes([inst], model, texts).get(inst)
+    if owner is None:
+        return None
+    short = owner.split(".")[-1]
+    copy = re.sub(r"\W", "_", f"{short}_{inst}")
+    for f in files:
+        text = with_instance_class(texts[str(f)], short, copy)
+        new = rewritten(text, copy, local, cls, mine) if text is not None else None
+        if new is None:
+            continue
+        for g in files:         # the model (or a class it extends) declares the instance
+            for where in _class_and_bases(model.split(".")[-1], [new if g == f else texts[str(g)] for g in files]):
+                changed = retyped(new if g == f else texts[str(g)], where, inst, copy)
+                if changed is not None:
+                    f.write_text(new)
+                    g.write_text(changed)       # (the same file: new, retyped)
+                    made[inst] = copy
+                    return f"{inst}.{law_instance(local)}"
+        return None
+    return None
 
 
 def _parameter_values(text: str) -> dict[str, float]:
