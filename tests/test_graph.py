@@ -88,3 +88,21 @@ def test_graph_command_prints_and_draws(tmp_path, capsys):
 
 def test_reference_model_unchanged():
     assert compiled("MCL.Examples.CauerFilter").parameters["Rnl.w3"] == 0.01
+
+
+def test_a_components_class_is_read_from_a_declaration_of_several():
+    """Tank t1, t2; declares both; a name in a call's arguments or a binding is declared by
+    nothing; a list of thousands is read in linear time (a pattern over the list backtracked
+    without end)."""
+    from mcl.compile.components import declared_classes
+
+    text = """
+    model Tank Real h; end Tank;
+    model Sys
+      Tank t1(h(start = f(a, t3))), t2 "the second", t4[2];
+      Real x = max(1, t3), t3;
+      Real """ + ", ".join(f"a{k}(start = {k})" for k in range(3000)) + """;
+    end Sys;
+    """
+    found = declared_classes(["t1", "t2", "t3", "t4[1]", "a2999", "zz"], "Sys", {"Sys.mo": text})
+    assert found == {"t1": "Tank", "t2": "Tank", "t3": "Real", "t4[1]": "Tank", "a2999": "Real"}, found

@@ -502,17 +502,42 @@ def _class_text_from(text: str, short: str, start: int) -> str:
     return text[start: start + end.start()] if end else text[start:]
 
 
-#: another instance of a declaration of several: its name, subscripts, modifiers, binding and comment
-_OTHER = r'[A-Za-z_]\w*\s*(?:\[[^\]]*\])?\s*(?:\([^;]*?\))?\s*(?:=[^,;"]*)?(?:"[^"]*"\s*)?'
+_TYPE = rf"(?:^|[;\s]){_DECL_PREFIX}([A-Za-z_][\w.]*)\s*(?:\[[^\]]*\]\s*)?\s+"
+_NOT_TYPES = ("end", "extends", "import", "connect", "equation", "algorithm")
 
 
 def _declared_type(body: str, inst: str) -> str | None:
-    # (one of several declared together: Tank t1, t2;)
-    m = re.search(rf"(?:^|[;\s]){_DECL_PREFIX}([A-Za-z_][\w.]*)\s*(?:\[[^\]]*\]\s*)?\s+(?:{_OTHER},\s*)*"
-                  rf"{re.escape(inst)}\s*(?:\[[^\]]*\])?\s*[(;\"=,]", body)
-    if m and m.group(1) not in ("end", "extends", "import", "connect", "equation", "algorithm"):
-        return m.group(1)
+    """The type ``inst`` is declared of in ``body`` (stripped of comments and strings), alone
+    (``Tank t1;``) or one of several declared together (``Tank t1, t2;``). Each place the name
+    is followed as a declaration's is tried with the statement it ends (linear in the body: a
+    pattern spanning the list backtracked without end on a list of thousands)."""
+    for occ in re.finditer(rf"(?<![\w.]){re.escape(inst)}\s*(?:\[[^\]]*\])?\s*[(;=,]", body):
+        head = body[body.rfind(";", 0, occ.start()) + 1:occ.start()]
+        if not head.rstrip().endswith(","):
+            m = re.search(_TYPE + r"$", head[-400:])
+        elif _depth(head):          # (an argument: f(a, t1))
+            continue
+        else:               # the first declarator of the list holds the type
+            first = head[:_top_level_comma(head)]
+            m = re.search(_TYPE + r"[A-Za-z_]\w*\s*(?:\[[^\]]*\])?\s*(?:\([^;]*\))?\s*(?:=[^;]*)?$", first)
+        if m and m.group(1) not in _NOT_TYPES:
+            return m.group(1)
     return None
+
+
+def _depth(text: str) -> int:
+    """How many parentheses, brackets and braces ``text`` leaves open."""
+    return sum({"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0) for ch in text)
+
+
+def _top_level_comma(text: str) -> int:
+    """Index of the first comma of ``text`` outside parentheses, brackets and braces."""
+    depth = 0
+    for k, ch in enumerate(text):
+        depth += {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0)
+        if ch == "," and depth == 0:
+            return k
+    return len(text)
 
 
 def _imports(body: str) -> tuple[dict[str, str], list[str]]:
