@@ -62,6 +62,15 @@ class FmuEngine(Engine):
 
 
 def _run_isolated(job: dict, time_limit: float):
+    """The FMU run in a child process; the FMU unpacked in a directory the parent removes (a
+    child killed at the time limit, or crashed, leaves nothing behind)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="mcl-fmu-run-") as tmp:
+        return _run_child({**job, "workdir": tmp}, time_limit)
+
+
+def _run_child(job: dict, time_limit: float):
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
     recv, send = ctx.Pipe(duplex=False)
     proc = ctx.Process(target=_child, args=(job, send), daemon=True)
@@ -108,8 +117,6 @@ def _child(job: dict, conn) -> None:
 def _simulate(job: dict, messages: list[str]) -> tuple[np.ndarray, str | None]:
     """(the outputs at the output times, "t = ...: message" where the model called terminate():
     the outputs then end at the last output time before it)."""
-    import tempfile
-
     from fmpy import read_model_description
 
     from .compile.fmu.archive import safe_extract
@@ -123,18 +130,17 @@ def _simulate(job: dict, messages: list[str]) -> tuple[np.ndarray, str | None]:
         elif text.startswith(_TERMINATED):
             ended.append(text[len(_TERMINATED):])
 
-    with tempfile.TemporaryDirectory(prefix="mcl-fmu-run-") as tmp:   # removed after use
-        unzipdir = safe_extract(job["path"], tmp)
-        md = read_model_description(unzipdir, validate=False)
-        job = {**job, "path": unzipdir}
-        cs = md.coSimulation
-        if (md.fmiVersion == "2.0" and cs is not None and cs.canInterpolateInputs
-                and cs.canHandleVariableCommunicationStepSize):
-            y = _simulate_cs2(job, md, logger)
-        elif md.fmiVersion == "2.0" and md.modelExchange is not None and not md.numberOfEventIndicators:
-            y = _simulate_me2(job, md, logger)
-        else:
-            y = _simulate_fmpy(job, logger)
+    unzipdir = safe_extract(job["path"], job["workdir"])     # (the parent's: removed by it)
+    md = read_model_description(unzipdir, validate=False)
+    job = {**job, "path": unzipdir}
+    cs = md.coSimulation
+    if (md.fmiVersion == "2.0" and cs is not None and cs.canInterpolateInputs
+            and cs.canHandleVariableCommunicationStepSize):
+        y = _simulate_cs2(job, md, logger)
+    elif md.fmiVersion == "2.0" and md.modelExchange is not None and not md.numberOfEventIndicators:
+        y = _simulate_me2(job, md, logger)
+    else:
+        y = _simulate_fmpy(job, logger)
     return y, (ended[0] if ended and len(y) < len(job["t_out"]) else None)
 
 

@@ -60,6 +60,20 @@ def test_time_limit_stops_the_run(cauer, cauer_fmu, engine):
     assert res.seconds < 10
 
 
+def test_an_fmu_run_stopped_at_its_time_limit_leaves_no_unpacked_fmu(cauer_fmu, tmp_path, monkeypatch):
+    """The child process that runs the FMU is killed at the time limit; the directory the FMU
+    was unpacked into is the parent's, and removed (the child's own was left behind, one per
+    killed run)."""
+    import tempfile
+
+    (tmp_path / "tmp").mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path / "tmp"))
+    t = np.linspace(0, 2000, 200001)
+    res = simulate(cauer_fmu, series(t, u=multisine(t)), options={"time_limit": 0.05, "rtol": 1e-10})
+    assert not res.ok and "time limit" in res.reason
+    assert list((tmp_path / "tmp").iterdir()) == []
+
+
 def test_broken_fmu_binary_is_a_failed_result(tmp_path, cauer_fmu):
     broken = tmp_path / "broken.fmu"
     with zipfile.ZipFile(cauer_fmu.path) as src, zipfile.ZipFile(broken, "w") as dst:
