@@ -659,9 +659,11 @@ def _rewritten_in_instance(comp, cls: str, files: list[Path], model: str, unknow
         new = rewritten(text, copy, local, cls, mine) if text is not None else None
         if new is None:
             continue
+        now = {**texts, str(f): new}
+        owners = _class_and_bases(model.split(".")[-1], list(now.values()))
         for g in files:         # the model (or a class it extends) declares the instance
-            for where in _class_and_bases(model.split(".")[-1], [new if g == f else texts[str(g)] for g in files]):
-                changed = retyped(new if g == f else texts[str(g)], where, inst, copy)
+            for where in owners:
+                changed = retyped(now[str(g)], where, inst, copy)
                 if changed is not None:
                     f.write_text(new)
                     g.write_text(changed)       # (the same file: new, retyped)
