@@ -342,3 +342,50 @@ def test_an_equation_of_the_engineers_own_submodel_is_named_and_put_back_for_tha
     assert "qout_law.u = h;" in extended and "qout = qout_law.y;" in extended
     assert extended.count("qout = h/R") == 1         # the class Tank itself stays as written
     assert report["extended"]["recompiled_difference"] < 1e-3, report["extended"]
+
+
+def chain_model(n: int) -> str:
+    """n tanks of the engineer's own class in a row, declared in one statement."""
+    lines = [SUBMODELS.split("model Cascade")[0], f'model Chain "{n} tanks in a row"', "  input Real u;",
+             "  output Real y \"the last level\";", "  output Real ymid \"the third level\";",
+             "  parameter Real kp = 0.3;", "  Tank " + ", ".join(f"t{k}" for k in range(1, n + 1)) + ";",
+             "equation", "  t1.qin = kp*u;", *(f"  t{k}.qin = t{k - 1}.qout;" for k in range(2, n + 1)),
+             f"  y = t{n}.h;", "  ymid = t3.h;", "end Chain;"]
+    return "\n".join(lines) + "\n"
+
+
+def chain_data(path, seed: int, n: int, fault: int) -> None:
+    """The last and the third level (noise 2 mm) of n tanks, tank ``fault`` draining as 0.6 sqrt(h)."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 400, 2001)
+    a, w, ph = rng.uniform(0.5, 1.0, 3), np.array([0.02, 0.05, 0.11]), rng.uniform(0, 2 * np.pi, 3)
+
+    def u(s):
+        return 1.0 + sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph)) / 3
+
+    def rhs(s, z):
+        h = np.maximum(z, 0.0)
+        q = h / 2.5
+        q[fault - 1] = 0.6 * np.sqrt(h[fault - 1])
+        return np.concatenate([[0.3 * u(s)], q[:-1]]) - q
+
+    sol = solve_ivp(rhs, (0, 400), np.full(n, 0.2), t_eval=t, rtol=1e-10, atol=1e-12)
+    y, ymid = (sol.y[k] + rng.normal(0, 0.002, len(t)) for k in (n - 1, 2))
+    path.write_text("time,u,y,ymid\n" + "\n".join(f"{a:.10g},{b:.10g},{c:.10g},{d:.10g}"
+                                                  for a, b, c, d in zip(t, u(t), y, ymid)) + "\n")
+
+
+def test_the_one_wrong_outlet_of_a_row_of_tanks_is_named_with_its_square_root(tmp_path):
+    """Twelve tanks of the engineer's own class; tank 7 drains as 0.6 sqrt(h). Its outlet is
+    named, decisively, with the square root itself: the screening (linear about the nominal
+    law) put that family behind a five-term polynomial, and the winner's simpler families are
+    fitted too (before, the five-term law won)."""
+    chain_data(tmp_path / "train.csv", 1, 12, 7)
+    chain_data(tmp_path / "validate.csv", 2, 12, 7)
+    report = discovered(tmp_path, "Chain.mo", "Chain", chain_model(12))
+    cause = report["causes"][0]
+    assert cause["component"] == "t7.qout", report["cause"]
+    assert cause["evidence"]["strength"] == "decisive", cause["evidence"]
+    law = cause["law"]["equation"]
+    assert law.startswith("t7.qout = 0.") and law.count("*") == 2 and "sqrt(abs(t7.h))" in law, law
+    assert abs(float(law.split(" = ")[1].split("*")[0]) - 0.6) < 0.01, law

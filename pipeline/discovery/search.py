@@ -426,9 +426,35 @@ def search(spec, base: Base, train, validate, part: Path, rundir, reg, sigma: fl
             if s_ is not None:
                 s_["not_applicable"] = c["not_applicable"]
     cands = [c for c in cands if not c.get("not_applicable")]
+    simpler = simpler_families(cands, items, screening) if beat is None else []
+    if simpler:
+        cands += [c for c in fit(simpler) if not c.get("not_applicable")]
     if spec.templates is None:
         cands += [c for c in shapes(fit, [c for c in cands if "parts" not in c], sigma) if not c.get("not_applicable")]
     return Round(cands, screening, pairs, signals, roles, fit)
+
+
+def simpler_families(cands: list[dict], items: list, screening: list[dict]) -> list:
+    """The families of the best fitted component with fewer parameters than its best law that
+    the screening left out: they are fitted too. The screening's prediction is linear about the
+    nominal law and misjudges a law of another shape (a tank's square-root outflow, predicted
+    behind a cubic with saturations, which then won with five terms where one was the law)."""
+    done = [c for c in _ranked(cands) if "parts" not in c]
+    if not done:
+        return []
+    best = done[0]
+    size = next((s.get("n_params") for s in screening
+                 if s["component"] == best["component"] and s["template"] == best["template"]), None)
+    if size is None:
+        return []
+    out = []
+    for it, s in zip(items, screening):
+        if (it.component == best["component"] and s.get("not_fitted") and s.get("n_params", size) < size
+                and not s.get("not_applicable")):
+            s.pop("not_fitted")
+            s["fitted_because"] = "a simpler family of the best component"
+            out.append(it)
+    return out
 
 
 def _screened(part: Path, rundir, items, why_not, base, train, resid, spec, floor: float):
