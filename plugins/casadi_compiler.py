@@ -41,9 +41,9 @@ class CasadiCompiler(Compiler):
         raw = rumoca_frontend.to_dae(ir, located, model)
         dae = eliminate_aliases(raw)
         ode = structure.build_ode(dae, model)
-        parts = _components(ir, located, model, prep.files, libraries)
-        components = with_equations(parts, raw, user_instances(raw, parts, _classes_of(located, model, prep.files,
-                                                                                        libraries)))
+        resolve, in_library = _classes(located, model, prep.files, libraries)
+        parts = _components(ir, model, resolve)
+        components = with_equations(parts, raw, user_instances(raw, parts, in_library))
         seconds = time.perf_counter() - start
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
@@ -54,35 +54,34 @@ class CasadiCompiler(Compiler):
         return compiled
 
 
-def _components(ir: dict, located, model: str, user_files, libraries):
-    """The model's component structure from the flat stage, with each component's class read
-    from its declaration (the user's files first, then the package the model is in)."""
-    from mcl.compile.components import declared_classes, structure_of
-
-    structure = structure_of(ir.get("flat") or {}, model)
-    user = {str(f): f.read_text(encoding="utf-8", errors="replace") for f in user_files}
-    top = model.split(".")[0]
-    rest = sorted(((p, t) for p, t in located.files.values() if p not in user), key=lambda pt: top not in pt[0])
-    classes = declared_classes(structure.components, model, {**user, **dict(rest)}, libraries)
-    for name, comp in structure.components.items():
-        comp.cls = classes.get(name, comp.cls)
-    return structure
-
-
-def _classes_of(located, model: str, user_files, libraries):
-    """paths -> {path: (its class, whether a library on the path holds it)}, for the instances
-    whose declarations are found (the user's files first)."""
-    from mcl.compile.components import declared_classes
+def _classes(located, model: str, user_files, libraries):
+    """(paths -> {path: class}, paths -> {path: (class, whether a library on the path holds
+    it)}): the classes of instances read from their declarations (the user's files first, then
+    the package the model is in), over the texts stripped once for both."""
+    from mcl.compile.components import class_resolver
     from mcl.compile.library import available, library_path
 
     user = {str(f): f.read_text(encoding="utf-8", errors="replace") for f in user_files}
-    rest = {p: t for p, t in located.files.values() if p not in user}
+    top = model.split(".")[0]
+    rest = sorted(((p, t) for p, t in located.files.values() if p not in user), key=lambda pt: top not in pt[0])
+    resolve = class_resolver(model, {**user, **dict(rest)}, libraries)
     libs = set(available(library_path(libraries)))
 
-    def classes_of(paths):
-        found = declared_classes(paths, model, {**user, **rest}, libraries) if paths else {}
-        return {n: (c, c.split(".")[0] in libs) for n, c in found.items()}
-    return classes_of
+    def in_library(paths):
+        return {n: (c, c.split(".")[0] in libs) for n, c in resolve(paths).items()}
+    return resolve, in_library
+
+
+def _components(ir: dict, model: str, resolve):
+    """The model's component structure from the flat stage, with each component's class read
+    from its declaration (``resolve``: :func:`_classes`)."""
+    from mcl.compile.components import structure_of
+
+    structure = structure_of(ir.get("flat") or {}, model)
+    classes = resolve(structure.components)
+    for name, comp in structure.components.items():
+        comp.cls = classes.get(name, comp.cls)
+    return structure
 
 
 class PymocaCompiler(Compiler):

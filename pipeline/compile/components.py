@@ -430,27 +430,36 @@ def declared_classes(names, model: str, texts: dict[str, str], libraries=(), lib
     declaration in the texts the compiler read (``{path: text}``, the user's files first), with
     the imports in force there; a class that cannot be resolved keeps the name as written, one
     whose declaration is not found is left out. ``lib``: the library classes, when already read."""
+    return class_resolver(model, texts, libraries, lib)(names)
+
+
+def class_resolver(model: str, texts: dict[str, str], libraries=(), lib=None):
+    """:func:`declared_classes` for the names given later, call after call, over texts stripped
+    and indexed once (the components' classes, then the user's instances level by level)."""
     from .classes import LibraryClasses
     from .library import available, library_path
 
     stripped = _Texts(texts)
     lib = lib or LibraryClasses(available(library_path(libraries)))
-    out = {}
-    for name in names:
-        body, scope = None, model
-        for part in split_name(name):
-            inst = re.sub(r"\[.*\]$", "", part)
-            body = stripped.class_body(scope.split(".")[-1])     # the class declaring the part
-            found = _declared_type(body, inst) if body else None
-            if found is None:       # declared in a base class: any text that declares it
-                found = stripped.declaring(inst)
-                body = None
-            if found is None:
-                break
-            scope = _qualified(found, body or "", scope, lib)
-        else:
-            out[name] = scope
-    return out
+
+    def resolve(names) -> dict[str, str]:
+        out = {}
+        for name in names:
+            body, scope = None, model
+            for part in split_name(name):
+                inst = re.sub(r"\[.*\]$", "", part)
+                body = stripped.class_body(scope.split(".")[-1])     # the class declaring the part
+                found = _declared_type(body, inst) if body else None
+                if found is None:       # declared in a base class: any text that declares it
+                    found = stripped.declaring(inst)
+                    body = None
+                if found is None:
+                    break
+                scope = _qualified(found, body or "", scope, lib)
+            else:
+                out[name] = scope
+        return out
+    return resolve
 
 
 class _Texts:
@@ -518,26 +527,34 @@ def _declared_type(body: str, inst: str) -> str | None:
         elif _depth(head):          # (an argument: f(a, t1))
             continue
         else:               # the first declarator of the list holds the type
-            first = head[:_top_level_comma(head)]
+            first = top_level_parts(head)[0]
             m = re.search(_TYPE + r"[A-Za-z_]\w*\s*(?:\[[^\]]*\])?\s*(?:\([^;]*\))?\s*(?:=[^;]*)?$", first)
         if m and m.group(1) not in _NOT_TYPES:
             return m.group(1)
     return None
 
 
+_NESTING = {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}
+
+
 def _depth(text: str) -> int:
     """How many parentheses, brackets and braces ``text`` leaves open."""
-    return sum({"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0) for ch in text)
+    return sum(_NESTING.get(ch, 0) for ch in text)
 
 
-def _top_level_comma(text: str) -> int:
-    """Index of the first comma of ``text`` outside parentheses, brackets and braces."""
-    depth = 0
-    for k, ch in enumerate(text):
-        depth += {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0)
-        if ch == "," and depth == 0:
-            return k
-    return len(text)
+def top_level_parts(text: str) -> list[str]:
+    """The comma-separated parts of ``text`` outside parentheses, brackets, braces and strings
+    (a modification's arguments, the declarators of a declaration of several), blank ones left out."""
+    out, depth, cur, quote = [], 0, "", False
+    for ch in text:
+        quote ^= ch == '"'
+        depth += 0 if quote else _NESTING.get(ch, 0)
+        if ch == "," and depth == 0 and not quote:
+            out.append(cur)
+            cur = ""
+        else:
+            cur += ch
+    return [a for a in [*out, cur] if a.strip()]
 
 
 def _imports(body: str) -> tuple[dict[str, str], list[str]]:

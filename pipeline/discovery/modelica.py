@@ -24,6 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compile.components import top_level_parts
+
 LEARNED_PACKAGE = "Learned"
 
 
@@ -437,19 +439,9 @@ def _statement_end(text: str, start: int) -> int:
     return n
 
 
-def _arguments(text: str) -> list[str]:
-    """The top-level comma-separated arguments of a modification (or the declarators of a
-    declaration of several; commas in strings are theirs)."""
-    out, depth, cur, quote = [], 0, "", False
-    for ch in text:
-        quote ^= ch == '"'
-        depth += 0 if quote else {"(": 1, ")": -1, "{": 1, "}": -1, "[": 1, "]": -1}.get(ch, 0)
-        if ch == "," and depth == 0 and not quote:
-            out.append(cur)
-            cur = ""
-        else:
-            cur += ch
-    return [a for a in [*out, cur] if a.strip()]
+#: a declaration's start: its line, indent, prefixes, type and the space before its names
+_DECLARATION = r"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)([A-Za-z_][\w.]*)(\s+)"
+_NOT_DECLARED = ("connect", "end", "equation", "import", "extends", "parameter", "constant")
 
 
 def retyped(text: str, model_short: str, inst: str, new_class: str) -> str | None:
@@ -460,12 +452,11 @@ def retyped(text: str, model_short: str, inst: str, new_class: str) -> str | Non
     if not head:
         return None
     quoted = _quoted(text)
-    decl = re.compile(r"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)([A-Za-z_][\w.]*)(\s+)")
-    for m in decl.finditer(text, head.end(), body_end):
-        if m.group(4) in ("connect", "end", "equation", "import", "extends", "parameter", "constant") or quoted(m.start(4)):
+    for m in re.compile(_DECLARATION).finditer(text, head.end(), body_end):
+        if m.group(4) in _NOT_DECLARED or quoted(m.start(4)):
             continue
         stop = _statement_end(text, m.end())
-        items = _arguments(text[m.end():stop - 1])
+        items = top_level_parts(text[m.end():stop - 1])
         k = next((j for j, a in enumerate(items) if re.match(rf"\s*{re.escape(inst)}\b(?!\.)", a)), None)
         if k is None:
             continue
@@ -508,11 +499,10 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
     head, body_end = _class_span(text, model_short)
     if not head:
         return None
-    decl = re.compile(rf"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)"
-                      rf"([A-Za-z_][\w.]*)(\s+){re.escape(component)}\b")
+    decl = re.compile(rf"{_DECLARATION}{re.escape(component)}\b")
     quoted = _quoted(text)
     for m in decl.finditer(text, head.end(), body_end):
-        if m.group(4) in ("connect", "end", "equation", "import", "extends", "parameter", "constant"):
+        if m.group(4) in _NOT_DECLARED:
             continue
         if quoted(m.start(4)):      # (a class's description: "... a counter reads ...")
             continue
@@ -524,7 +514,7 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
                 depth += {"(": 1, ")": -1}.get(rest[k], 0)
                 if depth == 0:
                     break
-            kept = [a for a in _arguments(rest[k0 + 1:k]) if re.match(rf"\s*(?:each\s+|final\s+)*({'|'.join(keep)})\b", a)]
+            kept = [a for a in top_level_parts(rest[k0 + 1:k]) if re.match(rf"\s*(?:each\s+|final\s+)*({'|'.join(keep)})\b", a)]
             rest = (f"({', '.join(a.strip() for a in kept)})" if kept else "") + rest[k + 1:]
         return text[:m.start(4)] + new_class + m.group(5) + component + rest + text[stop:]
     return None
