@@ -983,7 +983,7 @@ class _Hybrid:
         free = self.state_free()
         on_time = [r for r in flips if free[r]]
         on_states = [r for r in flips if not free[r]]
-        best_t, before = (self.bisect(plan, xa, ta, tb, p, on_time, g_a) if on_time else (tb, tb))
+        best_t, before = (self.bisect(plan, xa, ta, tb, p, on_time, g_a, budget) if on_time else (tb, tb))
         if not on_states:
             # the states reached just before the crossing: the relations read none, and the
             # model's right-hand side may switch with them (to just past it: 240 steps more)
@@ -993,7 +993,7 @@ class _Hybrid:
             return t_s, x_s
         return best_t, plan.hop(xa, p, ta, best_t, budget)   # just past the crossing on time
 
-    def bisect(self, plan, xa, ta, tb, p, rels, g_a):
+    def bisect(self, plan, xa, ta, tb, p, rels, g_a, budget):
         """(just past, just before) the first crossing of the relations ``rels`` on time alone,
         to the last digit (each trial one evaluation, no integration). The trial is the
         earliest secant root of the relations that change across the bracket and stay as steep
@@ -1010,6 +1010,7 @@ class _Hybrid:
         for _ in range(200):
             if hi - lo <= tol:
                 break
+            budget.check(lo)       # (a relation reading a loop whose solve fails costs a second a trial)
             t = 0.5 * (lo + hi)
             # (a relation exactly 0 at lo, a count equal to its bound until a tick: its secant
             # root is lo itself, and it jumps)

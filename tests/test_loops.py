@@ -261,3 +261,32 @@ def test_expansion_size_is_estimated_before_expanding():
     assert structure.expanded_size(calls) > structure.EXPAND_TRY_MAX
     assert structure.compact(calls) is calls            # left as it is, not expanded
     assert structure.compact(f).is_a("SXFunction")      # a small one still is
+
+
+def test_a_loop_solves_fallbacks_evaluate_what_they_are_given_once():
+    """A loop solve's fallbacks are conditionals nested several deep (Newton, then a damped
+    Newton, then a bracket or the branches, then NaN). Each takes the value computed before it
+    as it is: CasADi's short-circuit if_else builds its branches from the free symbols, so the
+    value was computed again inside each, twice as often at every level (a fluid model's failing
+    loop: 18 s an evaluation, and a simulation that never returned to check its time limit)."""
+    import casadi as ca
+    from mcl.compile import structure
+
+    class Counted(ca.Callback):
+        def __init__(self):
+            ca.Callback.__init__(self)
+            self.calls = 0
+            self.construct("counted", {})
+
+        def eval(self, arg):
+            self.calls += 1
+            return [arg[0] * 2]
+
+    f = Counted()
+    x = ca.MX.sym("x")
+    value = f(x)
+    for _ in range(10):
+        value = structure._otherwise(value < 100, value, lambda a: a + 1, x)
+    fun = ca.Function("nested", [x], [value])
+    assert float(fun(1.0)) == 2.0 and f.calls == 1              # kept: computed once, not 2^10 times
+    assert float(fun(60.0)) == 61.0                             # beyond: the fallback's

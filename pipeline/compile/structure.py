@@ -619,36 +619,52 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         # from the last solution; where Newton's method fails there, from the start values,
         # as without a last solution (a saturating core: a guess deep in saturation, left
         # behind by the flux, sends Newton's method away where 0 does not)
-        z1 = ca.if_else(ok, z1, quick(ca.DM(start), par), True)
+        z1 = _otherwise(ok, z1, lambda p: quick(ca.DM(start), p), par)
         ok = met(z1, par, LOOP_TOL)
     step, jac = _damped_step(name, resid, sx)
-    # the initial system's fallback starts a hair off the start values: a start at a
-    # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
-    # A run's loops move only off a start where the law has no finite derivative (|B|^n with
-    # n < 1 at B = 0); one where it is finite but singular (w2 v^2 + w3 v^3 = w1 i at v = 0,
-    # a cubic's double root) stays the model's to resolve
-    # (in a run, from the start values too: the fallback is then the one without a last solution)
-    zf = z0 if start is None else ca.MX(ca.DM(start))
-    off = zf + 1e-6 * (1 + ca.fabs(zf))
-    if strict:
-        z = off
-    else:
-        s = ca.sum1(ca.vec(jac(zf, par)))
-        z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), zf, off)
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
-    for _ in range(DAMPED_ITERATIONS):
-        z = step(z, par)
-    z2 = polish(z, par)
-    if z0.numel() == 1:
-        # one unknown: a sign change, then the root inside it (a Newton method with a line
-        # search stops at a local minimum of |r|, where an amplifier's branch has just ended)
-        z2 = ca.if_else(met(z2, par, INIT_TOL), z2, polish(_bracketed(resid, z0, par), par), True)
-    else:
-        z2 = ca.if_else(met(z2, par, INIT_TOL), z2, _branchwise(name, resid, zf, par, met), True)
-    # NaN, not an exception, where no solution is found: in a run the integrator then retries
-    # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
-    z2 = ca.if_else(met(z2, par, INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape), True)
-    return ca.if_else(ok, z1, z2, True)
+
+    def fallback(z0, par):
+        # the initial system's fallback starts a hair off the start values: a start at a
+        # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
+        # A run's loops move only off a start where the law has no finite derivative (|B|^n with
+        # n < 1 at B = 0); one where it is finite but singular (w2 v^2 + w3 v^3 = w1 i at v = 0,
+        # a cubic's double root) stays the model's to resolve
+        # (in a run, from the start values too: the fallback is then the one without a last solution)
+        zf = z0 if start is None else ca.MX(ca.DM(start))
+        off = zf + 1e-6 * (1 + ca.fabs(zf))
+        if strict:
+            z = off
+        else:
+            s = ca.sum1(ca.vec(jac(zf, par)))
+            z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), zf, off)
+        for _ in range(DAMPED_ITERATIONS):
+            z = step(z, par)
+        z2 = polish(z, par)
+        if z0.numel() == 1:
+            # one unknown: a sign change, then the root inside it (a Newton method with a line
+            # search stops at a local minimum of |r|, where an amplifier's branch has just ended)
+            z2 = _otherwise(met(z2, par, INIT_TOL), z2, lambda a, p: polish(_bracketed(resid, a, p), p), z0, par)
+        else:
+            z2 = _otherwise(met(z2, par, INIT_TOL), z2, lambda a, p: _branchwise(name, resid, a, p, met), zf, par)
+        # NaN, not an exception, where no solution is found: in a run the integrator then retries
+        # with a shorter step (a rectifier's diodes switching: the next point is found from nearer)
+        return ca.if_else(met(z2, par, INIT_TOL), z2, np.nan * ca.DM.ones(z2.shape))
+    return _otherwise(ok, z1, fallback, z0, par)
+
+
+def _otherwise(cond: ca.MX, value: ca.MX, fallback, *args) -> ca.MX:
+    """``value`` where ``cond`` holds, else ``fallback(*args)``, evaluated only then. CasADi's
+    short-circuit if_else builds each branch from the expression's free symbols, so a value
+    computed before it is computed again inside the branch, and every nesting doubles the cost
+    (a fluid model's loop solve, its fallbacks nested five deep: 18 s an evaluation); here
+    ``value`` is passed into the branch."""
+    args = [ca.MX(a) for a in args]
+    syms = [ca.MX.sym(f"a{k}", a.sparsity()) for k, a in enumerate(args)]
+    v = ca.MX.sym("v", value.sparsity())
+    keep = ca.Function("f_keep", [v, *syms], [v])       # (f_: a branch, to expanded_size)
+    other = ca.Function("f_otherwise", [v, *syms], [ca.MX(fallback(*syms))])
+    return ca.Function.if_else("switch", keep, other)(cond, value, *args)
 
 
 def _branchwise(name: str, resid: ca.Function, z0, par: ca.MX, met) -> ca.MX:
@@ -669,7 +685,7 @@ def _branchwise(name: str, resid: ca.Function, z0, par: ca.MX, met) -> ca.MX:
     for j, law in enumerate(_branch_laws(resid, [T, P], len(cmps))):
         fixed = ca.Function(f"{name}_branch{j}", [T, P], [law])
         solve = ca.rootfinder(f"{name}_on{j}", "fast_newton", fixed, {**NEWTON_OPTS, "error_on_fail": False})
-        z = ca.if_else(met(z, par, INIT_TOL), z, solve(z0, par), True)
+        z = _otherwise(met(z, par, INIT_TOL), z, lambda a, p, solve=solve: solve(a, p), z0, par)
     return z
 
 
@@ -684,7 +700,7 @@ def _bracketed(resid: ca.Function, z0: ca.MX, par: ca.MX) -> ca.MX:
     for j in range(BRACKET_STEPS):
         for side in (1.0, -1.0):
             near, far = z0 + side * h * (4.0 ** (j - 1) if j else 0.0), z0 + side * h * 4.0 ** j
-            r = ca.if_else(found, r0, resid(far, par), True)
+            r = _otherwise(found, r0, lambda a, p: resid(a, p), far, par)
             new = ca.logic_and(ca.logic_not(found), ca.logic_and(r * r0 <= 0, r == r))
             lo, hi = ca.if_else(new, near, lo), ca.if_else(new, far, hi)
             found = ca.logic_or(found, new)
