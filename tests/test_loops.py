@@ -290,3 +290,21 @@ def test_a_loop_solves_fallbacks_evaluate_what_they_are_given_once():
     fun = ca.Function("nested", [x], [value])
     assert float(fun(1.0)) == 2.0 and f.calls == 1              # kept: computed once, not 2^10 times
     assert float(fun(60.0)) == 61.0                             # beyond: the fallback's
+
+
+def test_a_loop_whose_jacobian_is_singular_everywhere_is_solved_not_refused():
+    """A loop that determines fewer unknowns than it has, consistently (a pipe closed at both
+    ends by dry tank ports: its pressure is any its static head allows), has a singular Jacobian
+    everywhere. Newton's step is infinite there, and sparse QR refused it, failing the whole
+    evaluation ("Evaluation failed", TanksWithOverflow's update). The fallback's damped steps take
+    the least-squares step instead and reach one of the solutions."""
+    import casadi as ca
+    from mcl.compile import structure
+
+    z, q = ca.SX.sym("z", 2), ca.SX.sym("q")
+    resid = ca.Function("r", [z, q], [ca.vertcat(z[0] ** 3 + z[1] - q, 2 * (z[0] ** 3 + z[1] - q))])
+    Q = ca.MX.sym("q")
+    f = ca.Function("f", [Q], [structure._loop_solve("l", resid, np.array([0.5, 0.2]), Q)])
+    for q_value in (2.0, -3.0):
+        sol = np.array(f(q_value)).ravel()
+        assert abs(sol[0] ** 3 + sol[1] - q_value) < 1e-9

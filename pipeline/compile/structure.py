@@ -525,6 +525,11 @@ def _nearest(A, b, guess, solve):
     return g - solve(ca.mtimes(A.T, A) + reg * type(A).eye(A.size2()), ca.mtimes(A.T, ca.mtimes(A, g) + b))
 
 
+def _sparse_qr(M, r):
+    """M x = r by sparse QR, NaN or inf (not an exception) where M is singular."""
+    return ca.solve(M, r, "qr", {"eps": -1.0})
+
+
 def _all_finite(z):
     """Whether every entry of ``z`` is finite, as an expression (through the sum: a norm's fmax
     passes over NaN)."""
@@ -640,7 +645,8 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
             z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), zf, off)
         for _ in range(DAMPED_ITERATIONS):
             z = step(z, par)
-        z2 = polish(z, par)
+        z2 = polish(z, par)       # (which fails where the Jacobian is singular: then z as it is)
+        z2 = ca.if_else(_all_finite(z2), z2, z)
         if z0.numel() == 1:
             # one unknown: a sign change, then the root inside it (a Newton method with a line
             # search stops at a local minimum of |r|, where an amplifier's branch has just ended)
@@ -777,14 +783,20 @@ def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Fun
     else:                      # (solves of inner loops, an initial system, or too large): in MX
         jac = ca.Function(f"{name}_jac", [z, par], [ca.jacobian(resid(z, par), z)])
     r = resid(z, par)
-    dz = -ca.solve(jac(z, par), r, "qr")
+    # where the Jacobian is singular, the least-squares step (a pipe closed at both ends by dry
+    # tank ports: its pressure is any that its static head allows, and Newton's step is
+    # infinite). Sparse QR is told not to refuse a pivot: its default failed the whole
+    # evaluation (TanksWithOverflow's update had no value at all)
+    J = jac(z, par)
+    newton = -ca.solve(J, r, "qr", {"eps": -1.0})
+    dz = ca.if_else(_all_finite(newton), newton, -_nearest(J, r, np.zeros(r.shape), _sparse_qr))
     f0 = ca.dot(r, r)
     alphas = [0.5 ** j for j in range(LINE_SEARCH_STEPS)]
     alpha = ca.MX(alphas[-1])
     for a in reversed(alphas[:-1]):
         ra = resid(z + a * dz, par)
         alpha = ca.if_else(ca.dot(ra, ra) <= (1 - 1e-4 * a) * f0, a, alpha)
-    body = ca.Function(f"{name}_ls", [z, par], [z + alpha * dz])
+    body = ca.Function(f"{name}_ls", [z, par], [ca.if_else(_all_finite(dz), z + alpha * dz, z)])
     r = resid(z, par)
     done = ca.dot(r, r) <= LOOP_TOL ** 2     # converged: the rest of the steps cost one residual
     return ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)]), jac
