@@ -49,6 +49,9 @@ MAX_EVENTS = 100000
 EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
 ZOOM_TOL = 1e-7           # a crossing on the states located to this fraction of the interval it was seen in
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
+#: output points whose outputs and checks a model with algebraic loops evaluates in one call
+#: (the time limit is checked between such calls)
+CHECK_CHUNK = 256
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
 FOLLOW_POINTS = 32        # points of a call where the loops' solutions are checked to follow on
 FOLLOW_TOL = 1e-3         # a loop's solution off the one followed point to point by more (relative): another root
@@ -336,7 +339,12 @@ class _Plan:
         Xs, Us, Ps, Ts = (ca.MX.sym(n, k) for n, k in
                           (("x", nx), ("u", len(ode.u_names)), ("p", npar), ("t", 1)))
         # outputs and checks with one solve of the loops per point (with q, where split)
-        self.checks = (self.split.checks if self.split is not None else ode.checks).map(N)
+        checks = self.split.checks if self.split is not None else ode.checks
+        # (a model with loops: a chunk of points at a time, the time limit checked between:
+        # where Newton's method fails, each point's fallback can take a second)
+        self.check_chunk = CHECK_CHUNK if ode.nonlinear_blocks and N > CHECK_CHUNK else N
+        self.checks = checks.map(self.check_chunk)
+        self.checks_rest = checks.map(N % self.check_chunk) if N % self.check_chunk else None
         if self.branched:   # at the output points, the loops' branches their call had
             z = ode.solved(Xs, Us, Ps, Ts)
             g = Ps[npar - self.ng:]
@@ -512,6 +520,17 @@ class _Plan:
             best = min(best, clock.elapsed)
         return max(40 * best, 2e-6)
 
+    def checked(self, at: tuple, budget) -> tuple:
+        """(outputs, loop residuals, drift) at every output point, a chunk at a time."""
+        n, c = len(self.t_out), self.check_chunk
+        parts = []
+        for start in range(0, n, c):
+            fun = self.checks if start + c <= n else self.checks_rest
+            parts.append([np.array(v) for v in fun(*(a[:, start:start + c] for a in at))])
+            if start + c < n:
+                budget.check(float(self.t_out[min(start + c, n - 1)]))
+        return tuple(np.hstack(vs) for vs in zip(*parts))
+
     # -- a run -------------------------------------------------------------------------------
     def run(self, p: np.ndarray, opts: SimulationOptions) -> SimulationResult:
         ode, t_out, N = self.ode, self.t_out, len(self.t_out)
@@ -589,9 +608,11 @@ class _Plan:
             at = (X, self.u_out, P, t_out[None, :])
             if self.split is not None:
                 at = (*at[:3], np.repeat(self.q[:, None], N, 1), at[3])
-            y, res, drift = (np.array(v) for v in self.checks(*at))
+            y, res, drift = self.checked(at, budget)
         except RuntimeError as exc:
             return fail(f"evaluating the outputs failed: {_last_line(exc)}")
+        except _Stop as stop:
+            return fail(f"evaluating the outputs: {stop}")
         # the run ends where the model called terminate(), as in other tools: its points so far
         n = N if ended is None else int(np.searchsorted(self.out_idx, ended[0], side="right"))
         result = SimulationResult(t_out[:n].copy(), y.T[:n], list(names), seconds=clock.elapsed,

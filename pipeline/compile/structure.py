@@ -791,12 +791,17 @@ def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Fun
     newton = -ca.solve(J, r, "qr", {"eps": -1.0})
     dz = ca.if_else(_all_finite(newton), newton, -_nearest(J, r, np.zeros(r.shape), _sparse_qr))
     f0 = ca.dot(r, r)
-    alphas = [0.5 ** j for j in range(LINE_SEARCH_STEPS)]
-    alpha = ca.MX(alphas[-1])
-    for a in reversed(alphas[:-1]):
+
+    def alpha(j, z, dz, par, f0):
+        """The longest of 1/2^j, 1/2^(j+1), ... that decreases |r|^2 enough, the next one
+        tried only where this one does not (mostly one or two residuals a step, not twelve)."""
+        a = 0.5 ** j
+        if j == LINE_SEARCH_STEPS - 1:
+            return ca.MX(a)
         ra = resid(z + a * dz, par)
-        alpha = ca.if_else(ca.dot(ra, ra) <= (1 - 1e-4 * a) * f0, a, alpha)
-    body = ca.Function(f"{name}_ls", [z, par], [ca.if_else(_all_finite(dz), z + alpha * dz, z)])
+        return _otherwise(ca.dot(ra, ra) <= (1 - 1e-4 * a) * f0, ca.MX(a),
+                          lambda *args: alpha(j + 1, *args), z, dz, par, f0)
+    body = ca.Function(f"{name}_ls", [z, par], [ca.if_else(_all_finite(dz), z + alpha(0, z, dz, par, f0) * dz, z)])
     r = resid(z, par)
     done = ca.dot(r, r) <= LOOP_TOL ** 2     # converged: the rest of the steps cost one residual
     return ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)]), jac
