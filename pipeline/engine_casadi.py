@@ -528,7 +528,7 @@ class _Plan:
             fun = self.checks if start + c <= n else self.checks_rest
             parts.append([np.array(v) for v in fun(*(a[:, start:start + c] for a in at))])
             if start + c < n:
-                budget.check(float(self.t_out[min(start + c, n - 1)]))
+                budget.check(float(self.t_out[start + c]))
         return tuple(np.hstack(vs) for vs in zip(*parts))
 
     # -- a run -------------------------------------------------------------------------------

@@ -67,6 +67,12 @@ def multisine(t, parts=((2.0, 0.5, 0.0), (0.5, 2.1, 0.3))):
     return sum(a * np.sin(w * t + phi) for a, w, phi in parts)
 
 
+def random_parts(rng, low: float, high: float, w) -> list:
+    """(a, w, phi) parts for :func:`multisine`: at the frequencies ``w``, amplitudes uniform in
+    [low, high] and phases uniform, drawn from ``rng`` in that order."""
+    return list(zip(rng.uniform(low, high, len(w)), w, rng.uniform(0, 2 * np.pi, len(w))))
+
+
 def series(t, **columns) -> TimeSeries:
     values = np.column_stack(list(columns.values())) if columns else np.zeros((len(t), 0))
     return TimeSeries(t, values, list(columns))

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import discovered, needs_msl, write_uy
+from helpers import discovered, multisine, needs_msl, random_parts, write_uy
 
 pytestmark = [needs_msl()]
 
@@ -44,10 +44,10 @@ def oscillator_data(path, seed: int, k3: float) -> None:
     """The displacement (noise 2 mm) of m x'' + d x' + k x + k3 x^3 = u under a multisine."""
     rng = np.random.default_rng(seed)
     t = np.linspace(0, 40, 801)
-    a, w, ph = rng.uniform(0.6, 1.0, 3), np.array([0.7, 1.9, 3.3]), rng.uniform(0, 2 * np.pi, 3)
+    parts = random_parts(rng, 0.6, 1.0, np.array([0.7, 1.9, 3.3]))
 
     def u(s):
-        return sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph))
+        return multisine(np.asarray(s), parts)
 
     def rhs(s, z):
         x, v = z
@@ -107,10 +107,10 @@ def tank_data(path, seed: int) -> None:
     """Level 1 (noise 1 mm) where the pipe's flow is 0.5 sign(dh) sqrt(|dh|)."""
     rng = np.random.default_rng(seed)
     t = np.linspace(0, 200, 801)
-    a, w, ph = rng.uniform(0.1, 0.2, 2), np.array([0.05, 0.13]), rng.uniform(0, 2 * np.pi, 2)
+    parts = random_parts(rng, 0.1, 0.2, np.array([0.05, 0.13]))
 
     def u(s):
-        return 0.3 + sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph))
+        return 0.3 + multisine(np.asarray(s), parts)
 
     def rhs(s, z):
         h1, h2 = z
@@ -310,10 +310,10 @@ def cascade_data(path, seed: int) -> None:
     """The lower level (noise 2 mm) of two tanks, the upper one draining as 0.6 sqrt(h)."""
     rng = np.random.default_rng(seed)
     t = np.linspace(0, 200, 1001)
-    a, w, ph = rng.uniform(0.5, 1.0, 3), np.array([0.03, 0.07, 0.15]), rng.uniform(0, 2 * np.pi, 3)
+    parts = random_parts(rng, 0.5, 1.0, np.array([0.03, 0.07, 0.15]))
 
     def u(s):
-        return 1.0 + sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph)) / 3
+        return 1.0 + multisine(np.asarray(s), parts) / 3
 
     def rhs(s, z):
         h1, h2 = np.maximum(z, 0.0)
@@ -358,10 +358,10 @@ def chain_data(path, seed: int, n: int, fault: int) -> None:
     """The last and the third level (noise 2 mm) of n tanks, tank ``fault`` draining as 0.6 sqrt(h)."""
     rng = np.random.default_rng(seed)
     t = np.linspace(0, 400, 2001)
-    a, w, ph = rng.uniform(0.5, 1.0, 3), np.array([0.02, 0.05, 0.11]), rng.uniform(0, 2 * np.pi, 3)
+    parts = random_parts(rng, 0.5, 1.0, np.array([0.02, 0.05, 0.11]))
 
     def u(s):
-        return 1.0 + sum(ak * np.sin(wk * np.asarray(s) + pk) for ak, wk, pk in zip(a, w, ph)) / 3
+        return 1.0 + multisine(np.asarray(s), parts) / 3
 
     def rhs(s, z):
         h = np.maximum(z, 0.0)

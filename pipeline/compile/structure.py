@@ -551,7 +551,7 @@ def _run_time_solve(A: ca.MX, b: ca.MX, how: str, guess) -> ca.MX:
     make A singular: the second solve made a converter's calls 40 % slower."""
     rows = 1.0 / (ca.sum2(ca.fabs(A)) + 1e-300)       # (the checks in each row's own scale)
     An, bn = ca.mtimes(ca.diag(rows), A), b * rows
-    opts = {"eps": -1.0} if how == "qr" else {}
+    solve = _sparse_qr if how == "qr" else (lambda M, r: ca.solve(M, r, how))
 
     def solves(z, size_max=True):
         size = ca.norm_inf(ca.mtimes(ca.fabs(An), ca.fabs(z)))
@@ -559,10 +559,10 @@ def _run_time_solve(A: ca.MX, b: ca.MX, how: str, guess) -> ca.MX:
         ok = ca.logic_and(_all_finite(z), ca.norm_inf(ca.mtimes(An, z) + bn) <= 1e-8 * (scale + size))
         return ca.logic_and(ok, size <= 1e12 * scale) if size_max else ok
 
-    sol = -ca.solve(A, b, how, opts)
+    sol = -solve(A, b)
     if guess is None:
         return ca.if_else(solves(sol), sol, np.nan)
-    nearest = _nearest(An, bn, guess, lambda M, r: ca.solve(M, r, how, opts))
+    nearest = _nearest(An, bn, guess, solve)
     return ca.if_else(solves(sol), sol, ca.if_else(solves(nearest, False), nearest, np.nan))
 
 
@@ -691,7 +691,7 @@ def _branchwise(name: str, resid: ca.Function, z0, par: ca.MX, met) -> ca.MX:
     for j, law in enumerate(_branch_laws(resid, [T, P], len(cmps))):
         fixed = ca.Function(f"{name}_branch{j}", [T, P], [law])
         solve = ca.rootfinder(f"{name}_on{j}", "fast_newton", fixed, {**NEWTON_OPTS, "error_on_fail": False})
-        z = _otherwise(met(z, par, INIT_TOL), z, lambda a, p, solve=solve: solve(a, p), z0, par)
+        z = _otherwise(met(z, par, INIT_TOL), z, solve, z0, par)
     return z
 
 
@@ -706,7 +706,7 @@ def _bracketed(resid: ca.Function, z0: ca.MX, par: ca.MX) -> ca.MX:
     for j in range(BRACKET_STEPS):
         for side in (1.0, -1.0):
             near, far = z0 + side * h * (4.0 ** (j - 1) if j else 0.0), z0 + side * h * 4.0 ** j
-            r = _otherwise(found, r0, lambda a, p: resid(a, p), far, par)
+            r = _otherwise(found, r0, resid, far, par)
             new = ca.logic_and(ca.logic_not(found), ca.logic_and(r * r0 <= 0, r == r))
             lo, hi = ca.if_else(new, near, lo), ca.if_else(new, far, hi)
             found = ca.logic_or(found, new)
@@ -788,7 +788,7 @@ def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Fun
     # infinite). Sparse QR is told not to refuse a pivot: its default failed the whole
     # evaluation (TanksWithOverflow's update had no value at all)
     J = jac(z, par)
-    newton = -ca.solve(J, r, "qr", {"eps": -1.0})
+    newton = -_sparse_qr(J, r)
     dz = ca.if_else(_all_finite(newton), newton, -_nearest(J, r, np.zeros(r.shape), _sparse_qr))
     f0 = ca.dot(r, r)
 
