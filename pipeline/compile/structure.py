@@ -15,6 +15,7 @@ DAE -> ODE in three steps (../shared/DESIGN.md, sections 2-3):
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import itertools
 import logging
 import math
@@ -164,6 +165,55 @@ def reduce_index(dae: Dae):
             "a constraint that index reduction differentiates, e.g. a voltage source directly "
             "across a capacitor); add a series element or give the input as a state")
     return semi, state_to_orig, red["I"], int(stats["index"])
+
+
+def _preferred_states(dae: Dae, semi: dict, state_to_orig: ca.Function) -> Dae:
+    """``dae`` with the variables declared ``stateSelect = prefer`` (or ``always``) made states,
+    as Modelica tools select them, where its semi-explicit form ``semi`` solves them in a
+    nonlinear loop whose unknowns decide events (a relation or a discrete variable reads
+    them): a fluid volume's mass and energy are what its balances differentiate, but its
+    pressure and enthalpy are preferred, and from mass and energy they are a Newton solve
+    through IF97 water's functions, whose phase (an Integer) follows the iterate, so that the
+    event iteration never settles. As states they are integrated; index reduction
+    differentiates the equations that give mass and energy from them, and those equations
+    hold as invariants. ``dae`` itself where no preferred variable is in such a loop."""
+    # (a preferred variable may be an alias of the algebraic unknown that stands for it)
+    z_at = {v.element_hash(): i for i, v in enumerate(ca.vertsplit(dae.z))}
+    exprs = [dae.exprs.get(n) for n in dae.preferred]
+    preferred = sorted({z_at[e.element_hash()] for e in exprs
+                        if e is not None and e.is_symbolic() and e.element_hash() in z_at})
+    zs, g = semi["z"], semi["alg"]
+    if not preferred or not zs.numel():
+        return dae
+    z_orig = ca.vertsplit(state_to_orig(xf=semi["x"], zf=zs)["z"])
+    col = {s.element_hash(): c for c, s in enumerate(ca.vertsplit(zs))}
+    in_semi = {col[z_orig[i].element_hash()]: i for i in preferred
+               if z_orig[i].is_symbolic() and z_orig[i].element_hash() in col}
+    sp = ca.jacobian_sparsity(g, zs)
+    if not in_semi or ca.sprank(sp) < zs.numel():
+        return dae
+    gs, ws = ca.vertsplit(g), ca.vertsplit(zs)
+    # what the event iteration reads: the relations, the discrete variables' updates
+    switching = ca.vertcat(dae.relations, *[e for n, e in dae.exprs.items() if n.startswith("$update[")])
+    looped = set()
+    for rows, cols in _blocks(sp, zs.numel()):
+        mine = [in_semi[c] for c in cols if c in in_semi]
+        if mine:
+            gk, wk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[ws[c] for c in cols])
+            if ca.depends_on(ca.jacobian(gk, wk), wk) and ca.depends_on(switching, wk):
+                looped.update(mine)
+    if not looped:
+        return dae
+    chosen = sorted(looped)
+    rest = [i for i in range(dae.z.numel()) if i not in looped]
+    pick = lambda v, idx: ca.vertcat(*[v[i] for i in idx]) if idx else ca.SX(0, 1)      # noqa: E731
+    dv = ca.vertcat(*[ca.SX.sym(f"der({dae.z_names[i]})") for i in chosen])
+    log.debug("preferred variables made states: %s", [dae.z_names[i] for i in chosen])
+    return dataclasses.replace(
+        dae, x=ca.vertcat(dae.x, pick(dae.z, chosen)), dx=ca.vertcat(dae.dx, dv), z=pick(dae.z, rest),
+        x_names=[*dae.x_names, *[dae.z_names[i] for i in chosen]], z_names=[dae.z_names[i] for i in rest],
+        x_start=ca.vertcat(dae.x_start, pick(dae.z_start, chosen)), z_start=pick(dae.z_start, rest),
+        x_fixed=np.concatenate([np.asarray(dae.x_fixed, bool), np.zeros(len(chosen), bool)]))
 
 
 @contextlib.contextmanager
@@ -816,6 +866,16 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
 def _build(dae: Dae, name: str = "model") -> Ode:
     """The continuous model's ODE."""
     semi, state_to_orig, invariants, index = reduce_index(dae)
+    moved = _preferred_states(dae, semi, state_to_orig)
+    if moved is not dae:
+        reduced = reduce_index(moved)
+        # (kept where index reduction adds no more states than were preferred: a drum's
+        # pressure made a state brought its saturation properties as five more, integrated
+        # beside it, and a run 700x slower)
+        added = reduced[0]["x"].numel() - semi["x"].numel() - (moved.x.numel() - dae.x.numel())
+        if added <= moved.x.numel() - dae.x.numel():
+            dae = moved
+            semi, state_to_orig, invariants, index = reduced
     xs, zs = semi["x"], semi["z"]
     up = semi["p"]
     nu = dae.u.numel()
@@ -1374,7 +1434,11 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
 
     # the system in SX where it expands (its Jacobian is then sparse and cheap: 10 s in MX for
     # 800 R-C sections), else in MX (it holds the Newton solve of an algebraic loop)
-    H = expanded(ca.Function("H", [X, U, P, T], [hard]))
+    H = ca.Function("H", [X, U, P, T], [hard])
+    # (not where the expansion would be huge: a variant of NonCircularPipes with no loop left,
+    # its pipes' mass and energy given by pressure and enthalpy, filled 17 GB expanding this,
+    # IF97 water's functions inlined at every volume and port)
+    H = H if not H.is_a("SXFunction") and expanded_size(H) > EXPAND_TRY_MAX else expanded(H)
     sym = ca.SX.sym if H.is_a("SXFunction") else ca.MX.sym
     Xs, Us, Ps, Ts, Ss = (sym(n, k) for n, k in (("x", nx), ("u", U.numel()), ("p", P.numel()),
                                                     ("t", 1), ("s", nx)))
