@@ -104,11 +104,11 @@ def split_functions(funcs: dict, p_at: dict, n_p: int) -> tuple[dict, ca.Functio
     FMU computes q when a parameter is set, not in every call). A function that does not expand
     to SX keeps reading the parameters alone (the first ``n_p`` entries of the same argument).
     ``derived`` is None where nothing worth taking out was found."""
-    from .structure import EXPAND_TRY_MAX, expanded_size
+    from .structure import too_large_to_expand
 
     sx = {}
     for name, f in funcs.items():
-        if f is not None and not f.is_a("SXFunction") and expanded_size(f) > EXPAND_TRY_MAX:
+        if too_large_to_expand(f):
             continue        # kept MX by the compile (a fluid's media calls): expanded, 8 MB of C each
         try:
             g = f.expand() if f is not None and not f.is_a("SXFunction") else f

@@ -872,8 +872,8 @@ def _build(dae: Dae, name: str = "model") -> Ode:
         # (kept where index reduction adds no more states than were preferred: a drum's
         # pressure made a state brought its saturation properties as five more, integrated
         # beside it, and a run 700x slower)
-        added = reduced[0]["x"].numel() - semi["x"].numel() - (moved.x.numel() - dae.x.numel())
-        if added <= moved.x.numel() - dae.x.numel():
+        n_moved = moved.x.numel() - dae.x.numel()
+        if reduced[0]["x"].numel() - semi["x"].numel() - n_moved <= n_moved:
             dae = moved
             semi, state_to_orig, invariants, index = reduced
     xs, zs = semi["x"], semi["z"]
@@ -1329,6 +1329,12 @@ def _inlined(f: ca.Function, rounds: int = 20):
     return ins, outs, None
 
 
+def too_large_to_expand(f: ca.Function | None) -> bool:
+    """Whether ``f`` is an MX function that :func:`expanded_size` estimates past
+    EXPAND_TRY_MAX instructions expanded (a fluid's media calls, each inlined whole)."""
+    return f is not None and not f.is_a("SXFunction") and expanded_size(f) > EXPAND_TRY_MAX
+
+
 def compact(f: ca.Function) -> ca.Function:
     """``f`` expanded to SX where that stays small (a loop it holds does not reach its
     outputs), else as it is (or :func:`fused`, where it holds no loop): expanded, a loop's Newton
@@ -1438,7 +1444,7 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
     # (not where the expansion would be huge: a variant of NonCircularPipes with no loop left,
     # its pipes' mass and energy given by pressure and enthalpy, filled 17 GB expanding this,
     # IF97 water's functions inlined at every volume and port)
-    H = H if not H.is_a("SXFunction") and expanded_size(H) > EXPAND_TRY_MAX else expanded(H)
+    H = H if too_large_to_expand(H) else expanded(H)
     sym = ca.SX.sym if H.is_a("SXFunction") else ca.MX.sym
     Xs, Us, Ps, Ts, Ss = (sym(n, k) for n, k in (("x", nx), ("u", U.numel()), ("p", P.numel()),
                                                     ("t", 1), ("s", nx)))
