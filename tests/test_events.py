@@ -207,6 +207,40 @@ def test_an_assert_that_fires_fails_the_run_with_its_message(tmp_path):
     assert "x left its range" in res.reason and "t = 0.5" in res.reason and "A.mo:5" in res.reason
 
 
+PUMP_INLET = """
+model PumpInlet "an engineer's check, as Fluid's pumps do it: the margin to vapour pressure
+  by a function that asserts it is positive, its message given at each call"
+  function positiveDifference
+    input Real a;
+    input Real b;
+    input String message;
+    output Real d;
+  algorithm
+    d := a - b;
+    assert(d >= 0, message);
+  end positiveDifference;
+  parameter Real p_vap = 0.35;
+  Real p(start = 1, fixed = true);
+  Real inlet = positiveDifference(p, p_vap, "Cavitation occurs at the pump inlet");
+  Real outlet = positiveDifference(p + 1, p_vap, "Cavitation occurs in the pump");
+equation
+  der(p) = -1;
+end PumpInlet;
+"""
+
+
+def test_a_string_passed_to_a_function_is_the_message_of_its_assert(tmp_path):
+    """p falls through p_vap at t = 0.65: the inlet's check fails with the message its call
+    passed, and the outlet's (the same function, another message) holds."""
+    (tmp_path / "PumpInlet.mo").write_text(PUMP_INLET)
+    model = compile_model([tmp_path / "PumpInlet.mo"], "PumpInlet")
+    t = np.linspace(0, 1, 11)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert not res.ok
+    assert "Cavitation occurs at the pump inlet" in res.reason and "in the pump" not in res.reason
+    assert "t = 0.7" in res.reason
+
+
 STOPPING = """
 model Stopping "a tank that fills at 2 per second; the run ends once it holds 1.1"
   parameter Real q = 2 "inflow";

@@ -798,6 +798,7 @@ class _Translator:
         self.table_records: dict = {}      # the MSL's interpolation tables by their id (rumoca's data)
         self.tables: dict[int, tables.Table] = {}   # ... translated when first looked up
         self._compiled: dict = {}          # (function, argument pattern) -> SX Function
+        self._texts: dict = {}             # hash -> a constant string passed to a function
         self._calls: dict = {}             # (its name, its arguments' nodes) -> (arguments, outputs)
         self._function_tags: dict = {}     # its name -> (number of outputs, [(level, message)])
         self._unassigned: dict = {}        # its name -> outputs it never assigns
@@ -924,6 +925,7 @@ class _Translator:
                 if compared is not None:
                     done[k] = compared
                     continue
+                self.text_arguments(k, done)
                 if self._kind(k) == "conditional":       # its conditions first, then its branches
                     stack.append((k, "branches"))
                     stack.extend((c, False) for c in self.operands(k)[0:-1:2] if c not in done)
@@ -952,6 +954,22 @@ class _Translator:
         if a is None or b is None:
             return None
         return ca.SX(float((a == b) == (body["operator"] == "equal")))
+
+    def text_arguments(self, k: int, done: dict):
+        """A constant string passed to a Modelica function (the message of Fluid's
+        assertPositiveDifference) as its hash: the function is then interpreted for that string,
+        and an assert in it that names the parameter as its message says the string."""
+        node = self.nodes[k]
+        body = node.get("call") if isinstance(node, dict) else None
+        if not body or not isinstance(body.get("function"), int) or self.functions[body["function"]].get("external"):
+            return
+        for o in self.call_operands(k):
+            lit = self.nodes[o]
+            if o in done or not (isinstance(lit, dict) and "string" in (lit.get("literal") or {})):
+                continue
+            text = lit["literal"]["string"]
+            self._texts[xorshift.hash_string(text)] = text
+            done[o] = ca.SX(xorshift.hash_string(text))
 
     def string_hash(self, k: int) -> ca.SX | None:
         """Modelica.Utilities.Strings.hashString of a constant string (a noise block's automatic
@@ -1384,6 +1402,12 @@ class _Translator:
         ok = flat(self.sx(body["condition"], bound))
         lit = self.nodes[body["message"]] if body.get("message") is not None else None
         text = lit.get("literal", {}).get("string") if isinstance(lit, dict) else None
+        param = (lit.get("coordinate") or {}) if isinstance(lit, dict) else {}
+        if text is None and isinstance(param, dict) and "function_parameter" in param:
+            ref = param["function_parameter"]
+            value = bound["params"].get(ref["ordinal"] if isinstance(ref, dict) else ref)
+            if value is not None and value.is_constant() and value.numel() == 1:
+                text = self._texts.get(int(float(value)))
         where = self.located.span(self.span) if self.located is not None else None
         text = text or "assert"
         self.fn_asserts.append((ca.logic_not(ok[0]), body.get("level", "error"),
@@ -1517,6 +1541,16 @@ def _resident_bytes() -> int:
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
     except (OSError, ValueError, IndexError):
         return 0
+
+
+def _independent_of(asserts: list, syms: ca.SX) -> list:
+    """The asserts whose condition reads none of ``syms``: one sparsity sweep over all of them
+    (depends_on per assert walked a plant's shared media expressions once for each of its
+    hundreds of asserts)."""
+    if not asserts or not syms.numel():
+        return list(asserts)
+    reads = set(ca.jacobian_sparsity(ca.vertcat(*[a[0] for a in asserts]), syms).get_triplet()[0])
+    return [a for k, a in enumerate(asserts) if k not in reads]
 
 
 def _merged(asserts: list) -> list:
@@ -1931,7 +1965,7 @@ def _to_dae(ir: dict, located: Located, model: str) -> Dae:
         return ca.substitute(e, p_all, resolved)
 
     # asserts in the functions the model calls, where they read the model's values (not der())
-    fn = [a for a in tr.fn_asserts if not ca.depends_on(a[0], ca.vertcat(dx, held))]
+    fn = _independent_of(tr.fn_asserts, ca.vertcat(dx, held))
     if fn:
         asserts = ca.vertcat(asserts, *[a[0] for a in fn])
         assert_info = [*assert_info, *[(level, message) for _, level, message in fn]]
