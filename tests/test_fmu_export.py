@@ -112,10 +112,32 @@ def test_generated_code_too_large_for_gcc_is_refused_in_one_line(tmp_path, monke
     from mcl.errors import CompileError
 
     monkeypatch.setattr(export, "C_LIMIT", 1000)
+    monkeypatch.setattr(export, "C_LIMIT_O0", 1000)
     monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))    # no build of it kept from before
     with pytest.raises(CompileError, match=r"generated C code is \d+ MB, too large to compile"):
         build_fmu(compiled("MCL.Examples.MassSpringDamper"), tmp_path / "m.fmu")
     assert not (tmp_path / "m.fmu").exists()
+
+
+def test_code_past_the_limit_takes_its_jacobian_by_differences_and_runs_the_same(tmp_path, monkeypatch, cauer):
+    """Where the generated code would pass C_LIMIT (a steam plant's derivative code was 32 of
+    its 52 MB), Co-Simulation's Jacobian is taken by differences of the right-hand side in C,
+    the code is compiled unoptimised, and the FMU still runs the model as in-process."""
+    from mcl.compile.fmu import export
+
+    monkeypatch.setattr(export, "C_LIMIT", 1000)
+    monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))
+    path = build_fmu(cauer, tmp_path / "c.fmu")
+    with zipfile.ZipFile(path) as z:
+        code = z.read("sources/mcl_funcs.c").decode()
+        wrapper = z.read("sources/fmi2_model.c").decode()
+    assert "CauerFilter_step(" not in code and "#define FD_JACOBIAN 1" in wrapper
+    t = np.linspace(0, 20, 401)
+    u = series(t, u=multisine(t))
+    opts = {"rtol": 1e-9, "atol": 1e-11}
+    a, b = simulate(cauer, u, options=opts), simulate(FmuModel.read(path), u, options=opts)
+    assert a.ok and b.ok, (a.reason, b.reason)
+    assert b.engine == "fmu" and rel_err(b.outputs, a.outputs) < 1e-5
 
 
 def test_validation_names_what_fmpy_names(tmp_path, fmus):

@@ -94,15 +94,20 @@ def settable_starts(model: CompiledModel) -> tuple[list[bool], np.ndarray]:
     s0 = np.array(start(o.p_values), dtype=float).ravel()
     if not len(o.x_names):
         return [], s0
+    # row i of dx0/ds is e_i where (dx0/ds v)_i = v_i for two generic directions v: two
+    # directional derivatives, not the whole Jacobian (an engine's 1 410 states: 43 CPU-s, not
+    # more than 6 minutes)
+    n = len(o.x_names)
     U, P, T, S = init_start.mx_in()
+    V = ca.MX.sym("v", n, 2)
+    v = np.column_stack([1 + (np.arange(n) * 0.6180339887) % 1, 2 - (np.arange(n) * 0.4142135623) % 1])
     try:        # (CasADi cannot differentiate a loop's Newton solve read back from the compile
         # cache: its 'Duplicate'; then no start is said to be settable)
-        jac = ca.Function("dx0ds", [U, P, T, S], [ca.jacobian(init_start(U, P, T, S), S)])
-        J = np.array(jac(o.u_start, o.p_values, 0.0, s0), dtype=float)
+        jv = ca.Function("dx0ds_v", [U, P, T, S, V], [ca.jtimes(init_start(U, P, T, S), S, V)])
+        d = np.array(jv(o.u_start, o.p_values, 0.0, s0, v), dtype=float)
     except RuntimeError:
-        return [False] * len(o.x_names), s0
-    eye = np.eye(len(o.x_names))
-    return [bool(np.all(np.abs(J[i] - eye[i]) < 1e-9)) for i in range(len(o.x_names))], s0
+        return [False] * n, s0
+    return [bool(np.all(np.abs(d[i] - v[i]) < 1e-9 * n)) for i in range(n)], s0
 
 
 def n_discrete(model: CompiledModel) -> int:
@@ -176,9 +181,12 @@ def _events(o) -> dict:
 
 def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
                      residual_tol: float = 1e-6, tolerance: float = 1e-6, settable=None,
-                     rebuilt: bool = False) -> list[Path]:
+                     rebuilt: bool = False, fd_jacobian: bool | None = None) -> list[Path]:
     """Write the C sources of the FMU into ``build``; returns the files to compile. ``settable``:
-    the states whose start value can be set (default: :func:`settable_starts`)."""
+    the states whose start value can be set (default: :func:`settable_starts`).
+    ``fd_jacobian``: Co-Simulation's Jacobian by differences of the right-hand side in C, not
+    by generated derivative code; None: where the generated code would pass :data:`C_LIMIT`
+    (a steam model's derivatives were 32 of its 52 MB)."""
     o = model.ode
     prefix = f"{ident}_"
     probe_vars = _probe_variables(model)
@@ -194,7 +202,8 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     settable = settable_starts(model)[0] if settable is None else settable
     nd = n_discrete(model)
     funcs = dict(ode=o.ode, out=o.out, alg_res=o.alg_res, init=init_start, start=start, probe=probe,
-                 zero=zero, step=_step_function(o, nd), update=getattr(o, "update", None))
+                 zero=zero, step=None if fd_jacobian else _step_function(o, nd),
+                 update=getattr(o, "update", None))
     events = _events(o)
     if events["NA"]:
         funcs["asserts"] = o.asserts
@@ -208,11 +217,14 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     for cg in generators.values():
         cg.generate(str(build) + "/")
     if any(_NO_CODE in (build / name).read_text() for name in C_FUNCTIONS) and model.dae is not None and not rebuilt:
-        return generate_sources(for_code(model), build, ident, guid, residual_tol, tolerance, settable, True)
+        return generate_sources(for_code(model), build, ident, guid, residual_tol, tolerance, settable, True,
+                                fd_jacobian)
+    if fd_jacobian is None and sum((build / name).stat().st_size for name in C_FUNCTIONS) > C_LIMIT:
+        return generate_sources(model, build, ident, guid, residual_tol, tolerance, settable, rebuilt, True)
     template = (_HERE / "fmi2_model.c").read_text()
     nq = derived.nnz_out(0) if derived is not None else 0
     values = dict(NP=len(o.p_names), NQ=nq, NU=len(o.u_names), NY=len(o.y_names), NX=len(o.x_names),
-                  NV=len(probe_vars), HAS_LOOP=int(o.nonlinear_blocks > 0),
+                  NV=len(probe_vars), HAS_LOOP=int(o.nonlinear_blocks > 0), FD_JACOBIAN=int(bool(fd_jacobian)),
                   RES_TOL=repr(residual_tol), TOL=repr(float(tolerance)), GUID=guid, PREFIX=prefix,
                   P_DEFAULT=_fmt(o.p_values), U_START=_fmt(o.u_start),
                   X_SETTABLE=", ".join(str(int(b)) for b in settable) or "0",
@@ -489,19 +501,22 @@ def _gcc_version() -> str:
 #: a filter chain's 108 MB (its coefficients' functions of f_cut written out in each function
 #: and derivative) took gcc past 23 GB at -O0 before it was killed
 C_LIMIT = 16_000_000
+#: ... and past C_LIMIT, compiled unoptimised up to this: a steam plant's 18 MB of C took gcc 64
+#: CPU-s and 3.8 GB at -O0 (at -O1 more than 5 minutes)
+C_LIMIT_O0 = 32_000_000
 GCC_TIMEOUT = 600
 
 
 def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: list[str], xml: str) -> Path:
     """gcc, then the archive (packed in the build directory: nothing half-written is left)."""
     size = sum(f.stat().st_size for f in c_files)
-    if size > C_LIMIT:
+    if size > C_LIMIT_O0:
         raise CompileError(f"the FMU's generated C code is {size / 1e6:.0f} MB, too large to compile "
-                           f"(the limit is {C_LIMIT / 1e6:.0f} MB): the model runs in process, not as an FMU")
+                           f"(the limit is {C_LIMIT_O0 / 1e6:.0f} MB): the model runs in process, not as an FMU")
     so = build / f"{ident}.so"
     objects = [f.with_suffix(".o") for f in c_files]
-    # each file at its own optimisation, side by side, then linked
-    _gcc([["gcc", "-c", *_CFLAGS, _OPTIMISE[f.name], f"-I{build}", str(f), "-o", str(o)]
+    # each file at its own optimisation (none past C_LIMIT), side by side, then linked
+    _gcc([["gcc", "-c", *_CFLAGS, "-O0" if size > C_LIMIT else _OPTIMISE[f.name], f"-I{build}", str(f), "-o", str(o)]
           for f, o in zip(c_files, objects)], size, build)
     _gcc([["gcc", "-shared", *_CFLAGS, *map(str, objects), "-o", str(so), "-lm"]], size, build)
     fmu = build / "model.fmu"

@@ -53,6 +53,7 @@
 #define TIME_EPS(t) (1e-9 * fmax(1.0, fabs(t)))
 #define NV @NV@
 #define HAS_LOOP @HAS_LOOP@
+#define FD_JACOBIAN @FD_JACOBIAN@  /* Co-Simulation's Jacobian by differences, not generated code */
 #define NZ @NZ@
 #define RES_TOL @RES_TOL@
 #define DEFAULT_TOL @TOL@
@@ -446,7 +447,10 @@ static void work_size(casadi_int* sz_arg, casadi_int* sz_res, casadi_int* sz_iw,
 #define GROW(name) F(name##_work)(&a, &r, &i, &w); \
     *sz_arg = a > *sz_arg ? a : *sz_arg; *sz_res = r > *sz_res ? r : *sz_res; \
     *sz_iw = i > *sz_iw ? i : *sz_iw; *sz_w = w > *sz_w ? w : *sz_w;
-    GROW(ode) GROW(out) GROW(alg_res) GROW(init) GROW(start) GROW(probe) GROW(zero) GROW(step)
+    GROW(ode) GROW(out) GROW(alg_res) GROW(init) GROW(start) GROW(probe) GROW(zero)
+#if !FD_JACOBIAN
+    GROW(step)
+#endif
 #if HYBRID
     GROW(update)
 #endif
@@ -840,6 +844,28 @@ static int zero_at(Model* m, double t, const double* x, double* z) {
     return call(m, F(zero), x, input_at(m, t), m->st.p, &t, z);
 }
 
+#if FD_JACOBIAN
+/* f, df/dx (column-major) and df/dt along the input's slope by forward differences: the
+ * model's derivative code would have been too large to compile. ys and rhs are free here
+ * (rodas_step uses them after) */
+static int jacobian_at(Model* m, double t, const double* x) {
+    const double root_eps = 1.4901161193847656e-08;
+    if (rhs_at(m, t, x, m->f0)) return 1;
+    for (int i = 0; i < NX; i++) m->ys[i] = x[i];
+    for (int j = 0; j < NC; j++) {
+        double d = root_eps * fmax(fabs(x[j]), m->atol / m->rtol);
+        m->ys[j] = x[j] + d;
+        d = m->ys[j] - x[j];                         /* the step as represented */
+        if (rhs_at(m, t, m->ys, m->rhs)) return 1;
+        for (int i = 0; i < NC; i++) m->J[j * NC + i] = (m->rhs[i] - m->f0[i]) / d;
+        m->ys[j] = x[j];
+    }
+    double dt = root_eps * fmax(fabs(t), 1.0);
+    if (rhs_at(m, t + dt, x, m->rhs)) return 1;
+    for (int i = 0; i < NC; i++) m->ft[i] = (m->rhs[i] - m->f0[i]) / dt;
+    return 0;
+}
+#else
 /* f, df/dx (column-major, as CasADi writes it) and df/dt along the input's slope */
 static int jacobian_at(Model* m, double t, const double* x) {
     State* s = &m->st;
@@ -847,6 +873,7 @@ static int jacobian_at(Model* m, double t, const double* x) {
     m->res[0] = m->f0; m->res[1] = m->J; m->res[2] = m->ft;
     return F(step)(m->arg, m->res, m->iw, m->w, 0);
 }
+#endif
 
 /* the slope of a secant, limited by the one before: a turn or a jump in the input is held */
 static double limited(double s, double before) {
