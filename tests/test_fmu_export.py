@@ -117,6 +117,12 @@ def test_generated_code_too_large_for_gcc_is_refused_in_one_line(tmp_path, monke
     with pytest.raises(CompileError, match=r"generated C code is \d+ MB, too large to compile"):
         build_fmu(compiled("MCL.Examples.MassSpringDamper"), tmp_path / "m.fmu")
     assert not (tmp_path / "m.fmu").exists()
+    # within the total, but unoptimised, one function too large (gcc's memory grows faster)
+    monkeypatch.setattr(export, "C_LIMIT_O0", 10 ** 9)
+    monkeypatch.setattr(export, "FUNCTION_LIMIT_O0", 1000)
+    with pytest.raises(CompileError, match=r"has a function of \d+ MB, too large to compile"):
+        build_fmu(compiled("MCL.Examples.MassSpringDamper"), tmp_path / "m.fmu")
+    assert not (tmp_path / "m.fmu").exists()
 
 
 def test_code_past_the_limit_takes_its_jacobian_by_differences_and_runs_the_same(tmp_path, monkeypatch, cauer):

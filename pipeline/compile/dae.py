@@ -554,26 +554,37 @@ _STEPS = {getattr(ca, f"OP_{n}") for n in ("FLOOR", "CEIL", "SIGN", "FMOD", "REM
 def read_through_steps(rows: ca.SX, v: ca.SX) -> set[int]:
     """The rows of ``rows`` that read ``v`` through a step (floor(x), x > 1, mod's quotient):
     ``x - floor(x)`` has the Jacobian of ``x`` and must not be solved as if it were ``x``."""
-    if rows.numel() == 0 or v.numel() == 0:
-        return set()
+    return {r for r, mask in enumerate(steps_read(rows, v, per_entry=False)) if mask}
+
+
+def steps_read(rows: ca.SX, v: ca.SX, per_entry: bool = True) -> list[int]:
+    """Per row of ``rows``, a bit mask of the entries of ``v`` it reads through a step (1 for
+    any, without ``per_entry``): one pass over the rows' instructions answers for every (row,
+    entry) pair (a block's rows and unknowns, a tearing's pivots), where a pass per pair walked
+    a steam model's shared media expressions again each time."""
+    n = rows.numel()
+    if n == 0 or v.numel() == 0:
+        return [0] * n
     f = ca.Function("steps", [v], [ca.vec(rows)], {"allow_free": True})
     row_of = f.sparsity_out(0).row()
-    dep, step = {}, {}                       # per work slot: reads v; reads v through a step
-    found = set()
+    dep, step = [0] * (f.sz_w() + 1), [0] * (f.sz_w() + 1)    # per work slot: masks of v read; read through a step
+    found = [0] * n
+    op_of, ins_of, outs_of = f.instruction_id, f.instruction_input, f.instruction_output
     for k in range(f.n_instructions()):
-        op, ins, outs = f.instruction_id(k), f.instruction_input(k), f.instruction_output(k)
+        op, ins, outs = op_of(k), ins_of(k), outs_of(k)
         if op == ca.OP_INPUT:
-            dep[outs[0]], step[outs[0]] = True, False
+            dep[outs[0]], step[outs[0]] = 1 << ins[1] if per_entry else 1, 0
         elif op == ca.OP_OUTPUT:
-            if step.get(ins[0]):
-                found.add(row_of[outs[1]])
+            found[row_of[outs[1]]] |= step[ins[0]]
         elif op == ca.OP_IF_ELSE_ZERO:       # the condition is a step; the value is not
-            c, v_ = ins
-            dep[outs[0]], step[outs[0]] = (dep.get(c, False) or dep.get(v_, False),
-                                           dep.get(c, False) or step.get(c, False) or step.get(v_, False))
+            c, x = ins
+            dep[outs[0]], step[outs[0]] = dep[c] | dep[x], dep[c] | step[c] | step[x]
         else:                                # (the output slot may be an input's: read them first)
-            d = any(dep.get(i, False) for i in ins)
-            dep[outs[0]], step[outs[0]] = d, (d and op in _STEPS) or any(step.get(i, False) for i in ins)
+            d = s_ = 0
+            for i in ins:
+                d |= dep[i]
+                s_ |= step[i]
+            dep[outs[0]], step[outs[0]] = d, (d if op in _STEPS else 0) | s_
     return found
 
 

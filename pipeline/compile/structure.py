@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from .dae import CSE_MIN, Dae, read_through_steps
+from .dae import CSE_MIN, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
@@ -287,7 +287,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     held, now, crossings, ops = [], [], [], []     # per loop with branches: its comparisons
     n_nonlinear = 0
     running = ca.vertcat(args[0], args[2])     # states and time (blocks that read a mode are not symbolic)
-    stepped = read_through_steps(g, z)        # rows that may hide a step in z (their block's own, to check)
+    stepped = steps_read(g, z)        # per row, the unknowns it reads through a step
     mode_names = {str(m) for m in ca.vertsplit(modes)} if modes is not None else set()
     mode_at = [n for n, a in enumerate(ca.vertsplit(ca.vertcat(*args))) if str(a) in mode_names]
     for k, (rows, cols) in enumerate(blocks):
@@ -305,7 +305,8 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         # diode pair's, its relations held), or one torn down to that many by pivots that
         # are the same in every mode (a diode bridge's), is solved symbolically in every mode
         moded = modes is not None and modes.numel() > 0 and ca.depends_on(A, modes)
-        linear = not ca.depends_on(A, zk) and (stepped.isdisjoint(rows) or not read_through_steps(gk, zk))
+        own = sum(1 << c for c in cols)
+        linear = not ca.depends_on(A, zk) and not any(stepped[r] & own for r in rows)
         torn, residual, whole = ([], None, None) if linear else _tear([gs[r] for r in rows], [zs[c] for c in cols])
         sol_free = None
         if linear:
@@ -487,13 +488,13 @@ def _tear(rows: list, unknowns: list):
         reads[r].add(j)
 
     pivots: dict[tuple[int, int], bool] = {}
-    stepped = read_through_steps(g, z)          # rows reading the loop through a step: checked per unknown
+    stepped = steps_read(g, z)                  # per row, the unknowns it reads through a step
 
     def pivot(r, j):                            # (asked again each pass: kept)
         if (r, j) not in pivots:
             coef = ca.jacobian(rows[r], unknowns[j])
             pivots[r, j] = coef.is_constant() and float(coef) != 0 and \
-                (r not in stepped or not read_through_steps(rows[r], unknowns[j]))
+                not stepped[r] >> j & 1
         return pivots[r, j]
 
     order, tears, residual, decided = [], [], [], set()

@@ -502,8 +502,19 @@ def _gcc_version() -> str:
 #: and derivative) took gcc past 23 GB at -O0 before it was killed
 C_LIMIT = 16_000_000
 #: ... and past C_LIMIT, compiled unoptimised up to this: a steam plant's 18 MB of C took gcc 64
-#: CPU-s and 3.8 GB at -O0 (at -O1 more than 5 minutes)
+#: CPU-s and 3.8 GB at -O0 (at -O1 more than 5 minutes), its largest function 6 MB ...
 C_LIMIT_O0 = 32_000_000
+#: ... where no function is larger than this: gcc's memory grows faster than a function's size
+#: (an engine initialiser's 15 MB derivative function took it to 24 GB)
+FUNCTION_LIMIT_O0 = 8_000_000
+_FUNCTION_START = re.compile(rb"^(?:static |CASADI_SYMBOL_EXPORT )?int \w+\(const casadi_real\*\* arg", re.M)
+
+
+def largest_function(path: Path) -> int:
+    """Bytes of the largest function CasADi wrote in C file ``path``."""
+    text = path.read_bytes()
+    starts = [m.start() for m in _FUNCTION_START.finditer(text)] + [len(text)]
+    return max((b - a for a, b in zip(starts, starts[1:])), default=0)
 GCC_TIMEOUT = 600
 
 
@@ -513,6 +524,11 @@ def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: lis
     if size > C_LIMIT_O0:
         raise CompileError(f"the FMU's generated C code is {size / 1e6:.0f} MB, too large to compile "
                            f"(the limit is {C_LIMIT_O0 / 1e6:.0f} MB): the model runs in process, not as an FMU")
+    largest = max(largest_function(f) for f in c_files) if size > C_LIMIT else 0
+    if largest > FUNCTION_LIMIT_O0:
+        raise CompileError(f"the FMU's generated C code has a function of {largest / 1e6:.0f} MB, too large to "
+                           f"compile (the limit is {FUNCTION_LIMIT_O0 / 1e6:.0f} MB where the code passes "
+                           f"{C_LIMIT / 1e6:.0f} MB): the model runs in process, not as an FMU")
     so = build / f"{ident}.so"
     objects = [f.with_suffix(".o") for f in c_files]
     # each file at its own optimisation (none past C_LIMIT), side by side, then linked
