@@ -733,7 +733,9 @@ class _Hybrid:
         for _ in range(MAX_EVENT_ITERATIONS):
             new = self.update(cur, u, p, t, pre, flags).ravel()
             if not np.all(np.isfinite(new)):
-                raise _NonFinite(f"event iteration gave non-finite values at t = {t:g}")
+                bad = [self.ode.x_names[i] for i in np.flatnonzero(~np.isfinite(new[:nx]))]
+                raise _NonFinite(f"event iteration gave non-finite values at t = {t:g}"
+                                 + (f" ({', '.join(bad[:3])}{' ...' if len(bad) > 3 else ''})" if bad else ""))
             if not np.array_equal(new[:nc], cur[:nc]):
                 reinit = new[:nc].copy()
             new[:nc] = cur[:nc]

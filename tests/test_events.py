@@ -1063,3 +1063,16 @@ def _flat_calls(f) -> int:
 
     g = _inlined(f)[2]
     return sum(g.instruction_id(k) == ca.OP_CALL for k in range(g.n_instructions()))
+
+
+def test_an_event_that_gives_a_non_finite_value_names_the_variable(tmp_path):
+    """A when-equation whose new value is NaN (the square root of a negative number) fails the
+    run at the event, naming the variable, not only the instant."""
+    (tmp_path / "Blowup.mo").write_text(
+        "model Blowup\n  Real x(start = 1, fixed = true);\n  discrete Real d(start = 1, fixed = true);\n"
+        "equation\n  der(x) = -x;\n  when x < 0.5 then\n    d = sqrt(pre(d) - 2);\n  end when;\nend Blowup;\n")
+    model = compile_model([tmp_path / "Blowup.mo"], "Blowup")
+    t = np.linspace(0, 1, 11)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert not res.ok
+    assert "non-finite values at t = 0.693" in res.reason and "(d)" in res.reason
