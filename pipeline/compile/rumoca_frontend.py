@@ -968,8 +968,9 @@ class _Translator:
             if o in done or not (isinstance(lit, dict) and "string" in (lit.get("literal") or {})):
                 continue
             text = lit["literal"]["string"]
-            self._texts[xorshift.hash_string(text)] = text
-            done[o] = ca.SX(xorshift.hash_string(text))
+            key = xorshift.hash_string(text)
+            self._texts[key] = text
+            done[o] = ca.SX(key)
 
     def string_hash(self, k: int) -> ca.SX | None:
         """Modelica.Utilities.Strings.hashString of a constant string (a noise block's automatic

@@ -507,6 +507,7 @@ C_LIMIT_O0 = 32_000_000
 #: ... where no function is larger than this: gcc's memory grows faster than a function's size
 #: (an engine initialiser's 15 MB derivative function took it to 24 GB)
 FUNCTION_LIMIT_O0 = 8_000_000
+GCC_TIMEOUT = 600
 _FUNCTION_START = re.compile(rb"^(?:static |CASADI_SYMBOL_EXPORT )?int \w+\(const casadi_real\*\* arg", re.M)
 
 
@@ -515,7 +516,6 @@ def largest_function(path: Path) -> int:
     text = path.read_bytes()
     starts = [m.start() for m in _FUNCTION_START.finditer(text)] + [len(text)]
     return max((b - a for a, b in zip(starts, starts[1:])), default=0)
-GCC_TIMEOUT = 600
 
 
 def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: list[str], xml: str) -> Path:
