@@ -93,6 +93,7 @@ class SimulationResult:
     sensitivity_names: list[str] = field(default_factory=list)
     states: np.ndarray | None = None
     steps: int = 0                  # solver steps taken (the work done; summed over all calls)
+    method: str = ""                # the solver's method ("bdf", "adams"), where the engine chose one
     #: where the model called terminate() ("t = ...: its message"): the run ends at that point
     terminated: str | None = None
 

@@ -92,7 +92,7 @@ def test_api_on_a_data_frame_equals_the_run_file(tmp_path, capsys):
     d = Discovery("Circuit.RC", sources=[tmp_path / "Circuit.mo"], verbose=False)
     assert d.fit(train, validate) is d
     assert d.cause_["component"] == "Rx" and d.law_["equation"] == yaml_report["cause"]["law"]["equation"]
-    assert d.gain_ == pytest.approx(yaml_report["gain"])
+    assert d.gain_ == pytest.approx(yaml_report["gain"], rel=1e-5)    # (the integrator's rounding, below)
     assert d.misfit_["train_rms"] == pytest.approx(yaml_report["misfit"]["train_rms"])
     assert d.misfit_["noise_estimate"] == pytest.approx(yaml_report["misfit"]["noise_estimate"])
     # the same fits; a freshly compiled and a cached model may round differently in the

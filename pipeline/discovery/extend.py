@@ -172,7 +172,7 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
     model = base.model
     pick = lambda r: r.outputs[:, [model.output_names.index(o) for o in outputs]] if r.ok else None
     y_train = pick(simulate(model, train))
-    y_val = pick(simulate(model, validate)) if validate is not None else None
+    y_val = pick(base.validation or simulate(model, validate)) if validate is not None else None
     ext_dir = part / "extended"
     log.info("[4/5] extended model: Modelica, compiled again, and an FMU")
     sources, name, package, notes = write_extended(causes, base, spec, ext_dir, _data_words(spec, train), calibrated)

@@ -83,7 +83,7 @@ def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
     # terms of the cause's (the data cannot separate them), and the two would be collinear
     named = {b["component"] for b in bests}
     named |= {p for b in bests if b.get("mode", "parallel") == "parallel" for p in base.structure.parallel(b["component"])}
-    return dataclasses.replace(base, model=model, result=result, excluded=base.excluded | named)
+    return dataclasses.replace(base, model=model, result=result, excluded=base.excluded | named, validation=None)
 
 
 class Causes:
@@ -100,13 +100,15 @@ class Causes:
         self.rounds: list[dict] = []
 
     def misfit(self, base: Base) -> tuple[np.ndarray, float | None]:
-        """The training residual of ``base`` and its validation RMS."""
+        """The training residual of ``base`` and its validation RMS (its run kept on ``base``)."""
         from ..services import simulate
 
         resid = self.y - _outputs_of(base.model, base.result, self.outputs)
         val = None
         if self.validate is not None:
-            sv = simulate(base.model, self.validate)
+            if base.validation is None:
+                base.validation = simulate(base.model, self.validate)
+            sv = base.validation
             val = rms(residual(self.validate, base.model, sv, self.outputs)) if sv.ok else None
         return resid, val
 
@@ -150,7 +152,7 @@ class Causes:
         label = f"round{number}" + ("chain" if chain else "")
         rpart = self.part / label
         (rpart / "candidates").mkdir(parents=True, exist_ok=True)
-        resid, _ = self.misfit(base)
+        resid = self.y - _outputs_of(base.model, base.result, self.outputs)
         rss = float(np.nansum(resid**2))
         found = search(self.spec, base, self.train, self.validate, rpart, self.rundir, self.reg, self.sigma, resid,
                        chain, beat)
