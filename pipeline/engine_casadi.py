@@ -273,10 +273,11 @@ class _Plan:
             f = self.split.ode(X, Ut, P, Q, T)
         else:
             f = differentiable(ode, p_cols=sel)(X, Ut, P, T)
-        # the state Jacobian at a run's start, for the choice of method (:meth:`method_for`)
+        # the state Jacobian at a run's start, for the choice of method (:meth:`method_for`):
+        # only where Adams' methods may be chosen (no loops, zero crossings or discrete variables)
+        adams = 0 < nx <= ADAMS_STATES and not self.ng and ode.zero is None and not getattr(ode, "discrete", 0)
         self.stiffness = (ca.Function("jx", [X, P, *((Q,) if self.split is not None else ()), T],
-                                      [ca.jacobian(f, X)])
-                          if 0 < nx <= ADAMS_STATES and not self.ng else None)
+                                      [ca.jacobian(f, X)]) if adams else None)
         self.spacing = float(np.median(np.diff(t_out))) if len(t_out) > 1 else 0.0
         xa, fa = X, f
         if ns:
@@ -415,7 +416,7 @@ class _Plan:
         """"adams" where the model is not stiff at the output spacing at ``x`` (its fastest
         mode times the spacing at most :data:`ADAMS_REACH`), else "bdf"; models with events,
         loops or many states keep BDF (asserts alone are read after the run)."""
-        if self.stiffness is None or self.ode.zero is not None or getattr(self.ode, "discrete", 0):
+        if self.stiffness is None:
             return "bdf"
         try:
             J = np.array(self.stiffness(x[: self.nx], p, *((self.q,) if self.split is not None else ()), t))
