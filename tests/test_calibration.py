@@ -101,6 +101,9 @@ def test_the_law_is_refitted_with_an_offset_written_as_zero_and_a_wrong_damping(
     validate = np.loadtxt(tmp_path / "validate.csv", delimiter=",", skiprows=1)
     y = d.predict({"time": validate[:, 0], "u": validate[:, 1]})["y"].to_numpy()
     assert abs(np.sqrt(np.mean((y - validate[:, 2]) ** 2)) - g["validation_rms_calibrated"]) < 1e-6
+    # the summary gives both gains: the calibrated one is the model delivered
+    summary = "\n".join(d.summary())
+    assert "(the law alone)" in summary and f"validation RMS {g['validation_rms_calibrated']:.4g}" in summary, summary
 
 
 LAG = """

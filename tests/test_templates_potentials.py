@@ -176,3 +176,16 @@ def test_a_knee_is_distilled_with_its_place_and_width():
     assert shape_words(law["terms"][1]).startswith("a knee on one side")
     knee = Monomial.parse(law["terms"][1], ("s1", "s2"))
     assert knee.value({"v": np.array([2.0]), "s1": 0.5, "s2": 1e-4})[0] == pytest.approx(1.5)
+
+
+def test_a_missing_term_is_named_in_the_components_own_variable():
+    """What a law adds to the nominal law is written in the variable the law itself is written
+    in (the term k*x of a balance: sinh(x/s1), not the template's sinh(v/s1)); a name that is
+    not a plain identifier (a negated one) leaves the template's."""
+    from mcl.discovery.extend import _named
+    from mcl.discovery.families import shape_words
+
+    said = shape_words("sinh(v/s1)")
+    assert _named(said, "v", "x") == said.replace("sinh(v/s1)", "sinh(x/s1)") and said.endswith("sinh(v/s1)")
+    assert _named("v^2*tanh(v/s2)", "v", "phi_rel") == "phi_rel^2*tanh(phi_rel/s2)"
+    assert _named("v^2", "v", "(-s_rel)") == "v^2"

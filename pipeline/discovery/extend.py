@@ -43,6 +43,15 @@ def _as_good(alt: dict, comp) -> dict:
     return out
 
 
+def _named(said: str, var: str, name: str) -> str:
+    """A term's words (``shape_words``) with the law's variable in the component's own name, as
+    the law is written: "sinh(x/s1)" for the term k*x, not the template's "sinh(v/s1)"."""
+    if not re.fullmatch(r"[A-Za-z_][\w.]*", name or ""):
+        return said          # (a negated or indexed name: the template's own)
+    head, sep, term = said.rpartition(": ")
+    return head + sep + re.sub(rf"\b{re.escape(var)}\b", name, term)
+
+
 def describe(best: dict, base, spec, train, signals) -> dict:
     """A cause: the winning law in the component's words, its curve, what it adds to the nominal
     law, the evidence and the equivalent components."""
@@ -76,8 +85,8 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     x_name, y_name = names[var], (wd.across if var == "i" else wd.flow)
     units = base.model.info.get("units", {})
     nominal_terms = set(best.get("nominal_form") or {})
-    new_terms = [shape_words(unscaled(t)[0], comp.signal) if t != "1" else "a constant" for t, on in zip(best.get("terms", [])[1:], best["active"][1:])
-                 if on and t not in nominal_terms]
+    new_terms = [_named(shape_words(unscaled(t)[0], comp.signal), var, x_name) if t != "1" else "a constant"
+                 for t, on in zip(best.get("terms", [])[1:], best["active"][1:]) if on and t not in nominal_terms]
     effect = f"{comp.name} follows {law}" + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else "")
     if best.get("nominal_exact") is False:
         effect += " (in place of its nominal law, which is not linear in the law's variables)"
