@@ -136,6 +136,10 @@ class _NonFinite(_Stop):
     """The event iteration met non-finite values (a singular mode's linear block)."""
 
 
+class _OverBudget(_Stop):
+    """The run used up its work budget (solver steps): another method may need fewer."""
+
+
 class _SolverFailed(_Stop):
     """The solver gave up (an error, or too much work where time was not short): a hybrid run
     first looks for a crossing it ran into (:meth:`_Hybrid.probe`)."""
@@ -163,7 +167,7 @@ class _Budget:
         if self.clock.expired:
             raise _Stop(f"time limit of {self.opts.time_limit:g} s exceeded at t = {t:g}")
         if self.opts.max_work is not None and self.steps >= self.opts.max_work:
-            raise _Stop(f"work budget of {self.opts.max_work} solver steps exceeded at t = {t:g}")
+            raise self.stop("work", t)
 
     def call_size(self, n_points: int, share: float = CALL_SHARE, rest: bool = False) -> tuple[int, int, str | None]:
         """(points, steps per point, the bound that limited them) for the next call of at most
@@ -219,10 +223,11 @@ class _Budget:
         n = min(n_points, 1 << (n.bit_length() - 1))
         return n, _pow2(max(min(int(allowed // n), cap), 16)), bound
 
-    def reason(self, bound: str | None, t: float) -> str:
+    def stop(self, bound: str | None, t: float) -> _Stop:
+        """The run's end at ``t`` by the ``bound`` that limited it (the work budget, else time)."""
         if bound == "work":
-            return f"work budget of {self.opts.max_work} solver steps exceeded at t = {t:g}"
-        return f"time limit of {self.opts.time_limit:g} s exceeded at t = {t:g}"
+            return _OverBudget(f"work budget of {self.opts.max_work} solver steps exceeded at t = {t:g}")
+        return _Stop(f"time limit of {self.opts.time_limit:g} s exceeded at t = {t:g}")
 
 
 def _snapped(te: float, t_out: np.ndarray) -> float:
@@ -483,7 +488,7 @@ class _Plan:
             n, steps, bound = (budget.call_size(len(idx) - pos, rest=True) if failed is None
                                else budget.call_size(1, 1.0))
             if failed is not None and steps <= failed:
-                raise _Stop(budget.reason(bound, t0))
+                raise budget.stop(bound, t0)
             sub = idx[pos:pos + n]
             if self.hybrid is not None and len(sub) > 1 and not _even(t0, self.t_int[sub]) and _even(
                     self.t_int[sub[0]], self.t_int[sub[1:]]):
@@ -642,7 +647,7 @@ class _Plan:
         except _Stop as stop:
             # (the solver gave up, where another method may not; a solution that diverged or
             # left the model's domain does so whichever integrates it)
-            self.gave_up = isinstance(stop, _SolverFailed) or str(stop).startswith("work budget")
+            self.gave_up = isinstance(stop, (_SolverFailed, _OverBudget))
             return fail(str(stop))
         except RuntimeError as exc:
             self.gave_up = True
