@@ -227,6 +227,7 @@ def read_csv(path) -> TimeSeries:
     rows = [r for r in rows if r and any(c.strip() for c in r)]
     if not rows:
         raise DataError("empty file", where=str(path))
+    rows = _without_blank_tail(rows)
     header = [h.strip() for h in rows[0]]
     if header[0].lower() != "time":
         raise DataError(f"the first column must be 'time', not '{header[0]}'", where=f"{path}:1")
@@ -250,6 +251,16 @@ def read_csv(path) -> TimeSeries:
                 raise DataError(f"column '{header[j]}': '{cell.strip()}' is not a measured value "
                                 "(leave the cell blank where nothing was measured)", where=f"{path}:{i}")
     return TimeSeries(data[:, 0], data[:, 1:], header[1:], str(path)).validate()
+
+
+def _without_blank_tail(rows: list[list[str]]) -> list[list[str]]:
+    """``rows`` without trailing columns that are blank throughout, header included: a
+    spreadsheet's export ends each line with a delimiter (``1.0,2.0,``)."""
+    width = len(rows[0])
+    while width > 1 and all(len(r) == width and not r[-1].strip() for r in rows):
+        rows = [r[:-1] for r in rows]
+        width -= 1
+    return rows
 
 
 def write_csv(path, series: TimeSeries) -> None:

@@ -46,7 +46,9 @@ def test_bad_values(tmp_path, text, message):
 
 
 @pytest.mark.parametrize("text", ["time;u;y\n0;1,5;2\n0,25;2;-3,5e-1\n",       # a European spreadsheet's
-                                  "time\tu\ty\n0\t1.5\t2\n0.25\t2\t-0.35\n"])
+                                  "time\tu\ty\n0\t1.5\t2\n0.25\t2\t-0.35\n",
+                                  "time,u,y,\n0,1.5,2,\n0.25,2,-0.35,\n",      # each line ending in a delimiter
+                                  "time;u;y;;\n0;1,5;2;;\n0,25;2;-0,35;;\n"])
 def test_semicolon_and_tab_separated_files_are_read(tmp_path, text):
     ts = read_csv(csv(tmp_path, text))
     assert ts.names == ["u", "y"] and ts.time.tolist() == [0.0, 0.25]
