@@ -840,7 +840,8 @@ def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Fun
     # evaluation (TanksWithOverflow's update had no value at all)
     J = jac(z, par)
     newton = -_sparse_qr(J, r)
-    dz = ca.if_else(_all_finite(newton), newton, -_nearest(J, r, np.zeros(r.shape), _sparse_qr))
+    # (the least-squares solution of J dz + r = 0 nearest dz = 0: already the step, downhill)
+    dz = ca.if_else(_all_finite(newton), newton, _nearest(J, r, np.zeros(z.shape), _sparse_qr))
     f0 = ca.dot(r, r)
 
     def alpha(j, z, dz, par, f0):
