@@ -165,7 +165,7 @@ class _Budget:
 
     def check(self, t: float):
         if self.clock.expired:
-            raise _Stop(f"time limit of {self.opts.time_limit:g} s exceeded at t = {t:g}")
+            raise self.stop("time", t)
         if self.opts.max_work is not None and self.steps >= self.opts.max_work:
             raise self.stop("work", t)
 

@@ -255,9 +255,10 @@ class Discovery:
             for k, c in enumerate(causes):
                 label = "cause" if len(causes) == 1 else f"cause {k + 1}"
                 lines.append(f"{label}: {c['effect']} [{c['evidence']['strength']}]")
+            calibrated = g.get("train_rms_calibrated") is not None
             lines.append(f"gain: training RMS {g['train_rms_before']:.4g} -> {g['train_rms_after']:.4g}{val}"
-                         + (" (the law alone)" if g.get("train_rms_calibrated") is not None else ""))
-            if g.get("train_rms_calibrated") is not None:
+                         + (" (the law alone)" if calibrated else ""))
+            if calibrated:
                 freed = ", ".join((self.report_.get("calibration") or {}).get("freed") or []) or "initial states"
                 cal = ("" if g.get("validation_rms_calibrated") is None else
                        f"; validation RMS {g['validation_rms_calibrated']:.4g}")
