@@ -933,7 +933,7 @@ class _Hybrid:
             self.count += 1
             t_star, x_star = self.locate(plan, xa, ta, tb, p, rels, g_a, budget)
             self.spaced(t_star)
-            x_star = self.iterate(plan, x_star, p, t_star, self.flags())
+            t_star, x_star = self.settle(plan, x_star, p, t_star, t_int[rest[j]], budget)
             if t_star >= t_int[rest[j]]:          # located at the grid point itself
                 traj[:, rest[j]] = x_star
                 self.at_point(plan, rest[j], p, traj)
@@ -942,6 +942,27 @@ class _Hybrid:
             else:
                 pos += j
                 t0, x0 = t_star, x_star
+
+    def settle(self, plan, x, p, t, t_next, budget):
+        """(time, state) of the event at ``t`` once its iteration settles. Where its discrete
+        values keep changing, the states are carried a little further, up to 1e-4 of the way to
+        ``t_next``, before each new try: two relations that cross at the same instant, each
+        located past its own hysteresis band, may leave one flipping until the other has
+        crossed (a tank's port at its level: closed, the pressure pushes it open; open, the
+        flow leaves; until the level is past the port, as it is 1e-7 s later)."""
+        try:
+            return t, self.iterate(plan, x, p, t, self.flags())
+        except _Unsettled as exc:
+            for k in range(4):
+                dt = (t_next - t) * 10.0 ** (k - 7)
+                if dt <= 4 * np.finfo(float).eps * max(1.0, abs(t)):
+                    continue
+                x_k = plan.hop(x, p, t, t + dt, budget)
+                try:
+                    return t + dt, self.iterate(plan, x_k, p, t + dt, self.flags())
+                except _Unsettled:
+                    pass
+            raise exc from None
 
     def spaced(self, t: float) -> None:
         """An event at ``t``: the span of the next calls from the events' spacing so far."""
