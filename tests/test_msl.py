@@ -279,7 +279,7 @@ def test_a_loop_without_a_solution_at_a_trial_step_shortens_the_step(msl_path):
             assert np.max(err) <= 2e-3 * max(np.ptp(theirs), 1e-12), n
 
 
-def test_tanks_with_an_overflow_pipe_run_to_their_stop_time(msl_path):
+def test_tanks_with_an_overflow_pipe_run_to_their_stop_time(msl_path, tmp_path):
     """TanksWithOverflow, its 25 000 s. The overflow pipe joins two tank ports above the liquid,
     both closed: its loop leaves the pipe's pressure level open, and the fallback's
     least-squares steps must find one of the solutions (their direction was reversed: NaN at
@@ -288,7 +288,8 @@ def test_tanks_with_an_overflow_pipe_run_to_their_stop_time(msl_path):
     cross at the same instant, and the first kept flipping until the second had crossed (the
     run stopped at t = 2025 s). The pump, switched by the pressure's hysteresis, fills the
     upper tank past the overflow twice; the water is conserved while it is off; the lower
-    level rises past the overflow port by the end, as the model's documentation says."""
+    level rises past the overflow port by the end, as the model's documentation says. The FMU
+    (Co-Simulation) runs past the first overflow as the in-process engine does."""
     import mcl
     from mcl.data import TimeSeries
 
@@ -306,6 +307,16 @@ def test_tanks_with_an_overflow_pipe_run_to_their_stop_time(msl_path):
     fills = np.flatnonzero((upper[1:] > 6) & (upper[:-1] <= 6))
     assert len(fills) == 2 and upper.max() < 20, upper              # the overflow's port at 6 m
     assert np.all(np.diff(lower) >= -1e-9) and lower[0] < 6 < lower[-1], lower
+
+    from fmpy import simulate_fmu       # the FMU's solver carries its states on the same way
+    from mcl.compile.fmu.export import build_fmu
+
+    build_fmu(model, tmp_path / "Tanks.fmu")
+    theirs = simulate_fmu(str(tmp_path / "Tanks.fmu"), fmi_type="CoSimulation", stop_time=3000.0,
+                          output_interval=50.0, output=["upperTank.V"])
+    ours = np.interp(theirs["time"], t, upper)
+    assert theirs["time"][-1] == 3000.0 and theirs["upperTank.V"].max() / 0.2 > 6
+    assert np.max(np.abs(theirs["upperTank.V"] / 0.2 - ours)) <= 1e-3 * np.ptp(ours)
 
 
 def test_an_equation_that_looks_dependent_at_the_start_values_is_still_met(msl_path):

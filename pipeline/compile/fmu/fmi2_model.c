@@ -26,6 +26,7 @@
  * each solver step and event: level error fails the call (fmi2Error, message logged), level
  * warning is logged once.
  */
+#include <float.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -128,6 +129,7 @@ typedef struct {
     State st;
     double dx[NX + 1], y[NY + 1], v[NV + 1];
     int dirty, failed;
+    int unsettled, quiet;              /* the last event iteration kept changing; its message held back */
     /* the current communication step: u(t) = uc + slope (t - tc) */
     double tc, uc[NU + 1], slope[NU + 1], ut[NU + 1];
     /* solver work */
@@ -294,9 +296,10 @@ static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
     State* s = &m->st;
     int r = settle(m, t, u, 0);
     if (r == 1) r = settle(m, t, u, 1);
+    m->unsettled = r == 1;
     if (r < 0) return fmi2Error;
     if (r == 1) {
-        logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
+        if (!m->quiet) logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
         return fmi2Error;
     }
     if (changed && !same(m->cur + NC, s->x + NC, ND)) *changed |= 1;
@@ -1160,6 +1163,36 @@ failed:
     return fmi2Error;
 }
 
+/* the event iteration at the state event just found (at s->t); where it keeps changing, the
+ * states carried a little further first, up to 1e-4 of the way to t_next, as the in-process
+ * engine does (engine_casadi._Hybrid.settle: two relations crossing at one instant, each
+ * located past its own hysteresis band) */
+static fmi2Status state_event(Model* m, double t_next, int* changed) {
+    State* s = &m->st;
+    double t = s->t, h = s->h, x[NX + 1];
+    memcpy(x, s->x, NX * sizeof(double));
+    m->quiet = 1;
+    for (int k = -1; k < 4; k++) {
+        if (k >= 0) {
+            double dt = (t_next - t) * pow(10.0, k - 7);
+            int rc;
+            if (dt <= 4 * DBL_EPSILON * fmax(1.0, fabs(t))) continue;
+            memcpy(s->x, x, NX * sizeof(double));
+            s->t = t;
+            s->h = h;
+            rc = integrate(m, t + dt);
+            if (rc != fmi2OK && rc != STATE_EVENT) break;
+        }
+        if (event_at(m, s->t, input_at(m, s->t), changed) == fmi2OK || !m->unsettled) {
+            m->quiet = 0;
+            return m->unsettled ? fmi2Error : fmi2OK;
+        }
+    }
+    m->quiet = 0;
+    logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
+    return fmi2Error;
+}
+
 /* a communication step of a hybrid model: integrate from event to event (clock ticks and time
  * events where the solver stops, state events where it finds them), the event iteration at each */
 static fmi2Status step_hybrid(Model* m, double t_end) {
@@ -1174,7 +1207,7 @@ static fmi2Status step_hybrid(Model* m, double t_end) {
             int rc = integrate(m, stop);
             if (rc == STATE_EVENT) {
                 for (int k = 0; k < NCLOCK; k++) m->due[k] = 0;
-                if (event_at(m, s->t, input_at(m, s->t), &changed) != fmi2OK) return fmi2Error;
+                if (state_event(m, stop, &changed) != fmi2OK) return fmi2Error;
                 if (check_asserts(m, s->t, s->x, input_at(m, s->t)) != fmi2OK) return fmi2Error;
                 if (changed & 2) s->h = 0;      /* a reinit: the solver starts afresh */
                 if (++events > MAX_EVENTS) {
