@@ -90,8 +90,9 @@ class FeasibilityModel:
     def _loss(self, theta, X, y):
         z = self._logit(theta, X)
         q = _sigmoid(z)
-        # cross-entropy in nats, stable form; divided by ln 2 for bits
-        loss = np.mean(np.logaddexp(0, z) - y * z) / LN2 + 0.5 * self.l2 * theta @ theta
+        # cross-entropy in nats, stable form (log(1 + e^z) - y z, written so that a logit of
+        # +-inf, weights far apart in scale, costs inf, not inf - inf); divided by ln 2 for bits
+        loss = np.mean(y * np.logaddexp(0, -z) + (1 - y) * np.logaddexp(0, z)) / LN2 + 0.5 * self.l2 * theta @ theta
         grad = ((q - y) @ self._logit_grad_params(theta, X)) / (len(y) * LN2) + self.l2 * theta
         return loss, grad
 

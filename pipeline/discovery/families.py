@@ -22,10 +22,12 @@ simulation of a candidate reproduces the nominal model):
 - ``absolute``: i = c0 + c1 x + c2 x^2 + c3 x^3 in the potential x (va or vb) the nominal law
   follows (the model says the flow follows that potential, not the difference: one family).
 
-Laws in both potentials (radiation, Q = G (T_a^4 - T_b^4), where the model has a linear
-conductor) are tried only where the laws in v cannot reach the noise (:func:`potential_families`,
-from the shape stage). Terms in a potential are written in units of its span ((va/400)^4, not
-va^4 ~ 1e10 beside v ~ 10): the screening's and the fit's least squares stay well conditioned.
+Two more laws of a static component are tried only where the laws in v cannot reach the noise
+(from the shape stage): the law the other way round, v = f(i) (:func:`inverse_families`: a
+pipe's turbulent pressure drop, a saturating core), and laws in both potentials (radiation,
+Q = G (T_a^4 - T_b^4), where the model has a linear conductor: :func:`potential_families`).
+Terms in a potential are written in units of its span ((va/400)^4, not va^4 ~ 1e10 beside
+v ~ 10): the screening's and the fit's least squares stay well conditioned.
 
 Non-polynomial shapes (tanh, sinh, |x| x, x/sqrt(1 + x^2), exp) are found afterwards for the
 most promising component only: a neural law fitted to the data is distilled into a sparse
@@ -38,6 +40,10 @@ import re
 import numpy as np
 
 STATIC = {"name": "polynomial", "lhs": ["i"], "rhs": ["v", "v^2", "v^3"], "family": "static"}
+#: the static law the other way round, the across value in the flow: where it grows faster
+#: than the flow (a pipe's turbulent pressure drop k q|q|, a saturating core's magnetic
+#: potential R (Phi + Phi^3/Phi_s^2)), i = f(v) is a root that no cubic in v follows
+INVERSE = {"name": "polynomial", "lhs": ["v"], "rhs": ["i", "i*abs(i)", "i^3"], "family": "inverse"}
 RATE = {"name": "polynomial", "lhs": ["i"], "rhs": ["dv", "dv^2", "dv^3"], "family": "rate"}
 STORAGE = {"name": "polynomial", "lhs": ["i"], "rhs": ["dv", "v*dv", "v^2*dv", "v", "v^2", "v^3"],
            "family": "storage"}
@@ -162,6 +168,15 @@ def families(role: str, env: dict | None = None, signal: bool = False, sensor: b
         out.insert(1, {"name": "polynomial", "lhs": ["i"], "rhs": ["1", f"sqrt(abs({x}))*sign({x})"],
                        "family": "absolute"})
     return out
+
+
+def inverse_families(env: dict) -> list[dict]:
+    """The static law the other way round, v = f(i) in odd terms (with a constant where the
+    nominal law has one), for a static component whose law in v cannot reach the noise."""
+    out = dict(INVERSE)
+    if _constant(env):
+        out["rhs"] = ["1", *out["rhs"]]
+    return [out]
 
 
 def potential_families(env: dict) -> list[dict]:

@@ -23,7 +23,7 @@ from ..progress import log
 from ..sensitivity import fine_grid
 from ..stats import criterion as criterion_of, gram_inverse
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
-from .families import distillations, families, potential_families, role_of
+from .families import distillations, families, inverse_families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
 from .screen import law_signals, linear_response, predicted_rss
 from .verdict import EQUAL
@@ -37,8 +37,8 @@ PAIR_WHEN, PAIR_GAIN = 2.0, 0.5
 WORK = 50
 #: and its states may reach this many times the largest |state| of the nominal run
 SPREAD = 1e3
-#: family indices of the laws in both potentials (:func:`potential_items`)
-POTENTIALS_INDEX = 90
+#: family indices of the laws in both potentials and of the inverse law (:func:`potential_items`)
+POTENTIALS_INDEX, INVERSE_INDEX = 90, 95
 
 
 def balanced(base: Base, train: TimeSeries, comp) -> bool:
@@ -254,24 +254,43 @@ def at_noise(c: dict, sigma: float) -> bool:
 
 
 def potential_items(ctx: Context, ranked: list[dict], top: int = 2) -> list[Item]:
-    """Laws in both connectors' own potentials (:func:`families.potential_families`: radiation
-    where the model has a linear conductor) at the static components among the ``top`` best
-    components, where both potentials vary."""
+    """The static laws a cubic in v cannot follow: the law the other way round, v = f(i)
+    (:func:`families.inverse_families`), at the best component where it is a static physical
+    one (not a block or a sensor, whose output follows its input) whose law in v bends back
+    (:func:`softening`; not the second best: a tank's outlet behind the other's, whose inverse
+    law cannot win but costs minutes to fit through the loop it makes), and laws in both
+    connectors' own potentials where both vary (:func:`families.potential_families`:
+    radiation where the model has a linear conductor) at the static components among the
+    ``top`` best components."""
     comps = list(dict.fromkeys(c["component"] for c in ranked if "parts" not in c))[:top]
     items = []
-    for comp in comps:
+    for rank, comp in enumerate(comps):
         env = ctx.signals[comp].env() if comp in ctx.signals else None
         if env is None or role_of(env) != "static":
             continue
+        part = ctx.base.structure.components[comp]
+        law = next((c for c in ranked if c["component"] == comp and c.get("family") == "static"), None)
+        if rank == 0 and not (part.signal or part.sensor) and law is not None and softening(law):
+            items += [Item(comp, INVERSE_INDEX + k, f) for k, f in enumerate(inverse_families(env))]
         items += [Item(comp, POTENTIALS_INDEX + k, f) for k, f in enumerate(potential_families(env))]
     return items
 
 
+def softening(law: dict) -> bool:
+    """Whether a fitted static law i = f(v) bends back toward the v axis, its cubic term against
+    its linear one: the shape of a root (a saturating core's flux in its magnetic potential, a
+    pipe's flow in its turbulent pressure drop), which the law the other way round follows.
+    A hardening spring's (a cubic that adds to the line) does not."""
+    coef = dict(zip(law.get("terms") or [], np.asarray(law["w"]) * np.asarray(law["active"])))
+    return float(coef.get("v", 0.0)) * float(coef.get("v^3", 0.0)) < 0
+
+
 def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     """What the polynomial laws in one difference variable could not reach, when the best of them
-    leaves misfit above the noise: first laws in both connectors' own potentials at the best
-    static components (radiation between two bodies whose temperatures both vary, where the
-    model has a linear conductor); then, unless such a law wins, non-polynomial shapes for the
+    leaves misfit above the noise: first, at the best static components, the law the other way
+    round (a saturating core's potential in its flux) and laws in both connectors' own
+    potentials (radiation between two bodies whose temperatures both vary, where the model has
+    a linear conductor); then, unless such a law wins, non-polynomial shapes for the
     most promising component: a neural law in the variable of its best polynomial law (v, dv,
     or a connector's own potential), fitted to the data, then distilled into a sparse readable
     law over tanh, sinh, |x| x, sqrt(|x|), x/sqrt(1 + x^2), exp and polynomial terms
@@ -285,7 +304,7 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     items = potential_items(fit.ctx, done)
     out = fit(items) if items else []
     done = _ranked(cands + out)
-    if at_noise(done[0], sigma) or done[0].get("family") == "potentials":
+    if at_noise(done[0], sigma) or done[0].get("family") in ("potentials", "inverse"):
         return out
     one = [c for c in done if c.get("family") in ("static", "rate", "absolute")
            and c.get("law_variable") in ("v", "dv", "va", "vb")]
