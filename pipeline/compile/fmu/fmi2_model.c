@@ -289,6 +289,10 @@ static int settle(Model* m, double t, const double* u, int promote) {
 }
 #endif
 
+static void unsettled_at(Model* m, double t) {
+    logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
+}
+
 /* Modelica's event iteration at t with the flags in m->flags, on m->st.x. *changed gets bit 1
  * when a discrete value changed, bit 2 when a continuous state did (reinit). */
 static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
@@ -299,7 +303,7 @@ static fmi2Status iterate(Model* m, double t, const double* u, int* changed) {
     m->unsettled = r == 1;
     if (r < 0) return fmi2Error;
     if (r == 1) {
-        if (!m->quiet) logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
+        if (!m->quiet) unsettled_at(m, t);
         return fmi2Error;
     }
     if (changed && !same(m->cur + NC, s->x + NC, ND)) *changed |= 1;
@@ -1189,7 +1193,7 @@ static fmi2Status state_event(Model* m, double t_next, int* changed) {
         }
     }
     m->quiet = 0;
-    logmsg(m, fmi2Error, "event iteration did not converge at t = %g (discrete variables keep changing)", t);
+    unsettled_at(m, t);
     return fmi2Error;
 }
 
