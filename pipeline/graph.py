@@ -15,7 +15,7 @@ import networkx as nx
 
 from . import modelica_text as mt
 from .errors import ModelicaError
-from .compile.components import Connector
+from .compile.components import Connector, two_of_a_kind
 from .compile.pymoca_frontend import collect_sources, find_class, parse
 from .compile.sources import checked, expand
 
@@ -33,11 +33,8 @@ class Component:
 
     @property
     def two_connector(self) -> bool:
-        """Two connectors of one kind (the same potential and flow variables: MSL's PositivePin
-        and NegativePin are two classes of one kind), one potential and one flow each."""
-        a = self.connectors
-        return (len(a) == 2 and a[0].simple and a[1].simple and a[0].potential == a[1].potential
-                and a[0].flow == a[1].flow)
+        """Two connectors of one kind, their potential and flow paired (:func:`two_of_a_kind`)."""
+        return two_of_a_kind(self.connectors)
 
     @property
     def domain(self) -> str:

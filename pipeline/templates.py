@@ -335,6 +335,7 @@ class Template:
             if name in self.uses:
                 memory += f'  Real {name} "potential at {conn.name}";\n'
                 mem_eq += f"  {name} = {conn.name}.{x};\n"
+        mem_eq += _carried(a, b)
         return (f'model {class_name} "{self.description} (mcl template {self.name}){note}"\n'
                 f"  {a.cls} {a.name};\n  {b.cls} {b.name};\n"
                 f'  Real v "across: {a.name}.{xa} - {b.name}.{xb}";\n'
@@ -785,3 +786,15 @@ def make_template(registry_templates: dict[str, type], spec) -> Template:
         return registry_templates[name](**spec)
     except (TypeError, ValueError) as exc:
         raise ConfigError(f"template '{name}': {exc}") from None
+
+
+def _carried(a, b) -> str:
+    """Equations for the pairs a connector carries after its first (FluidHeatFlow's port: the
+    enthalpy and the enthalpy flow, after the pressure and the mass flow): each flow passes
+    through unchanged, taken from the side it comes from (``semiLinear`` in the first flow), as
+    a pipe without heat exchange carries its medium's enthalpy."""
+    out = ""
+    for x, f in zip(a.potential[1:], a.flow[1:]):
+        out += (f"  0 = {a.name}.{f} + {b.name}.{f};\n"
+                f"  {a.name}.{f} = semiLinear({a.name}.{a.flow[0]}, {a.name}.{x}, {b.name}.{x});\n")
+    return out

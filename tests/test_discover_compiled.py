@@ -221,3 +221,124 @@ def test_a_saturating_core_is_its_magnetic_potential_in_the_flux(tmp_path):
     assert curve_error(cause, saturating) < 0.02
     g = report["gain"]
     assert g["validation_rms_after"] < 1.5 * 0.002 < 0.1 * g["validation_rms_before"]
+
+
+DRAIN = """
+within ;
+package Drain "a tank fed by a pump, drained through a pipe"
+  model Plant "pump -> open tank -> drain pipe -> ambient; the level is measured"
+    import Modelica.Thermal.FluidHeatFlow;
+    import Modelica.Units.SI;
+    parameter FluidHeatFlow.Media.Medium water = FluidHeatFlow.Media.Water() "coolant";
+    Modelica.Blocks.Interfaces.RealInput u(unit = "m3/s") "pump volume flow";
+    Modelica.Blocks.Interfaces.RealOutput y(unit = "m") "measured level";
+    FluidHeatFlow.Sources.Ambient supply(medium = water, constantAmbientPressure = 0, constantAmbientTemperature = 293.15);
+    FluidHeatFlow.Sources.VolumeFlow pump(medium = water, m = 0, useVolumeFlowInput = true);
+    FluidHeatFlow.Components.OpenTank tank(medium = water, ATank = 0.5, hTank = 3, pAmbient = 0,
+      level(start = 0.5, fixed = true), T0 = 293.15, T0fixed = true);
+    FluidHeatFlow.Components.Pipe drain(medium = water, m = 0, h_g = 0, V_flowLaminar = 1, dpLaminar = 2.44e6,
+      V_flowNominal = 2, dpNominal = 4.88e6) "laminar: the engineer's linear guess";
+    FluidHeatFlow.Sensors.PressureSensor bottom(medium = water) "read by no one";
+    FluidHeatFlow.Sources.Ambient sink(medium = water, constantAmbientPressure = 0, constantAmbientTemperature = 293.15);
+  equation
+    connect(u, pump.volumeFlow);
+    connect(supply.flowPort, pump.flowPort_a);
+    connect(pump.flowPort_b, tank.flowPort);
+    connect(tank.flowPort, drain.flowPort_a);
+    connect(tank.flowPort, bottom.flowPort);
+    connect(drain.flowPort_b, sink.flowPort);
+    y = tank.level;
+  end Plant;
+end Drain;
+"""
+RHO, G, A_TANK, K_TURBULENT = 995.6, 9.80665, 0.5, 1.22e9
+
+
+def drain_flow(dp):
+    """The pipe's mass flow when its pressure drop is turbulent, dp = k V|V|."""
+    return RHO * np.sign(dp) * np.sqrt(np.abs(dp) / K_TURBULENT)
+
+
+def drain_data(path, seed: int, stop: float = 1500.0, step: float = 3.0, mass: bool = False):
+    """The level of the tank the pump fills (steps of its volume flow, or with ``mass`` its
+    mass flow, ramped over 20 s)."""
+    rng = np.random.default_rng(seed)
+    flows = rng.uniform(0.0, 0.004, int(stop // 150) + 2) * (RHO if mass else 1.0)
+
+    def u(t):
+        k = int(t // 150)
+        prev = flows[max(k - 1, 0)]
+        return prev + (flows[k] - prev) * min(1.0, (t - 150 * k) / 20.0)
+
+    rhs = lambda t, x: [(u(t) / (RHO if mass else 1.0) - drain_flow(RHO * G * x[0]) / RHO) / A_TANK]   # noqa: E731
+    t = np.arange(0.0, stop + 1e-9, step)
+    level = solve_ivp(rhs, (0, stop), [0.5], t_eval=t, rtol=1e-9, atol=1e-12, max_step=1.0).y[0]
+    level += rng.normal(0, 1e-3, t.size)
+    path.write_text("time,u,y\n" + "\n".join(f"{float(a)!r},{float(u(a))!r},{float(b)!r}" for a, b in zip(t, level)) + "\n")
+
+
+def test_a_fluidheatflow_drain_is_a_root_of_its_pressure_drop(tmp_path):
+    """MSL FluidHeatFlow, whose ports carry two pairs (pressure and mass flow; enthalpy and
+    enthalpy flow), and whose pipe declares outputs no one reads: the pipe is questioned by its
+    first pair, its turbulent flow (a root of the pressure drop) is found where the model has a
+    laminar one, and the learned class, which carries the enthalpy with the flow, compiles back
+    into the model."""
+    (tmp_path / "Drain.mo").write_text(DRAIN)
+    drain_data(tmp_path / "train.csv", 1)
+    drain_data(tmp_path / "validate.csv", 2)
+    report = run(tmp_path, "Drain.mo", "Drain.Plant")
+    cause = report["cause"]
+    assert cause["component"] == "drain" and "sqrt(abs(drain.dp" in cause["law"]["equation"]
+    assert curve_error(cause, drain_flow) < 0.05
+    g = report["gain"]
+    assert g["validation_rms_after"] < 5e-3 < 0.1 * g["validation_rms_before"]
+    assert report["extended"]["recompiled_difference"] < 1e-3
+    assert [c for c in report["candidates"] if c["component"] == "bottom"] == []
+
+
+FLUID_DRAIN = """
+within ;
+package FluidDrain "an open tank filled by a pump, drained through a pipe (Modelica.Fluid)"
+  model Plant "pump -> tank -> pipe -> ambient; the level is measured"
+    import Modelica.Fluid;
+    replaceable package Medium = Modelica.Media.Water.ConstantPropertyLiquidWater;
+    Modelica.Blocks.Interfaces.RealInput u(unit = "kg/s") "pump mass flow";
+    Modelica.Blocks.Interfaces.RealOutput y(unit = "m") "level";
+    inner Fluid.System system(energyDynamics = Modelica.Fluid.Types.Dynamics.FixedInitial);
+    Fluid.Sources.MassFlowSource_T pump(redeclare package Medium = Medium, use_m_flow_in = true, nPorts = 1,
+      T = 293.15);
+    Fluid.Vessels.OpenTank tank(redeclare package Medium = Medium, height = 3, crossArea = 0.5, level_start = 0.5,
+      nPorts = 2, use_portsData = false);
+    Fluid.Pipes.StaticPipe pipe(redeclare package Medium = Medium, length = 2, diameter = 0.05,
+      redeclare model FlowModel = Fluid.Pipes.BaseClasses.FlowModels.NominalLaminarFlow(
+        dp_nominal = 2.44e3, m_flow_nominal = 1)) "laminar: the engineer's linear guess";
+    Fluid.Sources.Boundary_pT sink(redeclare package Medium = Medium, nPorts = 1, p = 101325, T = 293.15);
+  equation
+    connect(u, pump.m_flow_in);
+    connect(pump.ports[1], tank.ports[1]);
+    connect(tank.ports[2], pipe.port_a);
+    connect(pipe.port_b, sink.ports[1]);
+    y = tank.level;
+  end Plant;
+end FluidDrain;
+"""
+
+
+def test_a_modelica_fluid_pipe_is_a_root_of_its_pressure_drop(tmp_path):
+    """The same drain in Modelica.Fluid: a stream connector's pipe, whose laminar flow model is
+    redeclared with its nominal point (modifiers rumoca alone would drop), learns its root law,
+    and the learned class is a transport between two ports as the MSL's valves are, taking the
+    pipe's medium, and compiles back into the model."""
+    (tmp_path / "Drain.mo").write_text(FLUID_DRAIN)
+    drain_data(tmp_path / "train.csv", 1, mass=True)
+    drain_data(tmp_path / "validate.csv", 2, mass=True)
+    report = run(tmp_path, "Drain.mo", "FluidDrain.Plant")
+    cause = report["cause"]
+    assert cause["component"] == "pipe" and "sqrt(abs(pipe.dp" in cause["law"]["equation"]
+    assert curve_error(cause, drain_flow) < 0.05
+    g = report["gain"]
+    assert g["validation_rms_after"] < 5e-3 < 0.1 * g["validation_rms_before"]
+    learned = (tmp_path / "out" / "extended" / "Learned.mo").read_text()
+    assert "extends Modelica.Fluid.Interfaces.PartialTwoPortTransport;" in learned
+    assert "redeclare package Medium = Medium" in (tmp_path / "out" / "extended" / "Drain.mo").read_text()
+    assert report["extended"]["recompiled_difference"] < 1e-3

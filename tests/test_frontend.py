@@ -346,3 +346,56 @@ def test_a_record_valued_call_read_field_by_field_is_expanded_once(tmp_path):
         s += np.sin(s * x) / i
     xdot = np.array(three.ode.ode([x], [], three.parameter_vector(None), 0.0)).ravel()
     assert np.isclose(xdot[0], -(s + 2 * s + s * s), rtol=1e-12)
+
+
+REDECLARED = """  model A
+    parameter Real k;
+    parameter Real j = 1;
+    Real x;
+  equation
+    x = k + j;
+  end A;
+  record D
+    parameter Real c = 1;
+  end D;
+  partial function f0
+    input Real x;
+    output Real y;
+  end f0;
+  function lin
+    extends f0;
+    input Real a = 1;
+  algorithm
+    y := a*x;
+  end lin;
+  model B
+    replaceable model M = A;
+    replaceable record R = D;
+    replaceable function f = lin;
+    M m;
+    R r;
+    Real z = f(2);
+  end B;
+  model C "a redeclared model, record and function, each with modifiers"
+    parameter Real kk = 3;
+    B b(redeclare model M = A(k = kk, // the gain
+                              j = 2) "the element", redeclare record R = D(c = 5),
+        redeclare function f = lin(a = 7));
+    output Real y = b.m.x + b.r.c + b.z;
+  end C;
+"""
+
+
+def test_the_modifiers_of_a_redeclared_class_are_kept(tmp_path):
+    """rumoca 0.10.2 drops the modifiers of a class redeclared with them (a Modelica.Fluid
+    pipe's flow model lost its dp_nominal: 0, and the pipe's flow divided by it); the front end
+    lifts such a class into a short class of its own first, the file's lines where they were."""
+    from mcl.compile.redeclares import lifted
+
+    f = write(tmp_path, REDECLARED)
+    text = f.read_text()
+    assert lifted(text).count("\n") == text.count("\n") and "lin(a = 7)" in lifted(text)
+    m = compile_model([f], "P.C")
+    assert {k: m.parameters[k] for k in ("b.m.k", "b.m.j", "b.r.c")} == {"b.m.k": 3.0, "b.m.j": 2.0, "b.r.c": 5.0}
+    r = simulate(m, series(np.linspace(0, 1, 3)))
+    assert r.ok and np.allclose(r.outputs[:, 0], 3 + 2 + 5 + 7 * 2)

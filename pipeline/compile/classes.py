@@ -80,11 +80,26 @@ def _block(text: str, name: str) -> tuple[str, str] | None:
     return head.group(1), rest[: end.start()] if end else rest
 
 
+_NESTED = re.compile(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator)\s+)*"
+                     rf"{_KEYWORDS}\s+(\w+)\b")
+
+
+def _nested_class(body: str):
+    """The first class definition in ``body`` outside parentheses (a ``redeclare package
+    Medium = Medium`` in a port's modification is not one), or None."""
+    depth, at = 0, 0
+    for m in _NESTED.finditer(body):
+        depth += body.count("(", at, m.start()) - body.count(")", at, m.start())
+        at = m.start()
+        if depth == 0:
+            return m
+    return None
+
+
 def _without_nested(body: str) -> str:
     """The body less nested class definitions (their declarations are not members)."""
     while True:
-        m = re.search(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator)\s+)*"
-                      rf"{_KEYWORDS}\s+(\w+)\b", body)
+        m = _nested_class(body)
         if not m:
             return body
         tail = body[m.end():]

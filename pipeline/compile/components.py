@@ -31,6 +31,23 @@ class Connector:
         """One potential and one flow variable (paper 000's component template, Fig. 1)."""
         return len(self.potential) == 1 and len(self.flow) == 1
 
+    @property
+    def paired(self) -> bool:
+        """One potential and one flow variable, or several scalar ones in pairs, the first pair
+        the connector's own (FluidHeatFlow's port: pressure and mass flow, then the enthalpy
+        and the enthalpy flow it carries): a law is of the first pair."""
+        plain = lambda names: all(n.isidentifier() for n in names)      # noqa: E731 (no records, arrays)
+        return self.simple or (len(self.potential) == len(self.flow) > 1 and plain(self.potential)
+                               and plain(self.flow))
+
+
+def two_of_a_kind(connectors) -> bool:
+    """Two connectors of one kind (the same potential and flow variables: MSL's PositivePin
+    and NegativePin are two classes of one kind), each with its potential and flow paired."""
+    a = connectors
+    return (len(a) == 2 and a[0].paired and a[1].paired and a[0].potential == a[1].potential
+            and a[0].flow == a[1].flow)
+
 
 @dataclass
 class Component:
@@ -78,11 +95,8 @@ class Component:
 
     @property
     def two_connector(self) -> bool:
-        """Two connectors of one kind (the same potential and flow variables: MSL's PositivePin
-        and NegativePin are two classes of one kind), one potential and one flow each."""
-        a = self.connectors
-        return (len(a) == 2 and a[0].simple and a[1].simple and a[0].potential == a[1].potential
-                and a[0].flow == a[1].flow)
+        """Two connectors of one kind, their potential and flow paired (:func:`two_of_a_kind`)."""
+        return two_of_a_kind(self.connectors)
 
     @property
     def domain(self) -> str:
@@ -285,6 +299,7 @@ def structure_of(flat: dict, model: str, classes: dict[str, str] | None = None) 
     # composites (a part of theirs has connectors too) are left out: their parts are listed
     elementary = [o for o in owners if not any(p != o and p.startswith(o + ".") for p in owners)]
     classes = classes or {}
+    read = _read_outside(flat)
     comps = {}
     for name in sorted(elementary, key=_natural):
         conns = []
@@ -292,7 +307,8 @@ def structure_of(flat: dict, model: str, classes: dict[str, str] | None = None) 
             pot, flow = connectors[inst]
             conns.append(Connector(split_name(inst)[-1], _connector_class(pot, flow), pot, flow))
         own = _own(variables, name)
-        signals = [n for n, v in own if _kind(v.get("causality")) in ("Input", "Output")]
+        signals = [n for n, v in own if _kind(v.get("causality")) in ("Input", "Output")
+                   and (n in read or re.sub(r"\[[^]]*\]$", "", n) in read)]
         comps[name] = Component(name, classes.get(name, ""), conns, _parameters(own), signals)
     outer = _joined_to_model(flat)
     for name, y in _sensors(variables, flat.get("variable_type_names", {}) or {}, comps, outer).items():
@@ -361,6 +377,32 @@ def _joined_to_model(flat: dict) -> set[str]:
             for name in merged:
                 sets[name] = merged
     return {n for group in map(frozenset, sets.values()) if any("." not in m for m in group) for n in group}
+
+
+def _read_outside(flat: dict) -> set[str]:
+    """Variables that a connection joins or an equation outside their own component reads: a
+    source's input and a sensor's output, not the outlet temperature a FluidHeatFlow pipe
+    declares ``output`` for no one, nor the medium states a Modelica.Fluid pipe gives the
+    ``input`` of its own flow model (such a component is still a law of the plant)."""
+    read = set()
+    for eq in flat.get("equations", []):
+        origin = eq.get("origin") or {}
+        if "Connection" in origin:
+            read.update(v for v in (origin["Connection"].get("lhs"), origin["Connection"].get("rhs")) if v)
+            continue
+        owner = (origin.get("ComponentEquation") or {}).get("component")
+        stack = [eq.get("residual")]
+        while stack:
+            n = stack.pop()
+            if isinstance(n, dict):
+                ref = n.get("VarRef")
+                name = ref.get("name", {}).get("name") if isinstance(ref, dict) and isinstance(ref.get("name"), dict) else None
+                if name and not (owner and name.startswith(owner + ".")):
+                    read.add(name)
+                stack.extend(n.values())
+            elif isinstance(n, list):
+                stack.extend(n)
+    return read
 
 
 def _derivative_in(node) -> bool:

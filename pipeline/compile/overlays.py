@@ -10,6 +10,8 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
+from .redeclares import lifted
+
 
 # Modelica.Math.Vectors.interpolate: rumoca evaluates the interval search of a branch that a
 # one-row table (nx = 1, the MSL's friction elements' default) rules out, reads x[0] there and
@@ -267,17 +269,18 @@ def files_of(library: str) -> list[tuple[str, ...]]:
 
 def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
     """The text of ``path`` with its rewrites, or None when none applies to it."""
-    rewrites = REWRITES.get((library, tuple(unit)))
-    if not rewrites or not path.is_file():
+    rewrites = REWRITES.get((library, tuple(unit))) or []
+    if not path.is_file():
         return None
     text = original = path.read_text(encoding="utf-8", errors="replace")
     for old, new, *times in rewrites:       # (old, new[, how many times old occurs])
         assert old.count("\n") == new.count("\n"), "a rewrite keeps the line count"
         if text.count(old) == (times or [1])[0]:
             text = text.replace(old, new)
+    text = lifted(text)       # (any library's redeclarations with modifiers: :mod:`.redeclares`)
     return text if text != original else None
 
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
-VERSION = hashlib.sha256(repr(sorted(REWRITES.items())).encode()).hexdigest()[:12]
+VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + Path(lifted.__code__.co_filename).read_text()).encode()).hexdigest()[:12]

@@ -24,6 +24,7 @@ import numpy as np
 from . import tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
 from .bindings import restated
+from .redeclares import lifted
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
@@ -143,7 +144,7 @@ class _Front:
         rumoca does not also read the files beside it (a run directory holds many)."""
         if path.name == "package.mo":
             return self.session.load(str(path), model=model)
-        text = path.read_text(encoding="utf-8", errors="replace")
+        text = lifted(path.read_text(encoding="utf-8", errors="replace"))
         return self.session.loads(restated(text) if digest.endswith(_RESTATED) else text, model=model,
                                   filename=virtual_name(path, digest))
 

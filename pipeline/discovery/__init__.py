@@ -280,14 +280,30 @@ class Discovery:
         screening = self.report_.get("screening") or []
         if not screening:
             return []
-        comps = sorted({s["component"] for s in screening})
-        lines = [f"tried: {len(screening)} law(s) on {len(comps)} component(s): " + "; ".join(
-            f"{c} ({', '.join(family_of(s['template']) for s in screening if s['component'] == c)})" for c in comps)]
-        ranked = [c for c in self.report_.get("candidates", []) if c.get("score") is not None]
+        # the laws screened, and those fitted without a screening (the shape stage's)
+        screened = {(s["component"], repr(s["template"])) for s in screening}
+        neural = {"reference": "neural"}       # (the shape stage's tanh network)
+        cands = self.report_.get("candidates", [])
+        tried = [(s["component"], family_of(s["template"])) for s in screening] + [
+            (c["component"], neural.get(c.get("family"), c.get("family") or family_of(c["template"])))
+            for c in cands
+            if "parts" not in c and "template" in c and (c["component"], repr(c["template"])) not in screened]
+        comps = sorted({c for c, _ in tried})
+
+        def families(comp):
+            counts = {}
+            for c, f in tried:
+                if c == comp:
+                    counts[f] = counts.get(f, 0) + 1
+            return ", ".join(f if n == 1 else f"{f} x{n}" for f, n in counts.items())
+        lines = [f"tried: {len(tried)} law(s) on {len(comps)} component(s): "
+                 + "; ".join(f"{c} ({families(c)})" for c in comps)]
+        ranked = [c for c in cands if c.get("score") is not None]
         crit = (self.cause_ or {}).get("evidence", {}).get("criterion", "").upper() or "score"
         if ranked:
             lines.append("ranking: " + "; ".join(
-                f"{c['component']} {c.get('family', '')} {crit} {c['score']:.1f}" for c in ranked[:4])
+                f"{c['component']} {neural.get(c.get('family'), c.get('family', ''))} {crit} {c['score']:.1f}"
+                for c in ranked[:4])
                 + (f"; nominal {self.report_['nominal_score']:.1f}" if "nominal_score" in self.report_ else ""))
         return lines
 

@@ -66,9 +66,20 @@ def connector_classes(comp, libraries=(), sources=(), scope: str = "") -> dict[s
     return out
 
 
+#: where a library's components take their law from a partial class they need not extend: a
+#: Modelica.Fluid pipe's momentum law is that of a transport between two ports (the MSL's
+#: valves and orifices extend it: dp = port_a.p - port_b.p, m_flow = port_a.m_flow, the
+#: medium carried through unchanged), which leaves m_flow = f(dp) to the class, and the
+#: enthalpy carried through without loss (as the MSL's valves write it)
+TRANSPORTS = {"Modelica.Fluid.": "Modelica.Fluid.Interfaces.PartialTwoPortTransport"}
+TRANSPORT_EQUATIONS = {"Modelica.Fluid.Interfaces.PartialTwoPortTransport": [
+    "port_a.h_outflow = inStream(port_b.h_outflow);", "port_b.h_outflow = inStream(port_a.h_outflow);"]}
+
+
 def interface_of(comp, lib) -> str | None:
     """The partial class the nominal class extends that declares both its connectors and the
-    domain's law variables (MSL's OnePort, PartialCompliant, Element1D; MCL's TwoPin), or None."""
+    domain's law variables (MSL's OnePort, PartialCompliant, Element1D; MCL's TwoPin), else
+    its library's transport class where that declares them (:data:`TRANSPORTS`), or None."""
     from .words import words
 
     info = lib.find(comp.cls) if comp.cls else None
@@ -76,6 +87,15 @@ def interface_of(comp, lib) -> str | None:
         return None
     wd = words(comp)
     need = {c.name for c in comp.connectors} | {wd.across.split(".", 1)[1], wd.flow.split(".", 1)[1]}
+    own = _interface_in_bases(info, lib, need)
+    if own is not None:
+        return own
+    transport = next((t for prefix, t in TRANSPORTS.items() if comp.cls.startswith(prefix)), None)
+    return transport if transport is not None and need <= _declared(transport, lib) else None
+
+
+def _interface_in_bases(info, lib, need: set) -> str | None:
+    """The first class ``info`` extends (breadth first) that declares every name of ``need``."""
     todo, seen = list(info.extends), set()
     scope = info.name.rsplit(".", 1)[0]
     while todo:
@@ -213,7 +233,8 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
     annotation = f"  annotation({icon + ', ' if icon else ''}Documentation(info=\"{doc}\"));"
     return (f'{"block" if comp.signal else "model"} {cause["learned_class"]} "{comp.cls.split(".")[-1]} {comp.name} as learned by mcl: '
             f'{html.escape(cause["law"]["equation"])}"\n  extends {interface};\n' + "\n".join(params)
-            + f"\nequation\n  {law}\n{annotation}\nend {cause['learned_class']};\n")
+            + f"\nequation\n  {law}\n" + "".join(f"  {e}\n" for e in TRANSPORT_EQUATIONS.get(interface, []))
+            + f"{annotation}\nend {cause['learned_class']};\n")
 
 
 def _terms(template, w, names: dict, u: dict) -> tuple[list[str], list[str]]:
@@ -514,10 +535,21 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
                 depth += {"(": 1, ")": -1}.get(rest[k], 0)
                 if depth == 0:
                     break
-            kept = [a for a in top_level_parts(rest[k0 + 1:k]) if re.match(rf"\s*(?:each\s+|final\s+)*({'|'.join(keep)})\b", a)]
+            kept = [a for a in top_level_parts(rest[k0 + 1:k])
+                    if re.match(rf"\s*(?:each\s+|final\s+|redeclare\s+|package\s+)*({'|'.join(keep)})\b", a)]
             rest = (f"({', '.join(a.strip() for a in kept)})" if kept else "") + rest[k + 1:]
         return text[:m.start(4)] + new_class + m.group(5) + component + rest + text[stop:]
     return None
+
+
+def _kept(text: str, spec) -> tuple[str, ...]:
+    """What of a declaration's modification the learned class ``text`` takes: its own law's
+    variables, and where it extends an interface, what that declares and the medium (a
+    Modelica.Fluid pipe's ``redeclare package Medium``, ``m_flow_start``)."""
+    m = re.search(r"^\s*extends\s+([\w.]+)\s*;", text, re.M)
+    if m is None:
+        return ("v", "i")
+    return ("v", "i", "Medium", *sorted(_declared(m.group(1), _library(spec.libraries, spec.sources))))
 
 
 def write_extended(causes: list[dict], base, spec, directory: Path, data: str = "",
@@ -549,7 +581,7 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
             notes.append(str(exc))
             continue
         if "." not in comp.name or own:
-            swaps.append((comp, f"{LEARNED_PACKAGE}.{cause['learned_class']}"))
+            swaps.append((comp, f"{LEARNED_PACKAGE}.{cause['learned_class']}", _kept(classes[-1], spec)))
     short = spec.model_name.split(".")[-1]
     sources, model_name, extra = [], spec.model_name, ""
     if spec.sources:
@@ -572,10 +604,10 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
     copies = {}         # instance -> the copy of its class its own laws are written in
     dae = base.model.dae
     unknowns = [*dae.x_names, *dae.z_names, *dae.u_names] if dae is not None else []
-    for comp, cls in swaps:
+    for comp, cls, keep in swaps:
         name = comp.name
         change = ((lambda text, owner: rewritten(text, owner, comp, cls, unknowns)) if comp.equation or comp.term
-                  else (lambda text, owner: redeclared(text, owner, name, cls)))
+                  else (lambda text, owner: redeclared(text, owner, name, cls, keep)))
         done = False
         for owner in _class_and_bases(short, [f.read_text(errors="replace") for f in files] + [extra]):
             for f in files:

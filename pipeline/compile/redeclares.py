@@ -1,0 +1,145 @@
+"""Redeclared classes with modifiers, lifted into local short classes for rumoca.
+
+rumoca 0.10.2 drops the modifiers of a short class given in a redeclaration:
+``StaticPipe pipe(redeclare model FlowModel = NominalLaminarFlow(dp_nominal = 2440))`` leaves
+the flow model's ``dp_nominal`` unset (0: the pipe's flow divides by it), and a pump's
+``redeclare record`` or a vessel's ``redeclare model HeatTransfer = ...(alpha0 = ...)`` lose
+theirs the same way. A local short class keeps them: :func:`lifted` writes
+``model MclRedeclared_1 = NominalLaminarFlow(dp_nominal = 2440);`` just before the element
+that holds the redeclaration and redeclares that class there. Functions are left as written
+(rumoca keeps a function's modifiers in a redeclaration, and loses them in a local short
+function). The line count is kept: a message naming a line still names the right one.
+"""
+from __future__ import annotations
+
+import re
+
+_REDECLARE = re.compile(r"\bredeclare\s+(?:(?:final|each|replaceable)\s+)*(model|block|record)\s+(\w+)\s*=\s*"
+                        r"(?P<type>[A-Za-z_][\w.]*)\s*\(")
+_HEADER = re.compile(r"\b(?:model|block|class|package|record|connector|operator)\s+\w+\b(?!\s*=)\s*"
+                     r"(?:\"(?:[^\"\\]|\\.)*\")?")
+#: where an element may start after a class header: after its description, or a section keyword
+_SECTION = re.compile(r"\b(?:public|protected)\b")
+#: the name the lifted classes take (a model's own class names never start so)
+PREFIX = "MclRedeclared_"
+
+
+def lifted(text: str) -> str:
+    """``text`` with each redeclaration of a model, block or record with modifiers made a local
+    short class (see the module's note); ``text`` itself where there is none."""
+    if "redeclare" not in text:
+        return text
+    masked = _masked(text)
+    edits = []      # (start, end, replacement)
+    inserts = {}    # element start -> [class definitions]
+    count = 0
+    for m in _REDECLARE.finditer(masked):
+        close = _closing(masked, m.end() - 1)
+        start = _element_start(masked, m.start())
+        if close is None or start is None:
+            continue
+        count += 1
+        name = f"{PREFIX}{count}"
+        mods = text[m.end('type'):close]
+        words = " ".join(_without_comments(mods).split())
+        # the modifiers move to the short class; their line breaks stay where they were
+        edits.append((m.end("type"), close, "\n" * mods.count("\n")))
+        edits.append((m.start("type"), m.end("type"), name))
+        inserts.setdefault(start, []).append(
+            f"{m.group(1)} {name} = {m.group('type')}{words}; ")
+    if not edits:
+        return text
+    for pos, defs in inserts.items():
+        edits.append((pos, pos, "".join(defs)))
+    out, pos = [], 0
+    for a, b, new in sorted(edits, key=lambda e: (e[0], e[1])):
+        if a < pos:          # (a redeclaration inside another's modifiers: the outer one moved it)
+            continue
+        out += [text[pos:a], new]
+        pos = b
+    out.append(text[pos:])
+    return "".join(out)
+
+
+def _element_start(masked: str, at: int) -> int | None:
+    """Where the element holding the modification at ``at`` starts: after the last ``;`` before
+    the modifiers it is in, or after the class header or section keyword between."""
+    depth, k = 0, at - 1
+    while k >= 0:
+        c = masked[k]
+        if c == ")":
+            depth += 1
+        elif c == "(":
+            depth -= 1 if depth > 0 else 0
+        elif c == ";" and depth == 0:
+            break
+        k -= 1
+    start = k + 1
+    segment = masked[start:at]
+    last = None
+    for pattern in (_HEADER, _SECTION):
+        for h in pattern.finditer(segment):
+            if last is None or h.end() > last:
+                last = h.end()
+    if last is not None:
+        start += last
+    while start < at and masked[start].isspace():
+        start += 1
+    return start if start < at else None
+
+
+def _masked(text: str, comments: bool = True) -> str:
+    """``text`` with its strings' and (``comments``) comments' characters (not their line
+    breaks) blanked."""
+    out, i, n = list(text), 0, len(text)
+
+    def blank(a, b):
+        for j in range(a, b):
+            if out[j] != "\n":
+                out[j] = " "
+    while i < n:
+        if text.startswith("//", i):
+            j = text.find("\n", i)
+            j = n if j < 0 else j
+            if comments:
+                blank(i, j)
+            i = j
+        elif text.startswith("/*", i):
+            j = text.find("*/", i + 2)
+            j = n if j < 0 else j + 2
+            if comments:
+                blank(i, j)
+            i = j
+        elif text[i] == '"':
+            j = i + 1
+            while j < n and text[j] != '"':
+                j += 2 if text[j] == "\\" else 1
+            blank(i + 1, min(j, n))
+            i = j + 1
+        else:
+            i += 1
+    return "".join(out)
+
+
+def _without_comments(text: str) -> str:
+    """``text`` without its comments (strings kept)."""
+    masked = _masked(text, comments=False)
+    out, i = [], 0
+    for m in re.finditer(r"//[^\n]*|/\*.*?\*/", masked, re.S):
+        out.append(text[i:m.start()])
+        i = m.end()
+    out.append(text[i:])
+    return "".join(out)
+
+
+def _closing(masked: str, k: int) -> int | None:
+    """The index just past the parenthesis that closes the one at ``k``."""
+    depth = 0
+    for i in range(k, len(masked)):
+        if masked[i] == "(":
+            depth += 1
+        elif masked[i] == ")":
+            depth -= 1
+            if depth == 0:
+                return i + 1
+    return None
