@@ -277,22 +277,29 @@ def drain_data(path, seed: int, stop: float = 1500.0, step: float = 3.0, mass: b
     path.write_text("time,u,y\n" + "\n".join(f"{float(a)!r},{float(u(a))!r},{float(b)!r}" for a, b in zip(t, level)) + "\n")
 
 
+def drained(tmp_path, source: str, model: str, pipe: str, mass: bool = False) -> dict:
+    """The drain's run on SciPy's data: ``pipe`` named with a root of its pressure drop, the
+    curve within 5 %, the validation error at the noise and the extended model recompiled."""
+    (tmp_path / "Drain.mo").write_text(source)
+    drain_data(tmp_path / "train.csv", 1, mass=mass)
+    drain_data(tmp_path / "validate.csv", 2, mass=mass)
+    report = run(tmp_path, "Drain.mo", model)
+    cause = report["cause"]
+    assert cause["component"] == pipe and f"sqrt(abs({pipe}.dp" in cause["law"]["equation"]
+    assert curve_error(cause, drain_flow) < 0.05
+    g = report["gain"]
+    assert g["validation_rms_after"] < 5e-3 < 0.1 * g["validation_rms_before"]
+    assert report["extended"]["recompiled_difference"] < 1e-3
+    return report
+
+
 def test_a_fluidheatflow_drain_is_a_root_of_its_pressure_drop(tmp_path):
     """MSL FluidHeatFlow, whose ports carry two pairs (pressure and mass flow; enthalpy and
     enthalpy flow), and whose pipe declares outputs no one reads: the pipe is questioned by its
     first pair, its turbulent flow (a root of the pressure drop) is found where the model has a
     laminar one, and the learned class, which carries the enthalpy with the flow, compiles back
     into the model."""
-    (tmp_path / "Drain.mo").write_text(DRAIN)
-    drain_data(tmp_path / "train.csv", 1)
-    drain_data(tmp_path / "validate.csv", 2)
-    report = run(tmp_path, "Drain.mo", "Drain.Plant")
-    cause = report["cause"]
-    assert cause["component"] == "drain" and "sqrt(abs(drain.dp" in cause["law"]["equation"]
-    assert curve_error(cause, drain_flow) < 0.05
-    g = report["gain"]
-    assert g["validation_rms_after"] < 5e-3 < 0.1 * g["validation_rms_before"]
-    assert report["extended"]["recompiled_difference"] < 1e-3
+    report = drained(tmp_path, DRAIN, "Drain.Plant", "drain")
     assert [c for c in report["candidates"] if c["component"] == "bottom"] == []
 
 
@@ -329,16 +336,7 @@ def test_a_modelica_fluid_pipe_is_a_root_of_its_pressure_drop(tmp_path):
     redeclared with its nominal point (modifiers rumoca alone would drop), learns its root law,
     and the learned class is a transport between two ports as the MSL's valves are, taking the
     pipe's medium, and compiles back into the model."""
-    (tmp_path / "Drain.mo").write_text(FLUID_DRAIN)
-    drain_data(tmp_path / "train.csv", 1, mass=True)
-    drain_data(tmp_path / "validate.csv", 2, mass=True)
-    report = run(tmp_path, "Drain.mo", "FluidDrain.Plant")
-    cause = report["cause"]
-    assert cause["component"] == "pipe" and "sqrt(abs(pipe.dp" in cause["law"]["equation"]
-    assert curve_error(cause, drain_flow) < 0.05
-    g = report["gain"]
-    assert g["validation_rms_after"] < 5e-3 < 0.1 * g["validation_rms_before"]
+    drained(tmp_path, FLUID_DRAIN, "FluidDrain.Plant", "pipe", mass=True)
     learned = (tmp_path / "out" / "extended" / "Learned.mo").read_text()
     assert "extends Modelica.Fluid.Interfaces.PartialTwoPortTransport;" in learned
     assert "redeclare package Medium = Medium" in (tmp_path / "out" / "extended" / "Drain.mo").read_text()
-    assert report["extended"]["recompiled_difference"] < 1e-3

@@ -194,6 +194,8 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
     else:
         old, new = xa, xa - D
         pick = [k for k in range(len(rows)) if k not in set(external)]
+    if mode == "parallel" and not (comp.signal or comp.sensor):
+        old, new = _carried(dae, comp, D, old, new, exprs)
     for k in pick:
         if ca.depends_on(rows[k], old):
             rows[k] = ca.substitute(rows[k], old, new)
@@ -209,6 +211,23 @@ def _deviation(dae: Dae, comp: Component, mode: str) -> tuple[Dae, ca.SX, dict]:
                               z=ca.vertcat(dae.z, D), z_names=[*dae.z_names, f"{comp.name}.{DEVIATION}"],
                               z_start=ca.vertcat(dae.z_start, ca.SX(0)))
     return dae, D, env
+
+
+def _carried(dae: Dae, comp: Component, D, old, new, exprs: dict):
+    """``old`` and ``new`` (what the rest of the model sees of the flows) with the pairs the
+    connectors carry after their first: each flow with the deviation's share, taken from the
+    side it comes from (a FluidHeatFlow pipe's enthalpy flow with its mass flow,
+    ``semiLinear(D, h_a, h_b)``), as the learned class writes it (:func:`mcl.templates._carried`)."""
+    a, b = comp.connectors
+    for x, f in zip(a.potential[1:], a.flow[1:]):
+        names = [f"{comp.name}.{c.name}.{v}" for c, v in ((a, x), (b, x), (a, f), (b, f))]
+        if not all(n in dae.exprs and dae.exprs[n].is_symbolic() for n in names):
+            continue
+        xa, xb, fa, fb = (dae.exprs[n] for n in names)
+        share = ca.if_else(D > 0, D * xa, D * xb)       # (continuous: both nought at D = 0)
+        old, new = ca.vertcat(old, fa, fb), ca.vertcat(new, fa + share, fb - share)
+        exprs[names[2]], exprs[names[3]] = fa + share, fb - share
+    return old, new
 
 
 def _term_deviation(dae: Dae, comp: Component) -> tuple[Dae, ca.SX, dict]:
