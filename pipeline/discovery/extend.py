@@ -85,7 +85,8 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     x_name, y_name = names[var], (wd.across if var == "i" else wd.flow)
     units = base.model.info.get("units", {})
     nominal_terms = set(best.get("nominal_form") or {})
-    new_terms = [_named(shape_words(unscaled(t)[0], comp.signal), var, x_name) if t != "1" else "a constant"
+    speed = var == "dv" and bool(comp.connectors) and comp.connectors[0].potential[:1] in (("s",), ("phi",))
+    new_terms = [_named(shape_words(unscaled(t)[0], comp.signal, speed), var, x_name) if t != "1" else "a constant"
                  for t, on in zip(best.get("terms", [])[1:], best["active"][1:]) if on and t not in nominal_terms]
     effect = f"{comp.name} follows {law}" + (f"; missing from the nominal law: {', '.join(new_terms)}" if new_terms else "")
     if best.get("nominal_exact") is False:

@@ -230,12 +230,15 @@ _SHAPE_WORDS = {"tanh({x}/{s})": "Coulomb-like friction or saturation", "sinh({x
                 **{k: "a knee on one side (a diode's, a clamp's or a stop's)" for k in _KNEES}}
 
 
-def shape_words(term: str, signal: bool = False) -> str:
+def shape_words(term: str, signal: bool = False, speed: bool = True) -> str:
     """``term`` (a basis term, its scale named s1, s2, ...) with what an engineer calls it:
     "a dead zone: v - s1*tanh(v/s1)"; a term of no named shape as it is. In a signal block
-    (``signal``) a tanh is a saturation, not friction."""
+    (``signal``) a tanh is a saturation, not friction; a law not in a speed (``speed`` false: a
+    tank's level) has no Stribeck effect, only its shape."""
     for pattern, said in _SHAPE_WORDS.items():
         if re.fullmatch(_pattern(pattern), term.replace(" ", "")):
+            if not speed and "Stribeck" in said:
+                said = "a bump that fades on both sides (a Stribeck-shaped term)"
             return f"{'saturation' if signal and 'saturation' in said else said}: {term}"
     return term
 
