@@ -189,3 +189,13 @@ def test_a_missing_term_is_named_in_the_components_own_variable():
     assert _named(said, "v", "x") == said.replace("sinh(v/s1)", "sinh(x/s1)") and said.endswith("sinh(v/s1)")
     assert _named("v^2*tanh(v/s2)", "v", "phi_rel") == "phi_rel^2*tanh(phi_rel/s2)"
     assert _named("v^2", "v", "(-s_rel)") == "v^2"
+
+
+def test_the_stribeck_effect_is_named_only_in_a_speed():
+    """A term that rises and fades (tanh(x/s) exp(-(x/s)^2)) is the Stribeck effect in a
+    friction's law of its speed; in a tank's law of its level it is only that shape."""
+    from mcl.discovery.families import shape_words
+
+    term = "tanh(v/s1)*exp(-(v/s1)^2)"
+    assert shape_words(term).startswith("the Stribeck effect")
+    assert shape_words(term, speed=False).startswith("a bump that fades") and shape_words(term, speed=False).endswith(term)
