@@ -144,8 +144,8 @@ def plainest(best: dict, close: list[dict]) -> dict:
     if "parts" in best:
         return best
     size = lambda c: int(np.sum(np.asarray(c["active"], bool))) if "active" in c else len(c.get("w") or ())  # noqa: E731
-    same = [c for c in close if c.get("component") == best["component"] and "parts" not in c
-            and c.get("family") == best.get("family") or c is best]
+    same = [c for c in close if c is best or (c.get("component") == best["component"] and "parts" not in c
+                                              and c.get("family") == best.get("family"))]
     return min(same, key=lambda c: (size(c), c["score"]))
 
 
