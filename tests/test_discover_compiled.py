@@ -340,3 +340,67 @@ def test_a_modelica_fluid_pipe_is_a_root_of_its_pressure_drop(tmp_path):
     learned = (tmp_path / "out" / "extended" / "Learned.mo").read_text()
     assert "extends Modelica.Fluid.Interfaces.PartialTwoPortTransport;" in learned
     assert "redeclare package Medium = Medium" in (tmp_path / "out" / "extended" / "Drain.mo").read_text()
+
+
+HEATED_LOOP = """
+within ;
+package Loop "a pump pushes water through a valve pipe and a heated pipe; the outlet temperature is measured"
+  model Plant
+    import Modelica.Thermal.FluidHeatFlow;
+    import Modelica.Thermal.HeatTransfer;
+    parameter FluidHeatFlow.Media.Medium water = FluidHeatFlow.Media.Water();
+    Modelica.Blocks.Interfaces.RealInput u(unit = "Pa") "pump pressure rise";
+    Modelica.Blocks.Interfaces.RealOutput y(unit = "K") "outlet temperature";
+    FluidHeatFlow.Sources.Ambient supply(medium = water, constantAmbientPressure = 0, constantAmbientTemperature = 293.15);
+    FluidHeatFlow.Sources.PressureIncrease pump(medium = water, m = 0, usePressureIncreaseInput = true);
+    FluidHeatFlow.Components.Pipe valve(medium = water, m = 0, h_g = 0, V_flowLaminar = 1, dpLaminar = 5e7,
+      V_flowNominal = 2, dpNominal = 1e8) "laminar: the engineer's guess";
+    FluidHeatFlow.Components.Pipe heater(medium = water, m = 5, T0 = 293.15, T0fixed = true, h_g = 0,
+      V_flowLaminar = 1, dpLaminar = 0, V_flowNominal = 2, dpNominal = 0, useHeatPort = true);
+    HeatTransfer.Sources.FixedHeatFlow heat(Q_flow = 2e4);
+    FluidHeatFlow.Sensors.TemperatureSensor outlet(medium = water);
+    FluidHeatFlow.Sources.Ambient sink(medium = water, constantAmbientPressure = 0, constantAmbientTemperature = 293.15);
+  equation
+    connect(u, pump.pressureIncrease);
+    connect(supply.flowPort, pump.flowPort_a);
+    connect(pump.flowPort_b, valve.flowPort_a);
+    connect(valve.flowPort_b, heater.flowPort_a);
+    connect(heater.flowPort_b, sink.flowPort);
+    connect(heat.port, heater.heatPort);
+    connect(heater.flowPort_b, outlet.flowPort);
+    connect(outlet.y, y);
+  end Plant;
+end Loop;
+"""
+
+
+def heated_loop_data(path, seed: int, stop: float = 1200.0):
+    """The heated pipe's outlet temperature, m cp T' = Q + m_flow cp (T_in - T), behind a valve
+    whose flow is turbulent, m_flow = rho sqrt(dp/k); the pump's pressure rise in steps."""
+    rng = np.random.default_rng(seed)
+    rises = rng.uniform(2e4, 8e4, int(stop // 60) + 2)
+
+    def u(t):
+        k = int(t // 60)
+        prev = rises[max(k - 1, 0)]
+        return prev + (rises[k] - prev) * min(1.0, (t - 60 * k) / 5.0)
+
+    cp, k_valve, heat, mass = 4177.0, 5e10, 2e4, 5.0
+    rhs = lambda t, x: [(heat + RHO * np.sqrt(u(t) / k_valve) * cp * (293.15 - x[0])) / (mass * cp)]   # noqa: E731
+    t = np.arange(0.0, stop + 1e-9, 1.0)
+    temp = solve_ivp(rhs, (0, stop), [293.15], t_eval=t, rtol=1e-10, atol=1e-10, max_step=0.5).y[0]
+    temp += rng.normal(0, 0.05, t.size)
+    path.write_text("time,u,y\n" + "\n".join(f"{float(a)!r},{float(u(a))!r},{float(b)!r}" for a, b in zip(t, temp)) + "\n")
+
+
+def test_a_valve_is_found_from_the_temperature_its_flow_leaves(tmp_path):
+    """Only the outlet temperature of a heated pipe is measured: the valve's flow is seen
+    through the heat the water takes away, and its root law is found within 1 %."""
+    (tmp_path / "Loop.mo").write_text(HEATED_LOOP)
+    heated_loop_data(tmp_path / "train.csv", 1)
+    heated_loop_data(tmp_path / "validate.csv", 2)
+    report = run(tmp_path, "Loop.mo", "Loop.Plant")
+    cause = report["cause"]
+    assert cause["component"] == "valve" and "sqrt(abs(valve.dp" in cause["law"]["equation"]
+    assert curve_error(cause, lambda dp: RHO * np.sign(dp) * np.sqrt(np.abs(dp) / 5e10)) < 0.01
+    assert report["gain"]["validation_rms_after"] < 0.06 < 0.1 * report["gain"]["validation_rms_before"]
