@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from helpers import ROOT, msl_path, needs_msl
+from helpers import ROOT, msl_path, needs_msl, write_uy
 from mcl.cli import main
 
 sys.path.insert(0, str(ROOT / "examples" / "ladder"))
@@ -273,8 +273,7 @@ def drain_data(path, seed: int, stop: float = 1500.0, step: float = 3.0, mass: b
     rhs = lambda t, x: [(u(t) / (RHO if mass else 1.0) - drain_flow(RHO * G * x[0]) / RHO) / A_TANK]   # noqa: E731
     t = np.arange(0.0, stop + 1e-9, step)
     level = solve_ivp(rhs, (0, stop), [0.5], t_eval=t, rtol=1e-9, atol=1e-12, max_step=1.0).y[0]
-    level += rng.normal(0, 1e-3, t.size)
-    path.write_text("time,u,y\n" + "\n".join(f"{float(a)!r},{float(u(a))!r},{float(b)!r}" for a, b in zip(t, level)) + "\n")
+    write_uy(path, t, [u(a) for a in t], level + rng.normal(0, 1e-3, t.size))
 
 
 def drained(tmp_path, source: str, model: str, pipe: str, mass: bool = False) -> dict:
@@ -389,8 +388,7 @@ def heated_loop_data(path, seed: int, stop: float = 1200.0):
     rhs = lambda t, x: [(heat + RHO * np.sqrt(u(t) / k_valve) * cp * (293.15 - x[0])) / (mass * cp)]   # noqa: E731
     t = np.arange(0.0, stop + 1e-9, 1.0)
     temp = solve_ivp(rhs, (0, stop), [293.15], t_eval=t, rtol=1e-10, atol=1e-10, max_step=0.5).y[0]
-    temp += rng.normal(0, 0.05, t.size)
-    path.write_text("time,u,y\n" + "\n".join(f"{float(a)!r},{float(u(a))!r},{float(b)!r}" for a, b in zip(t, temp)) + "\n")
+    write_uy(path, t, [u(a) for a in t], temp + rng.normal(0, 0.05, t.size))
 
 
 def test_a_valve_is_found_from_the_temperature_its_flow_leaves(tmp_path):

@@ -29,7 +29,7 @@ def restated(text: str) -> str:
             continue
         k = head.end()
         if text.startswith("(", k):                      # its modifiers: (unit = "m", min = 0)
-            k = _closing(text, k)
+            k = closing(text, k)
             if k is None:
                 continue
             k = _skip_space(text, k)
@@ -39,7 +39,7 @@ def restated(text: str) -> str:
         call = _CALL.match(text, k)
         if call is None or text[k:call.end()].split("(")[0].strip() in ("if", "Real", "Integer"):
             continue
-        end = _closing(text, call.end() - 1)
+        end = closing(text, call.end() - 1)
         if end is None or _AFTER.match(text, end) is None:
             continue
         out.append(text[pos:end])
@@ -49,7 +49,7 @@ def restated(text: str) -> str:
     return "".join(out)
 
 
-def _closing(text: str, k: int) -> int | None:
+def closing(text: str, k: int) -> int | None:
     """The index just past the parenthesis that closes the one at ``k`` (strings skipped)."""
     depth, i, n = 0, k, len(text)
     while i < n:

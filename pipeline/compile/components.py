@@ -391,32 +391,29 @@ def _read_outside(flat: dict) -> set[str]:
             read.update(v for v in (origin["Connection"].get("lhs"), origin["Connection"].get("rhs")) if v)
             continue
         owner = (origin.get("ComponentEquation") or {}).get("component")
-        stack = [eq.get("residual")]
-        while stack:
-            n = stack.pop()
-            if isinstance(n, dict):
-                ref = n.get("VarRef")
-                name = ref.get("name", {}).get("name") if isinstance(ref, dict) and isinstance(ref.get("name"), dict) else None
-                if name and not (owner and name.startswith(owner + ".")):
-                    read.add(name)
-                stack.extend(n.values())
-            elif isinstance(n, list):
-                stack.extend(n)
+        for n in _nodes(eq.get("residual")):
+            ref = n.get("VarRef")
+            name = ref.get("name", {}).get("name") if isinstance(ref, dict) and isinstance(ref.get("name"), dict) else None
+            if name and not (owner and name.startswith(owner + ".")):
+                read.add(name)
     return read
+
+
+def _nodes(tree):
+    """The mappings of rumoca's expression tree ``tree``, depth first."""
+    stack = [tree]
+    while stack:
+        n = stack.pop()
+        if isinstance(n, dict):
+            yield n
+            stack.extend(n.values())
+        elif isinstance(n, list):
+            stack.extend(n)
 
 
 def _derivative_in(node) -> bool:
     """Whether rumoca's expression tree ``node`` calls der()."""
-    stack = [node]
-    while stack:
-        n = stack.pop()
-        if isinstance(n, dict):
-            if n.get("function") == "Der":
-                return True
-            stack.extend(n.values())
-        elif isinstance(n, list):
-            stack.extend(n)
-    return False
+    return any(n.get("function") == "Der" for n in _nodes(node))
 
 
 def _connector_class(pot, flow) -> str:

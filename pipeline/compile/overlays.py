@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
+from . import redeclares
 from .redeclares import lifted
 
 
@@ -283,4 +284,4 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
-VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + Path(lifted.__code__.co_filename).read_text()).encode()).hexdigest()[:12]
+VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + Path(redeclares.__file__).read_text()).encode()).hexdigest()[:12]

@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import re
 
+from .bindings import closing
+from .sources import COMMENT_OR_STRING
+
 _REDECLARE = re.compile(r"\bredeclare\s+(?:(?:final|each|replaceable)\s+)*(model|block|record)\s+(\w+)\s*=\s*"
                         r"(?P<type>[A-Za-z_][\w.]*)\s*\(")
 _HEADER = re.compile(r"\b(?:model|block|class|package|record|connector|operator)\s+\w+\b(?!\s*=)\s*"
@@ -34,7 +37,7 @@ def lifted(text: str) -> str:
     inserts = {}    # element start -> [class definitions]
     count = 0
     for m in _REDECLARE.finditer(masked):
-        close = _closing(masked, m.end() - 1)
+        close = closing(masked, m.end() - 1)
         start = _element_start(masked, m.start())
         if close is None or start is None:
             continue
@@ -88,58 +91,16 @@ def _element_start(masked: str, at: int) -> int | None:
     return start if start < at else None
 
 
-def _masked(text: str, comments: bool = True) -> str:
-    """``text`` with its strings' and (``comments``) comments' characters (not their line
-    breaks) blanked."""
-    out, i, n = list(text), 0, len(text)
-
-    def blank(a, b):
-        for j in range(a, b):
-            if out[j] != "\n":
-                out[j] = " "
-    while i < n:
-        if text.startswith("//", i):
-            j = text.find("\n", i)
-            j = n if j < 0 else j
-            if comments:
-                blank(i, j)
-            i = j
-        elif text.startswith("/*", i):
-            j = text.find("*/", i + 2)
-            j = n if j < 0 else j + 2
-            if comments:
-                blank(i, j)
-            i = j
-        elif text[i] == '"':
-            j = i + 1
-            while j < n and text[j] != '"':
-                j += 2 if text[j] == "\\" else 1
-            blank(i + 1, min(j, n))
-            i = j + 1
-        else:
-            i += 1
-    return "".join(out)
+def _masked(text: str) -> str:
+    """``text`` with its comments and the insides of its strings blanked, line breaks kept
+    (every position where it was)."""
+    def blank(m):
+        part = m.group()
+        inside = re.sub(r"[^\n]", " ", part[1:-1] if part.startswith('"') else part)
+        return f'"{inside}"' if part.startswith('"') else inside
+    return COMMENT_OR_STRING.sub(blank, text)
 
 
 def _without_comments(text: str) -> str:
     """``text`` without its comments (strings kept)."""
-    masked = _masked(text, comments=False)
-    out, i = [], 0
-    for m in re.finditer(r"//[^\n]*|/\*.*?\*/", masked, re.S):
-        out.append(text[i:m.start()])
-        i = m.end()
-    out.append(text[i:])
-    return "".join(out)
-
-
-def _closing(masked: str, k: int) -> int | None:
-    """The index just past the parenthesis that closes the one at ``k``."""
-    depth = 0
-    for i in range(k, len(masked)):
-        if masked[i] == "(":
-            depth += 1
-        elif masked[i] == ")":
-            depth -= 1
-            if depth == 0:
-                return i + 1
-    return None
+    return COMMENT_OR_STRING.sub(lambda m: m.group() if m.group().startswith('"') else " ", text)
