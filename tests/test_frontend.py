@@ -399,3 +399,22 @@ def test_the_modifiers_of_a_redeclared_class_are_kept(tmp_path):
     assert {k: m.parameters[k] for k in ("b.m.k", "b.m.j", "b.r.c")} == {"b.m.k": 3.0, "b.m.j": 2.0, "b.r.c": 5.0}
     r = simulate(m, series(np.linspace(0, 1, 3)))
     assert r.ok and np.allclose(r.outputs[:, 0], 3 + 2 + 5 + 7 * 2)
+
+
+def test_a_package_directory_keeps_the_modifiers_of_its_redeclared_classes(tmp_path):
+    """The same model in a package directory (rumoca reads the tree itself): the tree is read
+    from a lifted copy, the user's files untouched, and an error still names the user's file."""
+    head, tail = REDECLARED.split("  model C ")
+    pkg = tmp_path / "P"
+    pkg.mkdir()
+    (pkg / "package.mo").write_text(f"package P\n{head}end P;\n")
+    (pkg / "package.order").write_text("A\nD\nf0\nlin\nB\nC\n")
+    c = pkg / "C.mo"
+    c.write_text("within P;\nmodel C " + tail.replace("\n  ", "\n"))
+    before = {f.name: f.read_text() for f in pkg.iterdir()}
+    m = compile_model([pkg], "P.C")
+    assert {k: m.parameters[k] for k in ("b.m.k", "b.m.j", "b.r.c")} == {"b.m.k": 3.0, "b.m.j": 2.0, "b.r.c": 5.0}
+    assert {f.name: f.read_text() for f in pkg.iterdir()} == before
+    c.write_text(c.read_text().replace("b.r.c + b.z;", "b.r.c + b.z + missing;"))
+    with pytest.raises(ModelicaError, match=rf"{c}:7: .*missing"):
+        compile_model([pkg], "P.C")

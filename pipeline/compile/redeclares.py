@@ -12,7 +12,11 @@ function). The line count is kept: a message naming a line still names the right
 """
 from __future__ import annotations
 
+import os
 import re
+import shutil
+import tempfile
+from pathlib import Path
 
 from .bindings import closing
 from .sources import COMMENT_OR_STRING
@@ -62,6 +66,41 @@ def lifted(text: str) -> str:
         pos = b
     out.append(text[pos:])
     return "".join(out)
+
+
+def tree_copy(top: Path, place: Path) -> Path:
+    """Where the lifted copy of the package directory under ``top`` (its root ``package.mo``)
+    is made: ``place`` named by the tree's content, the directory's own name kept."""
+    return place / top.parent.name / "package.mo"
+
+
+def lifted_tree(top: Path, place: Path) -> Path:
+    """The root ``package.mo`` to load for the package directory of ``top``: ``top`` itself where
+    no file of the tree has a redeclaration to lift, else :func:`tree_copy`, made once: each
+    ``.mo`` file lifted (rumoca reads a package directory itself, so its files cannot be handed
+    over one by one as a single-file model's text is), every other file a link to its own."""
+    root = top.parent
+    texts = {f: f.read_text(encoding="utf-8", errors="replace") for f in sorted(root.rglob("*.mo"))}
+    if all(lifted(t) == t for t in texts.values()):
+        return top
+    copy = tree_copy(top, place)
+    if copy.is_file():
+        return copy
+    place.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=place, prefix=".new-"))
+    for f in sorted(root.rglob("*")):
+        to = tmp / f.relative_to(root)
+        if f.is_dir():
+            to.mkdir(parents=True, exist_ok=True)
+        elif f in texts:
+            to.write_text(lifted(texts[f]), encoding="utf-8")
+        else:
+            os.symlink(f.resolve(), to)
+    try:
+        tmp.rename(copy.parent)
+    except OSError:        # another process made it first
+        shutil.rmtree(tmp, ignore_errors=True)
+    return copy
 
 
 def _element_start(masked: str, at: int) -> int | None:

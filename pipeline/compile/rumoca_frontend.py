@@ -24,7 +24,7 @@ import numpy as np
 from . import tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
 from .bindings import restated
-from .redeclares import lifted
+from .redeclares import lifted, lifted_tree, tree_copy
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
@@ -143,7 +143,7 @@ class _Front:
         """A package directory is read as a tree; a single file under a name of its own, so that
         rumoca does not also read the files beside it (a run directory holds many)."""
         if path.name == "package.mo":
-            return self.session.load(str(path), model=model)
+            return self.session.load(str(lifted_tree(path, _copies(digest))), model=model)
         text = lifted(path.read_text(encoding="utf-8", errors="replace"))
         return self.session.loads(restated(text) if digest.endswith(_RESTATED) else text, model=model,
                                   filename=virtual_name(path, digest))
@@ -213,6 +213,11 @@ def _real(path: str, roots: str) -> str:
         if beside is not None:
             return os.path.join(os.path.dirname(os.path.realpath(beside.path)), os.path.basename(path))
     return real
+
+
+def _copies(digest: str) -> Path:
+    """Where the lifted copy of a package directory of content ``digest`` is made."""
+    return roots_dir() / "lifted" / digest[:16]
 
 
 def virtual_name(path: Path, digest: str) -> str:
@@ -352,8 +357,16 @@ class Prepared:
 
     @property
     def virtual(self) -> dict[str, str]:
-        """The names single files are registered under -> their real paths."""
-        return {virtual_name(p, h): str(p) for p, (h, _) in self.docs.items()}
+        """The names single files are registered under, and the files of a package directory's
+        lifted copy (:func:`.redeclares.lifted_tree`) -> their real paths."""
+        out = {}
+        for p, (h, _) in self.docs.items():
+            if p.name != "package.mo":
+                out[virtual_name(p, h)] = str(p)
+                continue
+            copy = tree_copy(p, _copies(h)).parent
+            out.update({str(copy / f.relative_to(p.parent)): str(f) for f in p.parent.rglob("*.mo")})
+        return out
 
     @functools.cached_property
     def roots(self) -> list[str]:
