@@ -646,11 +646,14 @@ class LevenbergMarquardt(Fitter):
         """(residual vector, its Jacobian d r / d w, J) at w, or None when w fails."""
         res = problem.simulate(w, gradient=True)
         r, ev_cost = problem.residual_and_cost(res)
-        problem.recorder.add(Evaluation(0, np.asarray(w, float).tolist(), ev_cost, bool(res.ok),
-                                        res.reason, res.seconds, None, "lm"))
-        if not res.ok:
+        S = res.sensitivities[:, problem.idx, :] if res.ok else None
+        ok, reason = bool(res.ok), res.reason
+        if ok and not np.all(np.isfinite(S)):      # (a run that grows without bound in its sensitivities)
+            ok, reason = False, "its sensitivities are not finite"
+        problem.recorder.add(Evaluation(0, np.asarray(w, float).tolist(), ev_cost if ok else None, ok,
+                                        reason, res.seconds, None, "lm"))
+        if not ok:
             return None
-        S = res.sensitivities[:, problem.idx, :]
         return r.ravel(), -S.reshape(-1, S.shape[2]), ev_cost
 
 

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -232,6 +233,16 @@ def load_runfile(path, registry=None) -> RunSpec:
     return spec
 
 
+class _Loader(yaml.SafeLoader):
+    """YAML 1.2's numbers: ``1e5`` and ``1.0e5`` are floats (YAML 1.1's rules, PyYAML's, read
+    them as text, and a template's start value 1.0e5 was refused as 'not a number')."""
+
+
+_Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$"), list("-+0123456789."))
+
+
 def _read_yaml(path: Path):
     from .outputs import check_input
 
@@ -239,7 +250,7 @@ def _read_yaml(path: Path):
     try:
         text = path.read_text(encoding="utf-8")
         node = yaml.compose(text)
-        raw = yaml.safe_load(text)
+        raw = yaml.load(text, Loader=_Loader)
     except UnicodeDecodeError as exc:
         raise ConfigError(f"not UTF-8 text ({exc.reason} at byte {exc.start})", where=str(path)) from None
     except yaml.YAMLError as exc:

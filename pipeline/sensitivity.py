@@ -147,10 +147,11 @@ def affine_scan(P: np.ndarray, G: np.ndarray, S0: np.ndarray) -> np.ndarray:
         Gp[:, i] = P[:, i] @ Gp[:, i - 1] + G[:, i]
     starts = np.empty((L, nx, ns))
     S = S0
-    for b in range(L):               # the blocks' starts, one after another
-        starts[b] = S
-        S = Pp[b, -1] @ S + Gp[b, -1]
-    out = np.einsum("bmij,bjk->bmik", Pp, starts) + Gp
+    with np.errstate(over="ignore", invalid="ignore"):    # (a run that blows up: not finite, refused by the fit)
+        for b in range(L):               # the blocks' starts, one after another
+            starts[b] = S
+            S = Pp[b, -1] @ S + Gp[b, -1]
+        out = np.einsum("bmij,bjk->bmik", Pp, starts) + Gp
     return out.reshape(L * m, nx, ns)[:n]
 
 

@@ -86,3 +86,14 @@ def test_aliases_that_expand_to_millions_of_values_are_refused(tmp_path, capsys)
     (tmp_path / "run.yaml").write_text("\n".join(levels) + "\ntemplates: [" + ",".join(["*g"] * 9) + "]\n")
     assert main(["run", str(tmp_path / "run.yaml")]) == 2
     assert "expands to more than" in capsys.readouterr().err
+
+
+def test_numbers_in_exponent_form_are_numbers(tmp_path):
+    """1e5 and 1.0e5 are numbers (YAML 1.2), not text as YAML 1.1 reads them; a template of the
+    hysteresis kind takes them, and its own options are checked."""
+    run = write(tmp_path, BASE + "templates:\n  - {name: hysteresis, span: 2.5e-3, start: [1, 1.0e5, 0, 0]}\n")
+    spec, _ = parse_runfile(run)
+    assert spec.templates[0]["start"] == [1, 1e5, 0, 0] and spec.templates[0]["span"] == 2.5e-3
+    run.write_text(BASE + "templates:\n  - {name: hysteresis, rhs: [v, v^2]}\n")
+    with pytest.raises(ConfigError, match=r"run.yaml:5: templates.0: hysteresis template: rhs must have the term z"):
+        parse_runfile(run)

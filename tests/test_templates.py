@@ -194,3 +194,22 @@ def test_third_party_template_through_the_hook(tmp_path):
     assert simulate(model, series(t, u=np.sin(t)), reg=reg).ok
     with pytest.raises(ConfigError, match="unknown template 'nope'"):
         reg.template("nope")
+
+
+def test_a_hysteresis_follows_v_without_shape_and_saturates_with_it():
+    """Bouc-Wen's z: v itself where h1 = h2 = 0; bounded by span/(h1 + h2) while v grows; and a
+    loop whose rising branch lies above the falling one (each cycle's work is lost in it)."""
+    from mcl.hysteresis import HysteresisTemplate
+
+    tpl = HysteresisTemplate(span=0.5, start=[1.0, 2.0, 0.0, 3.0], shape=[1e-9, 1e-9])
+    v = np.concatenate([np.linspace(0, 1, 50), np.linspace(1, -1, 100)])
+    assert np.allclose(tpl.path(tpl.start(), v), v, atol=1e-6)
+    w = np.array([1.0, 2.0, 0.0, 3.0, 1.0, 1.0])
+    z = tpl.path(w, np.linspace(0, 5, 200))
+    assert z.max() < 0.5 / 2 + 1e-9 and z[-1] > 0.24
+    xs = np.linspace(-1, 1, 41)
+    rising = tpl.curve(w, xs)
+    falling = -rising[::-1]        # (odd: the falling branch is the rising one turned about 0)
+    assert np.all(rising[1:-1] > falling[1:-1]) and np.allclose(rising[[0, -1]], falling[[0, -1]], atol=1e-6)
+    assert tpl.equation(w, across="s", flow="f") == "f = 2*s + 3*z; der(z) = der(s) - (2*abs(der(s))*z + 2*der(s)*abs(z))"
+    assert tpl.uses == {"v", "i", "dv"} and [str(m) for m in tpl.rhs] == ["v", "dv", "z"]

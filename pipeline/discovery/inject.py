@@ -144,11 +144,32 @@ def with_law(dae: Dae, comp: Component, template, w0, nominal: NominalForm | Non
     names = qualified(comp.name, template.parameter_names(), set(dae.p_names))
     w = ca.SX.sym("w", len(names))
     ws = ca.vertsplit(w)
+    if hasattr(template, "state_rate"):
+        dae, env = _hidden_state(dae, comp, template, ws, env)
     if explicit:
         law = D - (template.sx_explicit(ws, env) - _nominal_law(comp, template, nominal, env))
     else:
         law = template.sx_residual(ws, env)
     return _add(dae, rows=[law], p=(w, names, np.asarray(w0, float))), names
+
+
+def _hidden_state(dae: Dae, comp: Component, template, ws, env: dict) -> tuple[Dae, dict]:
+    """``dae`` with the law's own state (a hysteresis' z: :mod:`mcl.hysteresis`), started at 0
+    (the part relaxed), and its equation; ``env`` with it."""
+    name = f"{comp.name}.mcl_{template.STATE}"
+    z, dz = ca.SX.sym(name), ca.SX.sym(f"der({name})")
+    env = {**env, template.STATE: z}
+    nx, hybrid = dae.x.numel(), {}
+    if dae.x_pre.numel() == nx and nx:        # (a hybrid model's pre() and reinit() of the states)
+        hybrid["x_pre"] = ca.vertcat(dae.x_pre, ca.SX.sym(f"pre({name})"))
+    if dae.x_reinit.numel() == nx and nx:
+        hybrid["x_reinit"] = ca.vertcat(dae.x_reinit, z)
+    dae = dataclasses.replace(
+        dae, x=ca.vertcat(dae.x, z), dx=ca.vertcat(dae.dx, dz), x_names=[*dae.x_names, name],
+        x_start=ca.vertcat(dae.x_start, ca.SX(0)), x_fixed=np.append(np.asarray(dae.x_fixed, bool), True),
+        residual=ca.vertcat(dae.residual, dz - template.state_rate(ws, env)), exprs={**dae.exprs, name: z},
+        **hybrid)
+    return dae, env
 
 
 def _nominal_law(comp: Component, template, nominal: NominalForm, env: dict):

@@ -174,6 +174,8 @@ def coefficient_unit(term, units: dict) -> str | None:
     if not y or not re.fullmatch(r"[A-Za-z]+", y):
         return None
     powers = getattr(term, "powers", None)
+    if str(term) == "z":        # a hysteresis' z is in v's units (:mod:`mcl.hysteresis`)
+        powers = (("v", 1),)
     if powers is None or not isinstance(powers, tuple):
         return y if not getattr(term, "variables", None) or term.degree == 0 else None
     num, den = [y], []
@@ -228,6 +230,9 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
     u["va"] = u["vb"] = (units or {}).get(wd.potentials[0]) or u["v"]
     params, rhs = _terms(template, w, names, u)
     law = f"{names['i']} = {' + '.join(rhs) or '0'};"
+    if hasattr(template, "hidden_modelica"):      # the law's own state (a hysteresis' z) and its equation
+        decls, eqs = template.hidden_modelica(w, names["dv"])
+        params, law = params + decls, "\n  ".join([law, *eqs])
     icon = icon_of(comp.cls, lib)
     doc = _documentation(cause, data)
     annotation = f"  annotation({icon + ', ' if icon else ''}Documentation(info=\"{doc}\"));"

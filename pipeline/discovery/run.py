@@ -207,11 +207,16 @@ class Causes:
         if not self.spec.free or len(bests) != 1 or bests[0].get("pair"):
             return bests
         best = bests[0]
-        laws = sorted((c for c in self.rounds[-1]["candidates"]
-                       if c.get("component") == best["component"] and c.get("score") is not None
-                       and c.get("family") != "reference" and "parts" not in c and not c.get("failed")
-                       and (val0 is None or helps(c.get("validation_rms"), val0))),
-                      key=lambda c: c["score"])[:CALIBRATED_LAWS]
+        ranked = sorted((c for c in self.rounds[-1]["candidates"]
+                         if c.get("component") == best["component"] and c.get("score") is not None
+                         and c.get("family") != "reference" and "parts" not in c and not c.get("failed")
+                         and (val0 is None or helps(c.get("validation_rms"), val0))),
+                        key=lambda c: c["score"])
+        # one law once: of the fits of one law from several starts (a hysteresis'), the best
+        # (a worse local optimum, calibrated, may climb to the other's and be named with the
+        # values it had before)
+        law_of = lambda c: (c.get("family"), spec_name(c["template"]), tuple(c.get("terms") or ()))  # noqa: E731
+        laws = [c for k, c in enumerate(ranked) if law_of(c) not in {law_of(o) for o in ranked[:k]}][:CALIBRATED_LAWS]
         if len(laws) < 2:
             return bests
         n_obs = int(np.isfinite(self.y).sum())

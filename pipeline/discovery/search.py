@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ from ..progress import log
 from ..sensitivity import fine_grid
 from ..stats import criterion as criterion_of, gram_inverse
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
-from .families import distillations, families, inverse_families, potential_families, role_of
+from .families import distillations, families, hysteresis_families, inverse_families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
 from .screen import law_signals, linear_response, predicted_rss
 from .verdict import EQUAL
@@ -37,8 +38,9 @@ PAIR_WHEN, PAIR_GAIN = 2.0, 0.5
 WORK = 50
 #: and its states may reach this many times the largest |state| of the nominal run
 SPREAD = 1e3
-#: family indices of the laws in both potentials and of the inverse law (:func:`potential_items`)
-POTENTIALS_INDEX, INVERSE_INDEX = 90, 95
+#: family indices of the hysteresis laws, the laws in both potentials and the inverse law
+#: (:func:`potential_items`)
+HYSTERESIS_INDEX, POTENTIALS_INDEX, INVERSE_INDEX = 85, 90, 95
 
 
 def balanced(base: Base, train: TimeSeries, comp) -> bool:
@@ -271,7 +273,9 @@ def potential_items(ctx: Context, ranked: list[dict], top: int = 2) -> list[Item
     law cannot win but costs minutes to fit through the loop it makes), and laws in both
     connectors' own potentials where both vary (:func:`families.potential_families`:
     radiation where the model has a linear conductor) at the static components among the
-    ``top`` best components."""
+    ``top`` best components; and a hysteresis (:func:`families.hysteresis_families`) at the
+    best component where it is a static physical one whose best law reads the rate beside v
+    (:func:`directional`: its force depends on the direction of motion)."""
     comps = list(dict.fromkeys(c["component"] for c in ranked if "parts" not in c))[:top]
     items = []
     for rank, comp in enumerate(comps):
@@ -282,8 +286,21 @@ def potential_items(ctx: Context, ranked: list[dict], top: int = 2) -> list[Item
         law = next((c for c in ranked if c["component"] == comp and c.get("family") == "static"), None)
         if rank == 0 and not (part.signal or part.sensor) and law is not None and softening(law):
             items += [Item(comp, INVERSE_INDEX + k, f) for k, f in enumerate(inverse_families(env))]
+        if rank == 0 and not (part.signal or part.sensor) and directional(ranked, comp):
+            items += [Item(comp, HYSTERESIS_INDEX + k, f) for k, f in enumerate(hysteresis_families(env))]
         items += [Item(comp, POTENTIALS_INDEX + k, f) for k, f in enumerate(potential_families(env))]
     return items
+
+
+def directional(ranked: list[dict], comp: str) -> bool:
+    """Whether the best law fitted at ``comp`` is a storage law that keeps a term in the rate
+    beside its terms in v: a force that depends on the direction of motion, as a hysteresis'
+    does (the spring of a hysteretic oscillator is best fitted so: i = f(v) dv + g(v))."""
+    law = next((c for c in ranked if c["component"] == comp), None)
+    if law is None or law.get("family") != "storage":
+        return False
+    kept = [t for t, on in zip(law.get("terms") or [], law.get("active") or []) if on]
+    return any("dv" in t for t in kept[1:]) and any(re.search(r"\bv\b", t) for t in kept[1:])
 
 
 def softening(law: dict) -> bool:
@@ -314,7 +331,7 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     items = potential_items(fit.ctx, done)
     out = fit(items) if items else []
     done = _ranked(cands + out)
-    if done_at_noise(done[0], sigma) or done[0].get("family") in ("potentials", "inverse"):
+    if done_at_noise(done[0], sigma) or done[0].get("family") in ("potentials", "inverse", "hysteresis"):
         return out
     one = [c for c in done if c.get("family") in ("static", "rate", "absolute")
            and c.get("law_variable") in ("v", "dv", "va", "vb")]

@@ -29,7 +29,7 @@ def components_of(c: dict) -> list[str]:
 def effect_kind(c: dict, env: dict | None = None) -> str | None:
     """Which role the learned law's additions to the nominal law point to: ``static`` (terms in
     the across value only), ``rate`` (its rate only), ``integral`` (the flow and its rate),
-    ``storage`` (both); None when nothing is added. With ``env`` (the component's law variables
+    ``storage`` (both), ``hysteresis`` (a hysteresis' state); None when nothing is added. With ``env`` (the component's law variables
     along the run), additions that carry less than a tenth of the added flow's energy there do
     not count: a damper's law that is mostly a cubic in the position, with a small term in the
     speed, points to the spring beside it."""
@@ -40,6 +40,8 @@ def effect_kind(c: dict, env: dict | None = None) -> str | None:
              if on and w != 0 and t not in nominal]
     if not extra:
         return None
+    if any(t == "z" for t, _ in extra) and c.get("family") == "hysteresis":
+        return "hysteresis"
     scales = (c.get("template") or {}).get("scales", {}) if isinstance(c.get("template"), dict) else {}
     try:
         monos = [(Monomial.parse(t, scales), w) for t, w in extra]

@@ -72,10 +72,11 @@ def words(comp) -> Words:
 
 def parity(term, constants: dict | None = None) -> int:
     """+1 for an even term, -1 for an odd one, 0 for neither (checked numerically on v, i, dv, di
-    changing sign together: the orientation flip; the potentials va, vb keep theirs, a constant
-    is even; ``constants``: the values of scale names)."""
+    changing sign together, with a hysteresis' z, the part of v it follows: the orientation
+    flip; the potentials va, vb keep theirs, a constant is even; ``constants``: the values of
+    scale names)."""
     rng = np.random.default_rng(1)
-    env = {k: rng.uniform(0.1, 2.0, 16) for k in ("v", "i", "dv", "di")}
+    env = {k: rng.uniform(0.1, 2.0, 16) for k in ("v", "i", "dv", "di", "z")}
     pots = {k: rng.uniform(0.1, 2.0, 16) for k in ("va", "vb")}
     neg = {**(constants or {}), **pots, **{k: -x for k, x in env.items()}}
     env = {**(constants or {}), **pots, **env}
