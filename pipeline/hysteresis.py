@@ -128,9 +128,16 @@ class HysteresisTemplate(PolynomialTemplate):
     def curve(self, w, xs, at=None) -> np.ndarray:
         """The loop's rising branch over ``xs`` (ascending): v swept down from its top and up
         again twice, so that z is on the loop it settles to, and read on the last rise."""
+        return self.branch(w, xs, rising=True)
+
+    def branch(self, w, xs, rising: bool = True) -> np.ndarray:
+        """The flow on the loop's rising (or falling) branch at ``xs`` (ascending), the loop
+        swept over their span until z settles on it."""
         xs = np.atleast_1d(np.asarray(xs, float))
-        cycle = np.concatenate([xs[::-1], xs[1:], xs[::-1][1:], xs[1:]])
-        z = self.path(w, cycle)[-len(xs):]
+        down, up = xs[::-1], xs
+        legs = [down, up[1:], down[1:], up[1:]] + ([] if rising else [down[1:]])
+        z = self.path(w, np.concatenate(legs))[-len(xs):]
+        z = z if rising else z[::-1]
         return self._explicit(np.asarray(w, float), {"v": xs, "dv": np.zeros_like(xs), "z": z})
 
     def residual(self, w, env: dict) -> np.ndarray:

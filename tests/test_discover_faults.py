@@ -139,8 +139,8 @@ def test_no_cause_when_the_best_candidate_does_not_help_on_validation(tmp_path):
 
 
 def test_every_builtin_template_runs_through_mcl_run(tmp_path):
-    """Pinned templates: the neural one (an equation in v and i, solved for i) and the memory
-    one go through the same run as the families do."""
+    """Pinned templates: the neural one (an equation in v and i, solved for i), the memory one
+    and the hysteresis (a state of its own) go through the same run as the families do."""
     from mcl.api import registry
 
     f = lambda v: 0.5 * v + 0.6 * v**3
@@ -148,7 +148,8 @@ def test_every_builtin_template_runs_through_mcl_run(tmp_path):
     slider(tmp_path / "validate.csv", 18, f)
     specs = {"polynomial": "{name: polynomial, lhs: [i], rhs: [dv, dv^3]}",
              "memory": "{name: memory, lhs: [i], rhs: [dv, dv^3]}",
-             "neural": "{name: neural, hidden: 2, x: dv}"}
+             "neural": "{name: neural, hidden: 2, x: dv}",
+             "hysteresis": "{name: hysteresis, rhs: [dv, dv^3, z], span: 0.5}"}
     assert set(specs) == set(registry().templates)          # a new built-in needs a line here
     for name, spec in specs.items():
         (tmp_path / "run.yaml").write_text(

@@ -209,7 +209,8 @@ def test_a_hysteresis_follows_v_without_shape_and_saturates_with_it():
     assert z.max() < 0.5 / 2 + 1e-9 and z[-1] > 0.24
     xs = np.linspace(-1, 1, 41)
     rising = tpl.curve(w, xs)
-    falling = -rising[::-1]        # (odd: the falling branch is the rising one turned about 0)
+    falling = tpl.branch(w, xs, rising=False)
+    assert np.allclose(falling, -rising[::-1], atol=1e-6)      # (an odd law: the loop turned about 0)
     assert np.all(rising[1:-1] > falling[1:-1]) and np.allclose(rising[[0, -1]], falling[[0, -1]], atol=1e-6)
     assert tpl.equation(w, across="s", flow="f") == "f = 2*s + 3*z; der(z) = der(s) - (2*abs(der(s))*z + 2*der(s)*abs(z))"
     assert tpl.uses == {"v", "i", "dv"} and [str(m) for m in tpl.rhs] == ["v", "dv", "z"]

@@ -79,6 +79,9 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     held = ({other: float(template.at.get(other, np.mean(env[other])))}
             if (template.uses & {"va", "vb"}) - {var} else {})
     curve = [[x_sign * float(x), sign * float(f)] for x, f in zip(xs, template.curve(w, xs, at=held))]
+    # a law that remembers its path (a hysteresis) is a loop: its falling branch too
+    falling = ([[x_sign * float(x), sign * float(f)] for x, f in zip(xs, template.branch(w, xs, rising=False))]
+               if hasattr(template, "branch") else None)
     x_nom, f_nom = (env["i"], env["v"]) if var == "i" else (env[var], env["i"])
     pick = np.linspace(0, len(x_nom) - 1, min(200, len(x_nom))).astype(int)
     nominal_points = sorted([x_sign * float(x_nom[k]), sign * float(f_nom[k])] for k in pick)
@@ -114,6 +117,7 @@ def describe(best: dict, base, spec, train, signals) -> dict:
                     "variable": {"v": "across", "dv": "der(across)", "i": "flow", "va": "potential at a",
                                  "vb": "potential at b"}[var],
                     "range": sorted([x_sign * float(lo), x_sign * float(hi)]), "curve": curve,
+                    **({"falling": falling} if falling else {}),
                     "nominal": nominal_points,
                     "x": x_name, "y": y_name, "x_unit": unit_of(x_name, units), "y_unit": unit_of(y_name, units),
                     "sign": sign,          # the equation's orientation against the template's (v = a - b, i into a)

@@ -172,7 +172,12 @@ def _law_figure(plt, cause):
     if law.get("band"):
         band = 1.96 * np.asarray(law["band"], float)
         ax.fill_between(xs, fs - band, fs + band, color="tab:green", alpha=0.2, label="95% band")
-    ax.plot(xs, fs, color="tab:green", lw=2, label="learned law")
+    if law.get("falling"):        # a hysteresis: the loop, its rising branch where the curve is
+        xf, ff = np.array(law["falling"]).T
+        ax.plot(xf, ff, color="tab:green", lw=2, ls=":", label="learned law, across value falling")
+        ax.plot(xs, fs, color="tab:green", lw=2, label="learned law, across value rising")
+    else:
+        ax.plot(xs, fs, color="tab:green", lw=2, label="learned law")
     ax.set_xlabel(_label(law.get("x", law["across"]), law.get("x_unit")))
     ax.set_ylabel(_label(law.get("y", law["flow"]), law.get("y_unit")))
     ax.set_title(law["equation"], fontsize=9)
