@@ -273,11 +273,12 @@ def potential_items(ctx: Context, ranked: list[dict], top: int = 2) -> list[Item
     law cannot win but costs minutes to fit through the loop it makes), and laws in both
     connectors' own potentials where both vary (:func:`families.potential_families`:
     radiation where the model has a linear conductor) at the static components among the
-    ``top`` best components; and a hysteresis (:func:`families.hysteresis_families`) at the
-    best component where it is a static physical one whose best law reads the rate beside v
-    (:func:`directional`: its force depends on the direction of motion)."""
+    ``top`` best components; and a hysteresis (:func:`families.hysteresis_families`) where
+    the best component's best law reads the rate beside v (:func:`directional`: its force
+    depends on the direction of motion), at it where it is a static physical one, else at the
+    static ones in parallel with it (a damper beside the spring takes that law as well)."""
     comps = list(dict.fromkeys(c["component"] for c in ranked if "parts" not in c))[:top]
-    items = []
+    items = hysteresis_items(ctx, ranked, comps[0]) if comps and directional(ranked, comps[0]) else []
     for rank, comp in enumerate(comps):
         env = ctx.signals[comp].env() if comp in ctx.signals else None
         if env is None or role_of(env) != "static":
@@ -286,9 +287,22 @@ def potential_items(ctx: Context, ranked: list[dict], top: int = 2) -> list[Item
         law = next((c for c in ranked if c["component"] == comp and c.get("family") == "static"), None)
         if rank == 0 and not (part.signal or part.sensor) and law is not None and softening(law):
             items += [Item(comp, INVERSE_INDEX + k, f) for k, f in enumerate(inverse_families(env))]
-        if rank == 0 and not (part.signal or part.sensor) and directional(ranked, comp):
-            items += [Item(comp, HYSTERESIS_INDEX + k, f) for k, f in enumerate(hysteresis_families(env))]
         items += [Item(comp, POTENTIALS_INDEX + k, f) for k, f in enumerate(potential_families(env))]
+    return items
+
+
+def hysteresis_items(ctx: Context, ranked: list[dict], best: str) -> list[Item]:
+    """The hysteresis laws at ``best`` where it is a static physical component, else at the
+    static physical components in parallel with it."""
+    structure = ctx.base.structure
+    items = []
+    for comp in [best, *structure.parallel(best)]:
+        part = structure.components[comp]
+        env = ctx.signals[comp].env() if comp in ctx.signals else None
+        if env is not None and role_of(env) == "static" and not (part.signal or part.sensor):
+            items += [Item(comp, HYSTERESIS_INDEX + k, f) for k, f in enumerate(hysteresis_families(env))]
+            if comp == best:
+                break
     return items
 
 
