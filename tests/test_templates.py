@@ -1,4 +1,6 @@
 """Templates swapped into models of any library compile, simulate, and match hand-derived laws."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -214,3 +216,22 @@ def test_a_hysteresis_follows_v_without_shape_and_saturates_with_it():
     assert np.all(rising[1:-1] > falling[1:-1]) and np.allclose(rising[[0, -1]], falling[[0, -1]], atol=1e-6)
     assert tpl.equation(w, across="s", flow="f") == "f = 2*s + 3*z; der(z) = der(s) - (2*abs(der(s))*z + 2*der(s)*abs(z))"
     assert tpl.uses == {"v", "i", "dv"} and [str(m) for m in tpl.rhs] == ["v", "dv", "z"]
+
+
+def test_a_hysteresis_class_declares_its_state_and_reproduces_a_spring(tmp_path):
+    """The class written for a hysteresis (its own connectors, no library interface) declares z
+    and its equation: with z's coefficient 0 it is the spring it replaces, and with a loop it
+    runs."""
+    graph = build_graph([LIB], "MCL.Examples.MassSpringDamper")
+    tpl = registry().template({"name": "hysteresis", "span": 0.5})
+    t = np.linspace(0, 10, 501)
+    u = series(t, u=np.sin(1.3 * t) + 0.5)
+    tm = swap_component(graph, "spring", tpl, tmp_path / "a", w=[1.0, 4.0, 0.0, 0.0, 1.0, -1.0])
+    a = simulate(compile_model(tm.sources, tm.model_name), u, options=TIGHT)
+    b = simulate(compiled("MCL.Examples.MassSpringDamper"), u, options=TIGHT)
+    assert a.ok and rel_err(a.outputs, b.outputs) < 1e-7
+    tm = swap_component(graph, "spring", tpl, tmp_path / "b", w=[1.0, 2.0, 0.0, 2.0, 1.0, 1.0])
+    text = "".join(Path(p).read_text() for p in tm.sources if str(p).endswith(".mo"))
+    assert "Real z(start = 0, fixed = true)" in text and "der(z) = dv - (h1*abs(dv)*z + h2*dv*abs(z))/span;" in text
+    c = simulate(compile_model(tm.sources, tm.model_name), u, options=TIGHT)
+    assert c.ok and rel_err(c.outputs, b.outputs) > 1e-3
