@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import sys
 import tempfile
 import time
@@ -30,6 +29,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from discovery_scaling import cpu  # noqa: E402  (this process's and its workers' CPU seconds)
+from mcl.data import TimeSeries, write_csv  # noqa: E402
 M, C, K, ALPHA, BETA, GAMMA, DELTA = 2.0, 10.0, 5e4, 5e4, 1e3, 0.8, -1.1
 FS, N, NOISE = 750.0, 8192, 8e-6
 
@@ -81,16 +83,6 @@ def simulate(u: np.ndarray) -> np.ndarray:
     return solve_ivp(rhs, (0, t[-1]), [0, 0, 0], t_eval=t, method="DOP853", rtol=1e-9, atol=1e-12, max_step=1 / FS).y[0]
 
 
-def write(path: Path, u, y) -> None:
-    t = np.arange(len(u)) / FS
-    path.write_text("time,u,y\n" + "".join(f"{a:.10g},{b:.10g},{c:.10g}\n" for a, b, c in zip(t, u, y)))
-
-
-def cpu() -> float:
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--periods", type=int, default=2, help="multisine periods of 8192 samples to train on")
@@ -102,14 +94,14 @@ def main(argv=None) -> int:
     t0 = cpu()
     for name, n in (("train", args.periods * N), ("validate", N)):
         u = multisine(rng, n)
-        write(work / f"{name}.csv", u, simulate(u) + rng.normal(0, NOISE, n))
+        y = simulate(u) + rng.normal(0, NOISE, n)
+        write_csv(work / f"{name}.csv", TimeSeries(np.arange(n) / FS, np.column_stack([u, y]), ["u", "y"]))
     made = cpu() - t0
     (work / "BoucWen.mo").write_text(MODEL)
     msl = os.environ.get("MODELICAPATH") or str(ROOT.parent / "shared" / "msl")
     (work / "run.yaml").write_text(
         f"model: {{sources: [BoucWen.mo], name: BoucWen.Oscillator, libraries: [{msl}]}}\n"
         "data: {train: train.csv, validate: validate.csv}\nunknown: auto\nfree: auto\noutput: out\n")
-    sys.path.insert(0, str(ROOT))
     from mcl.cli import main as mcl
 
     t1, wall = cpu(), time.perf_counter()

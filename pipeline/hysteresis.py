@@ -155,21 +155,23 @@ class HysteresisTemplate(PolynomialTemplate):
              f"+ {h2 / self.span:.{digits}g}*{rate}*abs(z))").replace("+ -", "- ")
         return f"{super().equation(w, across, flow, digits, potentials)}; {z}"
 
-    def hidden_modelica(self, w, rate: str) -> tuple[list[str], list[str]]:
-        """(declarations, equations) of z in a class whose rate of v is named ``rate``."""
+    def hidden_modelica(self, w, rate: str, shape: bool = True) -> tuple[list[str], list[str]]:
+        """(declarations, equations) of z in a class whose rate of v is named ``rate``; with
+        ``shape``, h1 and h2 declared too (a class that declares the template's parameters
+        itself has them)."""
         w = np.asarray(w, float)
         h1, h2 = self._shape(w)
-        decls = [f'  parameter Real h1 = {float(h1)!r} "how sharply z saturates (in units of span)";',
-                 f'  parameter Real h2 = {float(h2)!r} "the asymmetry of loading and unloading (in units of span)";',
-                 f'  parameter Real span = {self.span!r} "the length z\'s shape parameters are in units of";',
-                 '  Real z(start = 0, fixed = true) "the hysteretic part of the deformation (Bouc-Wen)";']
+        decls = ([f'  parameter Real h1 = {float(h1)!r} "how sharply z saturates (in units of span)";',
+                  f'  parameter Real h2 = {float(h2)!r} "the asymmetry of loading and unloading (in units of span)";']
+                 if shape else [])
+        decls += [f'  parameter Real span = {self.span!r} "the length z\'s shape parameters are in units of";',
+                  '  Real z(start = 0, fixed = true) "the hysteretic part of the deformation (Bouc-Wen)";']
         eqs = [f"der(z) = {rate} - (h1*abs({rate})*z + h2*{rate}*abs(z))/span;"]
         return decls, eqs
 
     def modelica_class(self, class_name: str, component, w=None, note: str = "", learned: bool = False) -> str:
         w = self.start() if w is None else np.asarray(w, dtype=float)
         text = super().modelica_class(class_name, component, w, note, learned)
-        decls, eqs = self.hidden_modelica(w, "dv")
-        decls = [d for d in decls if not d.lstrip().startswith(("parameter Real h1 ", "parameter Real h2 "))]
+        decls, eqs = self.hidden_modelica(w, "dv", shape=False)     # (h1, h2: among the parameters written)
         head, tail = text.split("\nequation\n", 1)
         return f"{head}\n" + "\n".join(decls) + "\nequation\n" + "".join(f"  {e}\n" for e in eqs) + tail

@@ -12,6 +12,7 @@ function). The line count is kept: a message naming a line still names the right
 """
 from __future__ import annotations
 
+import functools
 import os
 import re
 import shutil
@@ -74,11 +75,14 @@ def tree_copy(top: Path, place: Path) -> Path:
     return place / top.parent.name / "package.mo"
 
 
+@functools.lru_cache(maxsize=64)
 def lifted_tree(top: Path, place: Path) -> Path:
     """The root ``package.mo`` to load for the package directory of ``top``: ``top`` itself where
     no file of the tree has a redeclaration to lift, else :func:`tree_copy`, made once: each
     ``.mo`` file lifted (rumoca reads a package directory itself, so its files cannot be handed
-    over one by one as a single-file model's text is), every other file a link to its own."""
+    over one by one as a single-file model's text is), every other file a link to its own.
+    Read once per process for each ``place`` (named by the tree's content): a compile loads the
+    tree twice, to register it and to compile its model."""
     root = top.parent
     texts = {f: f.read_text(encoding="utf-8", errors="replace") for f in sorted(root.rglob("*.mo"))}
     if all(lifted(t) == t for t in texts.values()):

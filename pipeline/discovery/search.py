@@ -295,15 +295,14 @@ def hysteresis_items(ctx: Context, ranked: list[dict], best: str) -> list[Item]:
     """The hysteresis laws at ``best`` where it is a static physical component, else at the
     static physical components in parallel with it."""
     structure = ctx.base.structure
-    items = []
-    for comp in [best, *structure.parallel(best)]:
+
+    def static(comp: str) -> bool:
         part = structure.components[comp]
-        env = ctx.signals[comp].env() if comp in ctx.signals else None
-        if env is not None and role_of(env) == "static" and not (part.signal or part.sensor):
-            items += [Item(comp, HYSTERESIS_INDEX + k, f) for k, f in enumerate(hysteresis_families(env))]
-            if comp == best:
-                break
-    return items
+        return comp in ctx.signals and role_of(ctx.signals[comp].env()) == "static" and not (part.signal or part.sensor)
+
+    targets = [best] if static(best) else [c for c in structure.parallel(best) if static(c)]
+    return [Item(c, HYSTERESIS_INDEX + k, f) for c in targets
+            for k, f in enumerate(hysteresis_families(ctx.signals[c].env()))]
 
 
 def directional(ranked: list[dict], comp: str) -> bool:
