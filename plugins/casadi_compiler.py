@@ -30,15 +30,18 @@ class CasadiCompiler(Compiler):
         from mcl.model import CompiledModel
 
         libraries = (options or {}).get("libraries", ())
+        # "calls: kept": large functions stay calls (for C code: see rumoca_frontend.KEPT_CALL_PAST)
+        keep_calls = (options or {}).get("calls") == "kept"
         prep = rumoca_frontend.prepare(sources, libraries, model)
         key = compile_cache.key_of(model=model, docs=sorted(h for h, _ in prep.docs.values()),
-                                   libraries=compile_cache.library_fingerprint(prep.whole), compiler=self.name)
+                                   libraries=compile_cache.library_fingerprint(prep.whole), compiler=self.name,
+                                   **({"calls": "kept"} if keep_calls else {}))
         cached = compile_cache.load(key)
         if cached is not None:
             return cached
         start = time.perf_counter()
         ir, located = rumoca_frontend.load_ir(sources, model, libraries, prepared=prep)
-        raw = rumoca_frontend.to_dae(ir, located, model)
+        raw = rumoca_frontend.to_dae(ir, located, model, keep_calls)
         dae = eliminate_aliases(raw)
         ode = structure.build_ode(dae, model)
         resolve, in_library = _classes(located, model, prep.files, libraries)
@@ -47,6 +50,7 @@ class CasadiCompiler(Compiler):
         seconds = time.perf_counter() - start
         files = sorted({path for path, _ in located.files.values()})
         info = {"compiler": self.name, "frontend": "rumoca", "sources": [str(f) for f in sources],
+                "libraries": [str(p) for p in libraries], "calls": "kept" if keep_calls else "inlined",
                 "files_read": len(files), "library_subset": ir.get("library_subset"), "units": dae.units, "descriptions": dae.descriptions,
                 "compile_seconds": seconds}
         compiled = CompiledModel(model, ode, info, dae=raw, structure=components)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from helpers import compiled, multisine, rel_err, series
+from helpers import compiled, msl_path, multisine, needs_msl, rel_err, series
 from mcl.api import simulate
 from mcl.compile.fmu.export import build_fmu, validate_fmu
 from mcl.model import FmuModel
@@ -218,3 +218,92 @@ def test_an_output_that_is_a_state_is_one_variable_whose_start_can_be_set(tmp_pa
     res = fmpy.simulate_fmu(str(path), stop_time=2.0, output_interval=0.5, start_values={"y": 3.0}, output=["y", "z"])
     assert res["y"] == pytest.approx(3.0 * np.exp(-res["time"] / 0.5), rel=1e-4)
     assert res["z"] == pytest.approx(2 * res["y"])
+
+
+PROPERTY_PLANT = """
+within;
+package PropertyPlant "heat capacity of a fluid from a long correlation, read by eight tanks"
+  function cp "specific heat capacity: a 100-term series, as media functions are"
+    input Real T "temperature";
+    output Real c;
+  protected
+    Real x = (T - 300)/100;
+  algorithm
+    c := 4180;
+    for k in 1:100 loop
+      c := c + 10/k^2*sin(k*x) + 0.5/k*x^2*cos(k*x);
+    end for;
+  end cp;
+
+  model Tank
+    parameter Real m = 1 "mass";
+    parameter Real UA = 5000;
+    Real T(start = 300, fixed = true);
+    Modelica.Blocks.Interfaces.RealInput T_in;
+  equation
+    der(T) = UA*(T_in - T)/(m*cp(T));
+  end Tank;
+
+  model Plant
+    import Modelica.Blocks.Interfaces.RealInput;
+    RealInput T_feed;
+    Tank t1(m = 1.0), t2(m = 1.25), t3(m = 1.5), t4(m = 1.75), t5(m = 2.0), t6(m = 2.25), t7(m = 2.5), t8(m = 2.75);
+    Modelica.Blocks.Interfaces.RealOutput T_out = t8.T;
+  equation
+    t1.T_in = T_feed;
+    t2.T_in = t1.T;
+    t3.T_in = t2.T;
+    t4.T_in = t3.T;
+    t5.T_in = t4.T;
+    t6.T_in = t5.T;
+    t7.T_in = t6.T;
+    t8.T_in = t7.T;
+  end Plant;
+end PropertyPlant;
+"""
+
+
+@needs_msl()
+def test_code_too_large_inlined_is_written_with_its_functions_as_calls(tmp_path, monkeypatch):
+    """Where a model's C with its functions inlined at every call would be too large (a Fluid
+    example's water properties: 200 MB), the FMU is built from the model compiled again with its
+    large functions kept as calls, whose C is written once: it validates and runs as the
+    in-process model (which keeps them inlined: faster to evaluate)."""
+    from mcl import compile_model
+    from mcl.compile.fmu import export
+
+    monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "PropertyPlant.mo").write_text(PROPERTY_PLANT)
+    model = compile_model([tmp_path / "PropertyPlant.mo"], "PropertyPlant.Plant", libraries=[msl_path()])
+    twin = export._calls_kept(model)
+    assert model.info["calls"] == "inlined" and twin.info["calls"] == "kept"
+    inlined = sum(f.n_instructions() for f in _sx_functions(model.ode.ode))
+    kept = sum(f.n_instructions() for f in _sx_functions(twin.ode.ode))
+    assert kept < inlined / 2, (kept, inlined)
+    t = np.linspace(0, 20, 401)
+    u = series(t, T_feed=300 + 50 * np.sin(0.5 * t))
+    a, b = simulate(model, u), simulate(twin, u)
+    assert a.ok and b.ok and np.ptp(a.outputs) > 5 and rel_err(b.outputs, a.outputs) < 1e-4
+    # the inlined C past the limit: the FMU is the twin's, and runs as the in-process model
+    sizes = {}
+    generate = export.generate_sources
+    monkeypatch.setattr(export, "generate_sources", lambda m, *args, **kw: sizes.setdefault(
+        m.info["calls"], sum(f.stat().st_size for f in generate(m, *args, **kw))) and generate(m, *args, **kw))
+    monkeypatch.setattr(export, "C_LIMIT_O0", 1_000_000)
+    fmu = FmuModel.read(build_fmu(model, tmp_path / "p.fmu"))
+    assert sizes["kept"] < 1_000_000 < sizes["inlined"], sizes
+    c = simulate(fmu, u)
+    assert c.ok and c.engine == "fmu" and rel_err(c.outputs, a.outputs) < 1e-4
+
+
+def _sx_functions(f):
+    """The SX functions an MX function calls, at any depth."""
+    if f.is_a("SXFunction"):
+        return [f]
+    found = []
+    if f.is_a("MXFunction"):
+        for i in range(f.n_instructions()):
+            x = f.instruction_MX(i)
+            if x.is_call():
+                found += _sx_functions(x.which_function())
+    return found

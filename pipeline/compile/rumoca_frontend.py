@@ -786,8 +786,9 @@ class _Translator:
     stack, children before parents), so a 5000-term sum or a long binding chain has no depth
     limit; a function call interprets the function's body in its own context."""
 
-    def __init__(self, storage: dict, model: str, located: "Located | None" = None):
+    def __init__(self, storage: dict, model: str, located: "Located | None" = None, keep_calls: bool = False):
         self.st, self.model, self.located = storage, model, located
+        self.keep_calls = keep_calls
         expr = storage["expressions"]
         self.nodes, self.operand_list = expr["nodes"], expr["operands"]
         self.subscripts = expr.get("subscripts", [])
@@ -1472,7 +1473,9 @@ class _Translator:
         # inlined once per field (14.7 million nodes for rho_ph instead of 0.9)
         key = (compiled.name(), tuple(tuple(e.element_hash() for e in ca.vertsplit(ca.vec(a))) for a in actual))
         if key not in self._calls:
-            self._calls[key] = (actual, compiled.call(actual))    # the arguments kept: the key holds their nodes' addresses
+            # kept as a call node (keep_calls), a large function's C is written once, not at each call
+            kept = self.keep_calls and compiled.n_instructions() > KEPT_CALL_PAST
+            self._calls[key] = (actual, compiled.call(actual, False, kept))   # the arguments kept: the key holds their nodes' addresses
         outs = self._calls[key][1]
         n_out, tags = self._function_tags[compiled.name()]
         for violated, (level, message) in zip(outs[n_out:], tags):
@@ -1544,6 +1547,12 @@ class _Translator:
         self._compiled[key] = compiled
         return compiled, symbolic
 
+
+#: with keep_calls, a function of more instructions than this stays a call in the expressions
+#: (smaller ones are inlined, where they simplify). Kept calls evaluate every output and branch
+#: of the function: a steam model's right-hand side took 106 ms kept against 1.9 ms inlined, so
+#: calls are kept only for code (an FMU whose inlined C would be too large to compile)
+KEPT_CALL_PAST = 100
 
 #: growth of the process's memory a compile's translation may use (MCL_COMPILE_MEMORY_GB)
 COMPILE_MEMORY_GB = 4.0
@@ -1654,12 +1663,12 @@ def _scalar_names(name: str, dims: list[int]) -> list[str]:
     return [f"{name}[{','.join(str(k + 1) for k in idx)}]" for idx in np.ndindex(*dims)]
 
 
-def to_dae(ir: dict, located: Located, model: str) -> Dae:
+def to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) -> Dae:
     """The DAE-stage IR as a scalar :class:`Dae` (arrays split into scalars, balance checked,
     parameters resolved to the free ones). The IR is another program's schema: a shape we do
     not know (a missing key, an index outside a table) is a one-line refusal, not a crash."""
     try:
-        return _to_dae(ir, located, model)
+        return _to_dae(ir, located, model, keep_calls)
     except (KeyError, IndexError, TypeError) as exc:
         raise UnsupportedConstruct(f"cannot translate rumoca's IR of {model} ({type(exc).__name__}: {exc}); "
                                    "try --compiler pymoca, or report the model",
@@ -1703,14 +1712,14 @@ def _evaluated(ir: dict) -> set[str]:
     return {re.sub(r"\[[^\]]*\]$", "", n) for n, v in flat.items() if v.get("evaluate")}
 
 
-def _to_dae(ir: dict, located: Located, model: str) -> Dae:
+def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) -> Dae:
     st = ir["storage"]
     _whole_arena(st)
     variables = st["variables"]
     _refuse_events(st, located, model)
     dims = [list(st["value_types"][v["value_type"]]["dimensions"] or []) for v in variables]
     size = [int(np.prod(d)) if d else 1 for d in dims]
-    tr = _Translator(st, model, located)
+    tr = _Translator(st, model, located, keep_calls)
     role = [v["role"] for v in variables]
     attrs = [v["attributes"] for v in variables]
     # an external object (a table's id: rumoca evaluated its constructor) and a String (a

@@ -440,6 +440,12 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
         if fmu is None:
             c_files = generate_sources(model, build, ident, _GUID_SLOT, tolerance=experiment.tolerance,
                                        settable=starts[0])
+            twin = _calls_kept(model) if sum(f.stat().st_size for f in c_files) > C_LIMIT_O0 else None
+            if twin is not None:
+                for f in build.iterdir():
+                    f.unlink()
+                c_files = generate_sources(twin, build, ident, _GUID_SLOT, tolerance=experiment.tolerance,
+                                           settable=starts[0])
             sources = sorted(p.name for p in build.iterdir() if p.suffix in (".c", ".h"))
             key = _build_key("sources", xml, *sources, *((build / s).read_text() for s in sources))
             fmu = compile_cache.fmu_lookup(key)
@@ -464,6 +470,24 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
         finally:
             staged.unlink(missing_ok=True)
     return out_path
+
+
+def _calls_kept(model: CompiledModel) -> CompiledModel | None:
+    """``model`` compiled again with its large functions kept as calls (each one's C written once,
+    not inlined at every call: a Fluid example's 200 MB of C became 8 MB), where it is a model
+    as the compiler gave it (not one with a law put in) and the twin has the same variables;
+    else None."""
+    info = model.info
+    if info.get("frontend") != "rumoca" or info.get("calls") != "inlined" or compile_cache.model_key(model) is None:
+        return None
+    from mcl.services import compile_model
+    try:
+        twin = compile_model([Path(s) for s in info["sources"]], model.name, info.get("compiler"),
+                             {"calls": "kept"}, libraries=[Path(p) for p in info.get("libraries", ())])
+    except (ModelicaError, CompileError):
+        return None
+    same = all(getattr(twin.ode, k) == getattr(model.ode, k) for k in ("x_names", "p_names", "u_names", "y_names"))
+    return twin if same and _probe_variables(twin) == _probe_variables(model) else None
 
 
 _GUID_SLOT = "{mcl-guid-of-this-build}"
