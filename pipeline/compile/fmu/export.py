@@ -219,7 +219,7 @@ def generate_sources(model: CompiledModel, build: Path, ident: str, guid: str,
     if any(_NO_CODE in (build / name).read_text() for name in C_FUNCTIONS) and model.dae is not None and not rebuilt:
         return generate_sources(for_code(model), build, ident, guid, residual_tol, tolerance, settable, True,
                                 fd_jacobian)
-    if fd_jacobian is None and sum((build / name).stat().st_size for name in C_FUNCTIONS) > C_LIMIT:
+    if fd_jacobian is None and c_size(build / name for name in C_FUNCTIONS) > C_LIMIT:
         return generate_sources(model, build, ident, guid, residual_tol, tolerance, settable, rebuilt, True)
     template = (_HERE / "fmi2_model.c").read_text()
     nq = derived.nnz_out(0) if derived is not None else 0
@@ -440,7 +440,7 @@ def build_fmu(model: CompiledModel, out_path, validate: bool = True, *, experime
         if fmu is None:
             c_files = generate_sources(model, build, ident, _GUID_SLOT, tolerance=experiment.tolerance,
                                        settable=starts[0])
-            twin = _calls_kept(model) if sum(f.stat().st_size for f in c_files) > C_LIMIT_O0 else None
+            twin = _calls_kept(model) if c_size(c_files) > C_LIMIT_O0 else None
             if twin is not None:
                 for f in build.iterdir():
                     f.unlink()
@@ -538,6 +538,11 @@ O1_PAST = 2_000_000
 _FUNCTION_START = re.compile(rb"^(?:static |CASADI_SYMBOL_EXPORT )?int \w+\(const casadi_real\*\* arg", re.M)
 
 
+def c_size(files) -> int:
+    """Bytes of C in ``files``."""
+    return sum(f.stat().st_size for f in files)
+
+
 def largest_function(path: Path) -> int:
     """Bytes of the largest function CasADi wrote in C file ``path``."""
     text = path.read_bytes()
@@ -547,7 +552,7 @@ def largest_function(path: Path) -> int:
 
 def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: list[str], xml: str) -> Path:
     """gcc, then the archive (packed in the build directory: nothing half-written is left)."""
-    size = sum(f.stat().st_size for f in c_files)
+    size = c_size(c_files)
     if size > C_LIMIT_O0:
         raise CompileError(f"the FMU's generated C code is {size / 1e6:.0f} MB, too large to compile "
                            f"(the limit is {C_LIMIT_O0 / 1e6:.0f} MB): the model runs in process, not as an FMU")
