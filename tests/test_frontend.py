@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from helpers import series
+from helpers import msl_path, needs_msl, series
 from mcl.api import compile_model, simulate
 from mcl.errors import ModelicaError, UnsupportedConstruct
 
@@ -85,6 +85,50 @@ end Decay;
     res = simulate(model, series(t), t_out=t)
     assert res.ok, res.reason
     assert np.allclose(res.states[:, 0], np.exp(-3.0 * t), rtol=1e-5)
+
+
+WALL = """model Wall "a wall of n layers of rising heat capacity, warmed by the room"
+  import Modelica.Thermal.HeatTransfer.Components;
+  import Modelica.Thermal.HeatTransfer.Sources.FixedTemperature;
+  parameter Integer n = 4;
+  parameter Real G(unit = "W/K") = 2;
+  Components.HeatCapacitor layer[n](C = linspace(10, 40, n) "each layer's", each T(start = 300, fixed = true));
+  Components.ThermalConductor g[n](G = G*ones(n));
+  FixedTemperature room(T = 350);
+equation
+  for i in 1:n loop
+    connect(room.port, g[i].port_a);
+    connect(g[i].port_b, layer[i].port);
+  end for;
+end Wall;
+"""
+
+
+@needs_msl()
+@pytest.mark.parametrize("as_package", [False, True])
+def test_a_component_array_modified_by_an_array_expression_takes_its_elements(tmp_path, as_package):
+    """rumoca refuses a component array modified by an array expression that is not a literal
+    (``C = linspace(...)``: "expression shape mismatch"); mcl compiles it again with each such
+    value written element by element, in a single file and in a package directory (whose
+    package.mo names no library: the imports are in the model's own file): each layer warms
+    towards the room at its own rate G/C_i."""
+    if as_package:
+        (tmp_path / "Walls").mkdir()
+        (tmp_path / "Walls" / "package.mo").write_text("package Walls\nend Walls;\n")
+        (tmp_path / "Walls" / "Wall.mo").write_text("within Walls;\n" + WALL)
+        source, name = tmp_path / "Walls", "Walls.Wall"
+    else:
+        source, name = tmp_path / "Wall.mo", "Wall"
+        source.write_text(WALL)
+    text = {f: f.read_text() for f in tmp_path.rglob("*.mo")}
+    model = compile_model([source], name, libraries=[msl_path()])
+    t = np.linspace(0.0, 10.0, 21)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    C = np.linspace(10, 40, 4)
+    truth = 350 - 50 * np.exp(-2 * np.outer(t, 1 / C))
+    assert np.allclose(res.states, truth, rtol=1e-5)
+    assert {f: f.read_text() for f in tmp_path.rglob("*.mo")} == text       # the user's files untouched
 
 
 @pytest.mark.parametrize("body,construct,needle", [

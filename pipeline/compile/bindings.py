@@ -1,4 +1,5 @@
-"""Parameters bound to a bare function call, restated so that rumoca counts them as parameters.
+"""Bindings restated so that rumoca reads them as written: parameters bound to a bare function
+call, and the modifiers of a component array that give one array for all its elements.
 
 rumoca 0.10 counts the binding of a scalar parameter to a call of a function with an array
 argument (``parameter Real L = Modelica.Math.Vectors.length(r)``, a gear's efficiency
@@ -6,11 +7,19 @@ interpolated in its loss table) as an equation of the model, while the parameter
 unknown: the model is refused as unbalanced (2 equations for 1 unknown). The same call inside an
 expression is a parameter's binding as it should be. :func:`restated` writes ``f(...) + 0`` for
 each such binding of a Real or Integer parameter (the value and type unchanged, the line count
-kept); the compile tries it only after rumoca refused the model as written as unbalanced.
+kept).
+
+rumoca 0.10 also fails on a component array modified by an array expression other than a
+literal or a reference, ``HeatCapacitor cap[n](C = linspace(10, 30, n))`` (unbalanced, or
+"expression shape mismatch"): :func:`distributed` writes the value element by element,
+``C = {(linspace(10, 30, n))[i] for i in 1:n}``, which it reads. The compile tries both only
+after rumoca refused the model as written.
 """
 from __future__ import annotations
 
 import re
+
+from .sources import KEYWORDS, masked
 
 #: a scalar Real or Integer parameter's declaration, up to its name (a Complex-valued SI type is
 #: a record: a call there is its constructor, and a record plus 0 is no Modelica)
@@ -21,6 +30,11 @@ _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
 
 
 def restated(text: str) -> str:
+    """``text`` with both restatements (:func:`called`, :func:`distributed`)."""
+    return distributed(called(text))
+
+
+def called(text: str) -> str:
     """``text`` with every scalar Real or Integer parameter bound to a bare call bound to
     ``call + 0`` instead (the rest of the text as it was)."""
     out, pos = [], 0
@@ -76,3 +90,108 @@ def _skip_space(text: str, k: int) -> int:
     while k < len(text) and text[k].isspace():
         k += 1
     return k
+
+
+#: a component array with a modification: ``cap[n](`` or ``Capacitor[n] cap(`` (in an expression
+#: an index is never followed by a parenthesis)
+_ARRAY_MODIFIED = re.compile(r"(?<![\w.])(?:(?P<name>[A-Za-z_]\w*)\s*\[(?P<dims>[^\[\]]*)\]"
+                             r"|[A-Za-z_][\w.]*\s*\[(?P<tdims>[^\[\]]*)\]\s+(?P<tname>[A-Za-z_]\w*))\s*\(")
+#: a reference, which rumoca takes for a component array as it is
+_REFERENCE = re.compile(r"[A-Za-z_][\w.]*(?:\s*\[[^\[\]]*\])?")
+#: the openings of a literal array, fill(...) or a string: taken as they are where they are all
+_LITERAL = re.compile(r"\{|fill\s*\(|\"")
+#: a value's end that is a description string, not part of it
+_DESCRIBED = re.compile(r"(?<=[\w)\]}.])\s*\"[^\"]*\"$")
+_ARGUMENT = re.compile(r"\s*(?P<prefix>(?:final\s+)*)(?P<path>[A-Za-z_][\w.]*)\s*")
+
+
+def distributed(text: str) -> str:
+    """``text`` with each modifier value of a component array that is an array expression
+    written element by element (``{(e)[i] for i in 1:n}``); ``each`` and ``redeclare``
+    arguments, literals, fill(...) and references as they were."""
+    blank, edits = masked(text), []
+    for m in _ARRAY_MODIFIED.finditer(blank):
+        name = m["name"] or m["tname"]
+        if name in KEYWORDS:
+            continue
+        dims = [d.strip() for d in (m["dims"] or m["tdims"]).split(",")]
+        if any(not d or d == ":" for d in dims):
+            continue
+        end = closing(blank, m.end() - 1)
+        if end is not None:
+            edits += [(a, b, dims) for a, b in _values(blank, m.end(), end - 1)]
+    for a, b, dims in sorted(edits, reverse=True):
+        text = text[:a] + _elementwise(text[a:b], dims) + text[b:]
+    return text
+
+
+def _values(masked: str, start: int, stop: int) -> list[tuple[int, int]]:
+    """The spans of the values to write element by element in the modification
+    ``masked[start:stop]`` (inside its parentheses), its nested modifications' included."""
+    edits = []
+    for a, b in _arguments(masked, start, stop):
+        arg = _ARGUMENT.match(masked, a, b)
+        if arg is None or re.match(r"\s*(each|redeclare|replaceable|extends)\b", masked[a:b]):
+            continue
+        k = arg.end()
+        if masked.startswith("(", k):
+            inner = closing(masked, k)
+            if inner is None or inner > b:
+                continue
+            edits += _values(masked, k + 1, inner - 1)
+            k = _skip_space(masked, inner)
+        if masked.startswith("=", k) or masked.startswith(":=", k):
+            k = _skip_space(masked, k + (1 if masked[k] == "=" else 2))
+            value = _DESCRIBED.sub("", masked[k:b].rstrip())
+            if value and not _as_is(value):
+                edits.append((k, k + len(value)))
+    return edits
+
+
+def _as_is(value: str) -> bool:
+    """Whether rumoca reads ``value`` for a component array as it is: a reference, or one
+    literal array, fill(...) or string."""
+    if _REFERENCE.fullmatch(value):
+        return True
+    opening = _LITERAL.match(value)
+    if opening is None:
+        return False
+    if value[0] == '"':
+        return value.find('"', 1) == len(value) - 1
+    return _closing_any(value, opening.end() - 1) == len(value)
+
+
+def _closing_any(text: str, k: int) -> int | None:
+    """The index just past the bracket that closes the one at ``k``."""
+    depth = 0
+    for i in range(k, len(text)):
+        depth += text[i] in "([{"
+        depth -= text[i] in ")]}"
+        if depth == 0:
+            return i + 1
+    return None
+
+
+def _arguments(masked: str, start: int, stop: int) -> list[tuple[int, int]]:
+    """The spans of the comma-separated arguments of ``masked[start:stop]`` (nesting kept)."""
+    spans, depth, a = [], 0, start
+    for i in range(start, stop):
+        c = masked[i]
+        if c in "([{":
+            depth += 1
+        elif c in ")]}":
+            depth -= 1
+        elif c == "," and depth == 0:
+            spans.append((a, i))
+            a = i + 1
+    spans.append((a, stop))
+    return spans
+
+
+def _elementwise(value: str, dims: list[str]) -> str:
+    """``value`` (an array of the component array's ``dims``) built element by element."""
+    its = [f"mcl_i{k}" for k in range(1, len(dims) + 1)]
+    out = f"({value})[{', '.join(its)}]"
+    for it, d in reversed(list(zip(its, dims))):
+        out = f"{{{out} for {it} in 1:{d}}}"
+    return out

@@ -19,8 +19,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from .bindings import closing
-from .sources import COMMENT_OR_STRING
+from .bindings import closing, restated
+from .sources import COMMENT_OR_STRING, masked
 
 _REDECLARE = re.compile(r"\bredeclare\s+(?:(?:final|each|replaceable)\s+)*(model|block|record)\s+(\w+)\s*=\s*"
                         r"(?P<type>[A-Za-z_][\w.]*)\s*\(")
@@ -37,13 +37,13 @@ def lifted(text: str) -> str:
     short class (see the module's note); ``text`` itself where there is none."""
     if "redeclare" not in text:
         return text
-    masked = _masked(text)
+    blank = masked(text)
     edits = []      # (start, end, replacement)
     inserts = {}    # element start -> [class definitions]
     count = 0
-    for m in _REDECLARE.finditer(masked):
-        close = closing(masked, m.end() - 1)
-        start = _element_start(masked, m.start())
+    for m in _REDECLARE.finditer(blank):
+        close = closing(blank, m.end() - 1)
+        start = _element_start(blank, m.start())
         if close is None or start is None:
             continue
         count += 1
@@ -76,16 +76,20 @@ def tree_copy(top: Path, place: Path) -> Path:
 
 
 @functools.lru_cache(maxsize=64)
-def lifted_tree(top: Path, place: Path) -> Path:
+def lifted_tree(top: Path, place: Path, restate: bool = False) -> Path:
     """The root ``package.mo`` to load for the package directory of ``top``: ``top`` itself where
     no file of the tree has a redeclaration to lift, else :func:`tree_copy`, made once: each
     ``.mo`` file lifted (rumoca reads a package directory itself, so its files cannot be handed
     over one by one as a single-file model's text is), every other file a link to its own.
     Read once per process for each ``place`` (named by the tree's content): a compile loads the
-    tree twice, to register it and to compile its model."""
+    tree twice, to register it and to compile its model. ``restate``: the files also restated
+    (:func:`.bindings.restated`), in a copy of their own under ``place``."""
     root = top.parent
     texts = {f: f.read_text(encoding="utf-8", errors="replace") for f in sorted(root.rglob("*.mo"))}
-    if all(lifted(t) == t for t in texts.values()):
+    if restate:                                     # (:func:`.bindings.restated`)
+        place = place / "restated"
+        texts = {f: restated(t) for f, t in texts.items()}
+    if all(lifted(t) == t for t in texts.values()) and not restate:
         return top
     copy = tree_copy(top, place)
     if copy.is_file():
@@ -132,16 +136,6 @@ def _element_start(masked: str, at: int) -> int | None:
     while start < at and masked[start].isspace():
         start += 1
     return start if start < at else None
-
-
-def _masked(text: str) -> str:
-    """``text`` with its comments and the insides of its strings blanked, line breaks kept
-    (every position where it was)."""
-    def blank(m):
-        part = m.group()
-        inside = re.sub(r"[^\n]", " ", part[1:-1] if part.startswith('"') else part)
-        return f'"{inside}"' if part.startswith('"') else inside
-    return COMMENT_OR_STRING.sub(blank, text)
 
 
 def _without_comments(text: str) -> str:

@@ -26,7 +26,7 @@ from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size
 from .bindings import restated
 from .redeclares import lifted, lifted_tree, tree_copy
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
-from .sources import first_line
+from .sources import KEYWORDS, first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
 log = logging.getLogger(__name__)
@@ -104,12 +104,14 @@ class _Front:
         import rumoca
 
         self.session = rumoca.Session(list(roots))
+        self.roots = list(roots)
         self.docs: dict[str, str] = {}      # path -> content hash
         self.owner: dict[str, str] = {}     # top-level class -> path
+        self.uses = False                   # the libraries named (:meth:`_use_libraries`)
 
     def compile(self, docs: dict[Path, tuple[str, set]], model: str, restate: bool = False):
-        """rumoca's compiled ``model`` from ``docs``; ``restate``: each single-file document with
-        its parameters bound to bare calls restated (:mod:`.bindings`)."""
+        """rumoca's compiled ``model`` from ``docs``; ``restate``: each document with its bindings
+        restated (:mod:`.bindings`)."""
         import rumoca
 
         if restate:
@@ -117,9 +119,11 @@ class _Front:
         if any(self.docs.get(str(p), h) != h or any(self.owner.get(n, str(p)) != str(p) for n in names)
                for p, (h, names) in docs.items()):
             self.session.clear()
-            self.docs, self.owner = {}, {}
+            self.docs, self.owner, self.uses = {}, {}, False
         for p, (h, names) in docs.items():
             if str(p) not in self.docs:
+                if p.name == "package.mo" and not self.uses:
+                    self._use_libraries()
                 try:   # registers the document; naming no class of it, nothing is compiled yet
                     self._load(p, h, "MclNoClass_")
                 except rumoca.RumocaError:
@@ -134,31 +138,50 @@ class _Front:
         stub = f"model {ENTRY}\n  extends {model};\nend {ENTRY};\n"
         return self.session.loads(stub, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo")
 
+    def _use_libraries(self):
+        """Register a document that imports every library of the roots. rumoca reads the
+        libraries a package directory uses from its ``package.mo`` alone: an import in another
+        file of the tree is unresolved where ``package.mo`` names no library (no ``uses``
+        annotation), unless a document loaded before named it."""
+        import rumoca
+
+        self.uses = True
+        names = sorted({Path(e).stem for r in self.roots for e in os.listdir(r)} - KEYWORDS)
+        stub = "".join(f"  import {n};\n" for n in names if n.isidentifier())
+        try:
+            self.session.loads(f"model {USES}\n{stub}end {USES};\n", model="MclNoClass_",
+                               filename=f"{VIRTUAL}/{USES}.mo")
+        except rumoca.RumocaError:
+            pass
+
     def reset(self):
         """Forget every document (after rumoca failed inside, its session is not trusted)."""
         self.session.clear()
-        self.docs, self.owner = {}, {}
+        self.docs, self.owner, self.uses = {}, {}, False
 
     def _load(self, path: Path, digest: str, model: str):
         """A package directory is read as a tree; a single file under a name of its own, so that
         rumoca does not also read the files beside it (a run directory holds many)."""
         if path.name == "package.mo":
-            return self.session.load(str(lifted_tree(path, _copies(digest))), model=model)
+            return self.session.load(str(lifted_tree(path, _copies(digest), digest.endswith(_RESTATED))),
+                                     model=model)
         text = lifted(path.read_text(encoding="utf-8", errors="replace"))
         return self.session.loads(restated(text) if digest.endswith(_RESTATED) else text, model=model,
                                   filename=virtual_name(path, digest))
 
 
+#: rumoca's errors on the bindings :func:`.bindings.restated` writes as it reads them
+_RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
 
 
 def _restatable(docs: dict[Path, tuple[str, set]]) -> bool:
-    """Whether restating changes any of the single-file documents (:meth:`_Front._load`): a
-    model unbalanced for another reason is not compiled twice."""
+    """Whether restating changes any of the documents' files (:meth:`_Front._load`): a model
+    unbalanced for another reason is not compiled twice."""
     for path in docs:
-        if path.name != "package.mo":
-            text = path.read_text(encoding="utf-8", errors="replace")
+        for f in sorted(path.parent.rglob("*.mo")) if path.name == "package.mo" else [path]:
+            text = f.read_text(encoding="utf-8", errors="replace")
             if restated(text) != text:
                 return True
     return False
@@ -225,6 +248,8 @@ def virtual_name(path: Path, digest: str) -> str:
 
 
 ENTRY = "MclEntry_"
+#: the document naming the libraries of the roots (:meth:`_Front._use_libraries`)
+USES = "MclUses_"
 #: the names of the relations held between events, among the discrete states
 HELD_PREFIX = "$rel"
 
@@ -364,8 +389,9 @@ class Prepared:
             if p.name != "package.mo":
                 out[virtual_name(p, h)] = str(p)
                 continue
-            copy = tree_copy(p, _copies(h)).parent
-            out.update({str(copy / f.relative_to(p.parent)): str(f) for f in p.parent.rglob("*.mo")})
+            for place in (_copies(h), _copies(h) / "restated"):
+                copy = tree_copy(p, place).parent
+                out.update({str(copy / f.relative_to(p.parent)): str(f) for f in p.parent.rglob("*.mo")})
         return out
 
     @functools.cached_property
@@ -452,15 +478,16 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
     try:
         return _guarded(front, lambda: front.compile(prep.docs, model))
     except rumoca.RumocaError as exc:
-        if "unbalanced model" in str(exc) and _restatable(prep.docs):
-            # rumoca's count of a parameter bound to a call (:mod:`.bindings`): the model
-            # again with those bindings restated, else its own error
+        if _RESTATE_ON.search(str(exc)) and _restatable(prep.docs):
+            # rumoca's count of a parameter bound to a call, its reading of an array expression
+            # modifying a component array (:mod:`.bindings`): the model again with those
+            # bindings restated, else its own error
             try:
                 compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True))
             except rumoca.RumocaError:
                 raise exc from None
-            log.info("%s: compiled with its parameters bound to function calls restated (f(...) + 0): "
-                     "rumoca counts such a binding as an equation", model)
+            log.info("%s: compiled with its parameters bound to function calls (f(...) + 0) and its component "
+                     "arrays' array modifiers ({(e)[i] for i in 1:n}) restated, as rumoca reads them", model)
             return compiled
         if _UNVALUED.search(str(exc)):
             compiled = _started(front, prep, model, libs, exc)

@@ -63,3 +63,13 @@ def first_line(texts, pattern: str) -> str | None:
             if rx.search(line.split("//", 1)[0]):
                 return f"{path}:{n}"
     return None
+
+
+def masked(text: str) -> str:
+    """``text`` with its comments and the insides of its strings blanked, line breaks kept
+    (every position where it was)."""
+    def blank(m):
+        part = m.group()
+        inside = re.sub(r"[^\n]", " ", part[1:-1] if part.startswith('"') else part)
+        return f'"{inside}"' if part.startswith('"') else inside
+    return COMMENT_OR_STRING.sub(blank, text)
