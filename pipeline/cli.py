@@ -7,8 +7,10 @@ them. Every output path goes through :mod:`mcl.outputs` (new, or with ``--force`
 from __future__ import annotations
 
 import argparse
+import difflib
 import logging
 import math
+import re
 import sys
 import traceback
 from pathlib import Path
@@ -132,16 +134,20 @@ def cmd_simulate(args) -> int:
     options = SimulationOptions.from_dict({"rtol": args.rtol, "atol": args.atol, "time_limit": limit},
                                           option=_flag)
     _libraries(args)
-    data = check_input(args.input, "data file")
-    read = [data, *args.sources]
+    if args.input is not None and (args.stop_time is not None or args.interval is not None):
+        raise ConfigError("--stop-time and --interval are for a model without inputs: with --input, "
+                          "the data's time column is the grid")
+    data = check_input(args.input, "data file") if args.input is not None else None
+    read = [*([data] if data else []), *args.sources]
     out = check_output(args.output, args.force, inputs=read, what="a result file")
     plot = None
     if args.plot:
         plot = check_output(_image("--plot", args.plot, (".png",)), args.force, inputs=read, what="a plot")
         if plot == out:
             raise ConfigError("--plot and -o name the same file: give each its own", where=args.plot)
-    inputs = read_csv(data)
     model = _model_from_args(args)
+    model = _recorded(model, args.variables)
+    inputs = read_csv(data) if data else _time_grid(model, args)
     result = simulate(model, inputs, params, options=options, engine=args.engine)
     if not result.ok:
         print(f"mcl: simulation failed: {result.reason}", file=sys.stderr)
@@ -155,9 +161,61 @@ def cmd_simulate(args) -> int:
                         units=getattr(model, "info", {}).get("units"))
         record(plot)
         print(f"plotted inputs and outputs -> {args.plot}")
-    print(f"simulated {len(result.time)} samples of {', '.join(result.output_names)} with the "
+    names = result.output_names
+    what = ", ".join(names) if len(names) <= 6 else f"{len(names)} variables"
+    print(f"simulated {len(result.time)} samples of {what or 'no variable'} with the "
           f"{result.engine} engine in {result.seconds:.3g} s -> {args.output}")
     return 0
+
+
+def _time_grid(model, args):
+    """The inputs of a model that has none: its time grid, from --stop-time and --interval, else
+    from the model's experiment annotation, else from its own time scales (500 intervals)."""
+    import numpy as np
+
+    from .compile.fmu.experiment import Experiment, for_model, of_fmu
+    from .data import TimeSeries
+
+    if model.input_names:
+        raise ConfigError(f"model {model.name} has inputs ({', '.join(model.input_names[:6])}): give their "
+                          f"values with --input CSV")
+    if args.stop_time is not None:
+        if not args.stop_time > 0:
+            raise ConfigError(f"--stop-time must be > 0, not {args.stop_time}")
+        exp = Experiment(0.0, args.stop_time, source="given")
+    elif hasattr(model, "ode"):
+        exp = for_model(model, args.library)
+    elif (exp := of_fmu(model.path)) is None:
+        raise ConfigError(f"{model.name} has no inputs and its FMU no default experiment: give the time to "
+                          f"simulate with --stop-time")
+    step = args.interval or exp.step or (exp.stop - exp.start) / 500
+    if not step > 0:
+        raise ConfigError(f"--interval must be > 0, not {step}")
+    n = int(round((exp.stop - exp.start) / step))
+    t = np.linspace(exp.start, exp.start + n * step, n + 1)
+    if args.stop_time is None:
+        why = ("the model's experiment" if exp.source == "annotation"
+               else "from its time scales; --stop-time sets it")
+        print(f"simulating {exp.start:g}..{t[-1]:g} s every {step:g} s ({why})")
+    return TimeSeries(t, np.zeros((len(t), 0)), [])
+
+
+def _recorded(model, patterns):
+    """``model`` recording the variables ``patterns`` name (``*`` any run of characters), else its
+    outputs, or every variable where it has no output (a top-level model seldom declares any)."""
+    names = model.variable_names
+    if not patterns:
+        return model if model.output_names else model.with_outputs(names)
+    chosen = []
+    for pattern in patterns:
+        rx = re.compile(".*".join(map(re.escape, pattern.split("*"))))
+        found = [n for n in [*model.output_names, *names] if rx.fullmatch(n)]
+        if not found:
+            close = difflib.get_close_matches(pattern, names, n=3)
+            raise ConfigError(f"--variables {pattern}: no variable of {model.name} matches"
+                              + (f" (did you mean {', '.join(close)}?)" if close else ""))
+        chosen += found
+    return model.with_outputs(chosen, only=True)
 
 
 def cmd_info(args) -> int:
@@ -392,16 +450,25 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = _command(sub, "simulate", "simulate a model with measured inputs",
                  "Simulate an FMU, a saved model, or Modelica sources (--model) with the inputs of a "
-                 "CSV file (header row, time first, one column per model input).", """
+                 "CSV file (header row, time first, one column per model input); a model without "
+                 "inputs over its experiment annotation's span or --stop-time.", """
   mcl simulate plant.fmu -i input.csv -o result.csv
   mcl simulate Lib.mo -m Lib.Plant -i input.csv -o result.csv --plot result.png
   mcl simulate plant/ -i input.csv -p R1.R=2.2 -p C.C=1e-3 -o result.csv --rtol 1e-8
-  mcl simulate plant.fmu -i input.csv -o result.csv --force   # replace the result mcl wrote""")
+  mcl simulate plant.fmu -i input.csv -o result.csv --force   # replace the result mcl wrote
+  mcl simulate -m Modelica.Electrical.Analog.Examples.ChuaCircuit -o chua.csv -V 'C*.v'""")
     p.add_argument("sources", nargs="*", metavar="MODEL",
                    help="an FMU, a saved model directory, or Modelica sources with --model")
     _library_option(p)
     p.add_argument("--model", "-m", help="class name when MODEL is Modelica sources")
-    p.add_argument("--input", "-i", required=True, help="CSV: header row, time first, one column per input")
+    p.add_argument("--input", "-i", help="CSV: header row, time first, one column per input (a model "
+                                          "without inputs may go without)")
+    p.add_argument("--stop-time", type=float, help="for a model without inputs: simulate 0..T s (default: "
+                                                   "its experiment annotation, else its time scales)")
+    p.add_argument("--interval", type=float, help="for a model without inputs: the output interval, s")
+    p.add_argument("--variables", "-V", action="append", metavar="NAME",
+                   help="a variable to record, '*' any characters, e.g. 'C*.v' (repeatable; default: "
+                        "the outputs, or every variable of a model without outputs)")
     p.add_argument("--param", "-p", action="append", metavar="NAME=VALUE", help="set a parameter")
     p.add_argument("-o", "--output", required=True, help="result CSV")
     p.add_argument("--plot", metavar="PNG", help="also draw inputs and outputs to this PNG file")

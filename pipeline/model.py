@@ -99,27 +99,23 @@ class CompiledModel:
             p[self.ode.p_names.index(k)] = float(v)
         return p
 
-    def with_outputs(self, names) -> "CompiledModel":
+    @property
+    def variable_names(self) -> list[str]:
+        """Every variable a simulation can record (states, algebraic variables, parameters)."""
+        return list(self.ode.probe_names)
+
+    def with_outputs(self, names, only: bool = False) -> "CompiledModel":
         """The same model with the named variables (any of ``ode.probe_names``: ``M.v``,
         ``C2.T``) appended to its outputs, so data may measure any variable, declared output
-        or not. Names already outputs, or not variables of the model, are left out."""
-        extra = [n for n in dict.fromkeys(names) if n not in self.ode.y_names and n not in self.ode.u_names
-                 and n in self.ode.probe_names]
-        if not extra:
-            return self
-        import dataclasses
-
+        or not; ``only``: those variables its outputs instead. Names already outputs (kept
+        where ``only``), or not variables of the model, are left out."""
         o = self.ode
-        idx = [o.probe_names.index(n) for n in extra]
-        args = o.out.mx_in()
-        y = ca.vertcat(o.out(*args), o.probe(*args)[idx])
-        y_c, res, drift = o.checks(*args)
-        io = (["x", "u", "p", "t"],)
-        out = expanded(ca.Function("out", args, [y], *io, ["out"]))
-        checks = expanded(ca.Function("checks", args, [ca.vertcat(y_c, o.probe(*args)[idx]), res, drift],
-                                       *io, ["y", "res", "drift"]))
-        ode = dataclasses.replace(o, y_names=[*o.y_names, *extra], out=out, checks=checks)
-        return CompiledModel(self.name, ode, self.info, self.dae, self.structure)
+        kept = [n for n in dict.fromkeys(names) if n in o.y_names] if only else list(o.y_names)
+        extra = [n for n in dict.fromkeys(names) if n not in o.y_names and n not in o.u_names
+                 and n in o.probe_names]
+        if not extra and kept == o.y_names:
+            return self
+        return CompiledModel(self.name, _recording(o, kept, extra), self.info, self.dae, self.structure)
 
     def save(self, directory, force: bool = False) -> Path:
         """Write the functions (CasADi serialisation) and names to ``directory``: a new one, or
@@ -198,6 +194,24 @@ def _fresh(f: ca.Function) -> ca.Function:
     return ca.Function(f.name(), args, f.call(args), f.name_in(), f.name_out())
 
 
+def _recording(o: Ode, kept: list[str], extra: list[str]) -> Ode:
+    """``o`` with outputs ``kept`` (of its own) then ``extra`` (of its probe variables); its
+    twin with the loops' guesses an argument (``warm``, which the engine runs) alike."""
+    import dataclasses
+
+    idx = [o.probe_names.index(n) for n in extra]
+    own = [o.y_names.index(n) for n in kept]
+    args = o.out.mx_in()
+    y = ca.vertcat(o.out(*args)[own], o.probe(*args)[idx])
+    y_c, res, drift = o.checks(*args)
+    io = (["x", "u", "p", "t"],)
+    out = expanded(ca.Function("out", args, [y], *io, ["out"]))
+    checks = expanded(ca.Function("checks", args, [ca.vertcat(y_c[own], o.probe(*args)[idx]), res, drift],
+                                  *io, ["y", "res", "drift"]))
+    warm = _recording(o.warm, kept, extra) if o.warm is not None else None
+    return dataclasses.replace(o, y_names=[*kept, *extra], out=out, checks=checks, warm=warm)
+
+
 @dataclass
 class FmuModel:
     """An FMI 2.0/3.0 Model Exchange or Co-Simulation FMU, read with FMPy."""
@@ -208,6 +222,7 @@ class FmuModel:
     output_names: list[str]
     parameters: dict[str, float]
     fmi_version: str
+    variable_names: list[str] = field(default_factory=list)    # every Real a run can record
 
     @classmethod
     def read(cls, path) -> "FmuModel":
@@ -229,7 +244,17 @@ class FmuModel:
         return cls(path=path, name=md.modelName,
                    input_names=[v.name for v in real if v.causality == "input"],
                    output_names=[v.name for v in real if v.causality == "output"],
-                   parameters=params, fmi_version=md.fmiVersion)
+                   parameters=params, fmi_version=md.fmiVersion,
+                   variable_names=[v.name for v in real if v.causality != "input"])
+
+    def with_outputs(self, names, only: bool = False) -> "FmuModel":
+        """The FMU recording the named variables too (``only``: those alone), as
+        :meth:`CompiledModel.with_outputs`."""
+        import dataclasses
+
+        chosen = [n for n in dict.fromkeys(names) if n in self.variable_names]
+        kept = [n for n in chosen if n in self.output_names] if only else list(self.output_names)
+        return dataclasses.replace(self, output_names=[*kept, *(n for n in chosen if n not in kept)])
 
     def parameter_vector(self, overrides: dict | None = None) -> dict[str, float]:
         p = dict(self.parameters)

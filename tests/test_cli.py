@@ -48,6 +48,41 @@ def test_failed_simulation_exits_1_with_the_reason(tmp_path, input_csv, capsys):
     assert not (tmp_path / "r.csv").exists()
 
 
+DRAIN = """model Drain "two tanks, the first draining into the second"
+  parameter Real tau1 = 2, tau2 = 5;
+  Real h1(start = 1, fixed = true), h2(start = 0, fixed = true);
+  Real q12 = h1/tau1 "flow from the first tank to the second";
+equation
+  der(h1) = -q12;
+  der(h2) = q12 - h2/tau2;
+  annotation(experiment(StopTime = 20, Interval = 0.5));
+end Drain;
+"""
+
+
+def test_a_model_without_inputs_runs_its_experiment_recording_every_variable(tmp_path, capsys):
+    """No input CSV: the grid is the class's experiment annotation (in process) or the FMU's
+    DefaultExperiment; a model without outputs records every variable; --variables picks."""
+    src = tmp_path / "Drain.mo"
+    src.write_text(DRAIN)
+    every = tmp_path / "every.csv"
+    assert main(["simulate", str(src), "-m", "Drain", "-o", str(every)]) == 0
+    assert "experiment" in capsys.readouterr().out
+    r = read_csv(every)
+    assert len(r.time) == 41 and r.time[-1] == 20.0
+    assert {"h1", "h2", "q12"} <= set(r.names)
+    assert np.allclose(r.select(["h1"]).values[:, 0], np.exp(-r.time / 2), rtol=1e-5)
+    fmu = tmp_path / "drain.fmu"
+    assert main(["compile", str(src), "-m", "Drain", "-o", str(fmu)]) == 0
+    a, b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert main(["simulate", str(fmu), "-o", str(a), "-V", "h*"]) == 0
+    assert main(["simulate", str(src), "-m", "Drain", "-o", str(b), "-V", "h*", "--stop-time", "20",
+                 "--interval", "0.5"]) == 0
+    ra, rb = read_csv(a), read_csv(b)
+    assert ra.names == rb.names == ["h1", "h2"]
+    assert np.allclose(ra.time, rb.time) and np.allclose(ra.values, rb.values, atol=1e-5)
+
+
 def test_plugins_lists_compilers_and_engines(capsys):
     assert main(["plugins"]) == 0
     out = capsys.readouterr().out
@@ -62,6 +97,9 @@ def test_plugins_lists_compilers_and_engines(capsys):
     (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-i", "{input}", "-o", "x.csv",
       "-p", "nope=1"], "no free parameter 'nope'"),
     (["compile", "{bad}", "-m", "B.M", "-o", "x.fmu"], "syntax error"),
+    (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-o", "x.csv"], "give their values with --input"),
+    (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-i", "{input}", "-o", "x.csv", "-V", "C9*"],
+     "--variables C9*: no variable of MCL.Examples.CauerFilter matches"),
     (["compile", "{lib}", "-m", "MCL.Examples.CauerFilter", "-o", "x.fmu", "--compiler", "openmodelica"],
      "not available"),
 ])

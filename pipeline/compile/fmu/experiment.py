@@ -59,6 +59,18 @@ def for_model(model, libraries=()) -> Experiment:
     return from_annotation(model, libraries) or estimated(model)
 
 
+def of_fmu(path) -> Experiment | None:
+    """The DefaultExperiment of the FMU at ``path`` (any tool's), None where it sets no stop time."""
+    from fmpy import read_model_description
+
+    e = read_model_description(str(path), validate=False).defaultExperiment
+    if e is None or e.stopTime is None:
+        return None
+    start = float(e.startTime or 0.0)
+    return Experiment(start, float(e.stopTime), float(e.stepSize) if e.stepSize else None,
+                      float(e.tolerance or DEFAULT_TOLERANCE), "annotation")
+
+
 # -- the annotation ---------------------------------------------------------------------------
 
 _KEYWORDS = r"(?:model|block|class|package)"
