@@ -87,6 +87,33 @@ end Decay;
     assert np.allclose(res.states[:, 0], np.exp(-3.0 * t), rtol=1e-5)
 
 
+def test_a_variable_bound_to_a_call_on_an_array_is_one_equation(tmp_path):
+    """rumoca counts a variable's binding to a call with an array argument that reads no
+    unknown (``Real P = rated(table, time)``) as several equations (unbalanced: 5 for 2); mcl
+    compiles it again restated (f(...) + 0): the body warms at the 1 W the function gives."""
+    f = tmp_path / "Heat.mo"
+    f.write_text("""model Heat "a body heated by a power read from its rating table"
+  function rated
+    input Real table[:];
+    input Real load;
+    output Real y;
+  algorithm
+    y := table[1] + table[2]*load;
+  end rated;
+  parameter Real C = 2;
+  Real T(start = 0, fixed = true);
+  Real P = rated({1, 0, 5, 7}, time) "the heating power";
+equation
+  C*der(T) = P;
+end Heat;
+""")
+    model = compile_model([f], "Heat")
+    t = np.linspace(0.0, 4.0, 9)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    assert np.allclose(res.states[:, 0], t / 2, rtol=1e-6, atol=1e-9)
+
+
 WALL = """model Wall "a wall of n layers of rising heat capacity, warmed by the room"
   import Modelica.Thermal.HeatTransfer.Components;
   import Modelica.Thermal.HeatTransfer.Sources.FixedTemperature;

@@ -4,7 +4,8 @@ call, and the modifiers of a component array that give one array for all its ele
 rumoca 0.10 counts the binding of a scalar parameter to a call of a function with an array
 argument (``parameter Real L = Modelica.Math.Vectors.length(r)``, a gear's efficiency
 interpolated in its loss table) as an equation of the model, while the parameter is not an
-unknown: the model is refused as unbalanced (2 equations for 1 unknown). The same call inside an
+unknown: the model is refused as unbalanced (2 equations for 1 unknown). A variable bound so
+(``Real q = f({0, 1, 2}, time)``) is miscounted the same way. The same call inside an
 expression is a parameter's binding as it should be. :func:`restated` writes ``f(...) + 0`` for
 each such binding of a Real or Integer parameter (the value and type unchanged, the line count
 kept).
@@ -23,7 +24,7 @@ from .sources import KEYWORDS, masked
 
 #: a scalar Real or Integer parameter's declaration, up to its name (a Complex-valued SI type is
 #: a record: a call there is its constructor, and a record plus 0 is no Modelica)
-_HEAD = re.compile(r"\bparameter\s+(?P<type>Real|Integer|(?:Modelica\.Units\.|Modelica\.SIunits\.)?SI\.(?!Complex)\w+"
+_HEAD = re.compile(r"(?:\bparameter\s+|\boutput\s+|\bdiscrete\s+|(?<![\w.])(?=(?:Real|Integer|Modelica|SI)\b))(?P<type>Real|Integer|(?:Modelica\.Units\.|Modelica\.SIunits\.)?SI\.(?!Complex)\w+"
                    r"|Modelica\.SIunits\.(?!Complex)\w+)\s+(?P<name>\w+)\s*")
 _CALL = re.compile(r"[A-Za-z_][\w.]*\s*\(")
 _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
@@ -35,8 +36,8 @@ def restated(text: str) -> str:
 
 
 def called(text: str) -> str:
-    """``text`` with every scalar Real or Integer parameter bound to a bare call bound to
-    ``call + 0`` instead (the rest of the text as it was)."""
+    """``text`` with every scalar Real or Integer parameter or variable bound to a bare call
+    bound to ``call + 0`` instead (the rest of the text as it was)."""
     out, pos = [], 0
     for head in _HEAD.finditer(text):
         if head.start() < pos:

@@ -486,7 +486,7 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
                 compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True))
             except rumoca.RumocaError:
                 raise exc from None
-            log.info("%s: compiled with its parameters bound to function calls (f(...) + 0) and its component "
+            log.info("%s: compiled with its bindings to function calls (f(...) + 0) and its component "
                      "arrays' array modifiers ({(e)[i] for i in 1:n}) restated, as rumoca reads them", model)
             return compiled
         if _UNVALUED.search(str(exc)):
