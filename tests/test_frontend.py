@@ -1,4 +1,6 @@
 """Modelica input the front end refuses: one clear error naming file, line and construct."""
+import re
+
 import numpy as np
 import pytest
 
@@ -54,6 +56,34 @@ def test_unbalanced_model_is_refused(tmp_path):
     with pytest.raises(ModelicaError, match="unbalanced: 1 equations for 2 unknowns") as err:
         compile_model([f], "P.M")
     assert err.value.where == f"{f.resolve()}:{line_of(f, 'model M')}"
+
+
+@needs_msl()
+def test_an_unbalanced_model_names_the_inputs_nothing_connects(tmp_path):
+    """rumoca gives the counts alone; mcl names the component inputs the model leaves unset
+    (here the limiter's, forgotten), and not those it connects, sets or makes conditional."""
+    f = write(tmp_path, """  model Loop "a speed loop whose limiter was never wired"
+    import Modelica.Blocks;
+    Blocks.Sources.Step ref(height = 1, startTime = 0.1);
+    Blocks.Math.Feedback err;
+    Blocks.Continuous.PI pi(k = 2, T = 0.5, initType = Blocks.Types.Init.InitialState);
+    Blocks.Nonlinear.Limiter lim(uMax = 1);
+    Blocks.Continuous.FirstOrder plant(k = 1, T = 0.2, initType = Blocks.Types.Init.InitialState);
+    Blocks.Math.Gain g(k = 1);
+  equation
+    connect(ref.y, err.u1);
+    connect(err.y, pi.u);
+    connect(lim.y, plant.u);
+    connect(plant.y, err.u2);
+    g.u = plant.y;
+  end Loop;
+""")
+    with pytest.raises(ModelicaError) as err:
+        compile_model([f], "P.Loop", libraries=[msl_path()])
+    counts = re.search(r"is unbalanced: (\d+) equations for (\d+) unknowns: nothing connects or sets the "
+                       r"input lim\.u$", str(err.value))
+    assert counts and int(counts[2]) == int(counts[1]) + 1, str(err.value)
+    assert err.value.where == f"{f.resolve()}:{line_of(f, 'model Loop')}"
 
 
 def test_a_parameter_bound_to_a_call_on_an_array_is_a_parameter(tmp_path):

@@ -653,10 +653,10 @@ def test_output_paths_of_every_command(command, kind, force, tmp_path, capsys):
 
 def test_argument_errors_are_one_line(capsys):
     with pytest.raises(SystemExit) as exc:
-        main(["simulate", "m.fmu", "-o", "r.csv"])
+        main(["simulate", "m.fmu", "-i", "input.csv"])
     err = capsys.readouterr().err
     assert exc.value.code == 2 and err.count("\n") == 1
-    assert err.startswith("mcl simulate: error: the following arguments are required: --input/-i")
+    assert err.startswith("mcl simulate: error: the following arguments are required: -o/--output")
 
 
 def test_truths_says_how_to_use_it(tmp_path):

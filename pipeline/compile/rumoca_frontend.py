@@ -23,6 +23,7 @@ import numpy as np
 
 from . import tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
+from .balance import unconnected_inputs
 from .bindings import restated
 from .redeclares import lifted, lifted_tree, tree_copy
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
@@ -456,7 +457,7 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
     try:
         ir = in_rumoca_thread(work)
     except rumoca.RumocaError as exc:
-        raise _located_error(exc, model, prep.files, real) from None
+        raise _with_suspects(_located_error(exc, model, prep.files, real), exc, model, prep) from None
     except FrontEndCrash as exc:
         raise UnsupportedConstruct(f"cannot compile {model}: the Modelica front end (rumoca) stopped on an "
                                    f"internal error ({exc}); a construct of the model it cannot translate",
@@ -694,6 +695,23 @@ _KNOWN = [
 
 def _find(files: list[Path], pattern: str) -> str | None:
     return first_line(((f, f.read_text(errors="replace")) for f in files), pattern)
+
+
+def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> ModelicaError:
+    """``err`` of a model with fewer equations than unknowns with the inputs of its components
+    that nothing connects (:mod:`.balance`): the usual cause, which rumoca's counts do not name."""
+    counts = re.search(r"unbalanced model: (\d+) equations, (\d+) unknowns", str(exc))
+    if counts is None or int(counts[1]) >= int(counts[2]):
+        return err
+    try:
+        loose = unconnected_inputs(model, prep.docs, prep.search)
+    except (OSError, RecursionError, ValueError):      # a hint only: the counts stand without
+        return err
+    if not loose:
+        return err
+    more = f" and {len(loose) - 8} more" if len(loose) > 8 else ""
+    return type(err)(f"{err.message}: nothing connects or sets the input{'s' * (len(loose) > 1)} "
+                     f"{', '.join(loose[:8])}{more}", where=err.where)
 
 
 def _located_error(exc, model: str, files: list[Path], real: dict | None = None) -> ModelicaError:

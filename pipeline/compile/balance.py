@@ -1,0 +1,60 @@
+"""Why a model has fewer equations than unknowns, in the engineer's words: the inputs of its
+components that nothing connects or sets.
+
+rumoca reports the counts alone ("38 equations for 39 unknowns"); the usual cause is a block
+input left unconnected (an equation per input is missing). The model's own text is read for
+its components (:class:`.classes.LibraryClasses`, the classes of the user's files and the
+libraries on the path) and for each input of theirs that no ``connect``, equation or modifier
+names. Only the model's own components are read: a class it extends holds its connections.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from .classes import LibraryClasses
+from .sources import masked
+
+
+def unconnected_inputs(model: str, docs: dict[Path, tuple[str, set]], search) -> list[str]:
+    """``component.input`` names of ``model``'s own components that its text leaves unset
+    (``docs``: the user's documents, as :func:`.rumoca_frontend.documents` gives them)."""
+    from .library import available
+
+    user = {name: (p.parent if p.name == "package.mo" else p) for p, (_, names) in docs.items() for name in names}
+    if model.split(".")[0] not in user:
+        return []
+    lib = LibraryClasses({**available(search), **user})
+    info = lib.find(model)
+    if info is None:
+        return []
+    files = [p for p in docs if p.name != "package.mo"] + [f for p in docs if p.name == "package.mo"
+                                                           for f in sorted(p.parent.rglob("*.mo"))]
+    text = "\n".join(masked(f.read_text(encoding="utf-8", errors="replace")) for f in files)
+    scope = model.rsplit(".", 1)[0] if "." in model else model
+    out = []
+    for prefixes, type_name, name, conditional in info.declarations:
+        cls = lib.resolve(type_name, info.name, info) or lib.resolve(type_name, scope)
+        if cls is None or conditional or cls.kind not in ("model", "block", "class"):
+            continue
+        out += [f"{name}.{port}" for port in _inputs(lib, cls) if not _named(text, name, port)]
+    return out
+
+
+def _inputs(lib: LibraryClasses, cls) -> list[str]:
+    """The unconditional input connectors of class ``cls``."""
+    found = []
+    for prefixes, port_cls, _, port, conditional in lib.members(cls):
+        if conditional or "protected" in prefixes or "output" in prefixes or "parameter" in prefixes:
+            continue
+        short = (port_cls.short or "") if port_cls is not None else ""
+        if "input" in prefixes or short.split()[:1] == ["input"]:
+            found.append(port)
+    return found
+
+
+def _named(text: str, component: str, port: str) -> bool:
+    """Whether ``text`` names ``component.port`` (an index anywhere), or sets it as a modifier."""
+    index = r"(?:\s*\[[^\]]*\])?"
+    return bool(re.search(rf"(?<![\w.]){component}{index}\s*\.\s*{port}\b", text)
+                or re.search(rf"(?<![\w.]){component}{index}\s*\([^;]*?\b{port}\s*=", text))
