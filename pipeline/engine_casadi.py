@@ -1190,7 +1190,7 @@ class _Hybrid:
             if not bad.size or level == "terminate":
                 continue
             if level == "warning":
-                log.warning("assert at t = %g: %s", t[bad[0]], message)
+                log.warning("warning at t = %g: %s", t[bad[0]], message)
                 continue
             return f"assertion failed at t = {t[bad[0]]:g}: {message}"
         return None

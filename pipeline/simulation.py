@@ -8,6 +8,7 @@ detection needs every one of these checks).
 from __future__ import annotations
 
 import contextlib
+import logging
 import math
 import os
 import sys
@@ -181,10 +182,12 @@ def quiet_native_output():
     """Silence what native solvers print on stdout/stderr (CVODES, rootfinder failures).
 
     Their messages are folded into ``SimulationResult.reason`` instead; C++ writes to the file
-    descriptors directly, so redirecting ``sys.stdout`` is not enough.
+    descriptors directly, so redirecting ``sys.stdout`` is not enough. mcl's own messages of
+    the block (a warning assert, a terminate()) are held and written after it.
     """
     sys.stdout.flush()
     sys.stderr.flush()
+    held = [_Held(h) for h in _console_handlers()]
     saved = [os.dup(1), os.dup(2)]
     null = os.open(os.devnull, os.O_WRONLY)
     try:
@@ -196,3 +199,37 @@ def quiet_native_output():
         os.dup2(saved[1], 2)
         for fd in (*saved, null):
             os.close(fd)
+        for h in held:
+            h.release()
+
+
+class _Held(logging.Filter):
+    """The records a console handler is given while the console is silenced, written after."""
+
+    def __init__(self, handler: logging.Handler):
+        super().__init__()
+        self.handler, self.records = handler, []
+        handler.addFilter(self)
+
+    def filter(self, record) -> bool:
+        self.records.append(record)
+        return False
+
+    def release(self):
+        self.handler.removeFilter(self)
+        for record in self.records:
+            self.handler.handle(record)
+
+
+def _console_handlers() -> list[logging.Handler]:
+    """The handlers mcl's messages reach that write to stdout or stderr."""
+    found, logger = [], logging.getLogger("mcl")
+    while logger is not None:
+        for h in logger.handlers:
+            try:
+                if isinstance(h, logging.StreamHandler) and h.stream.fileno() in (1, 2):
+                    found.append(h)
+            except (AttributeError, ValueError, OSError):      # (a stream without a descriptor)
+                continue
+        logger = logger.parent if logger.propagate else None
+    return found

@@ -83,6 +83,28 @@ def test_a_model_without_inputs_runs_its_experiment_recording_every_variable(tmp
     assert np.allclose(ra.time, rb.time) and np.allclose(ra.values, rb.values, atol=1e-5)
 
 
+def test_a_runs_warnings_and_its_terminate_are_said(tmp_path):
+    """What the model says during a run (an assert of level warning, a terminate()) reaches the
+    console, though the solvers' own output is silenced while it runs."""
+    (tmp_path / "Fill.mo").write_text("""model Fill
+  Real level(start = 0, fixed = true);
+equation
+  der(level) = 1;
+  assert(level < 0.51, "the tank is above half", AssertionLevel.warning);
+  when level > 0.81 then
+    terminate("the tank is full");
+  end when;
+end Fill;
+""")
+    proc = subprocess.run([sys.executable, "-m", "mcl", "simulate", "Fill.mo", "-m", "Fill", "-o", "r.csv",
+                           "--stop-time", "2", "--interval", "0.02"],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert "warning at t = 0.52: the tank is above half" in proc.stderr
+    assert "terminated the run at t = 0.81: the tank is full" in proc.stderr       # (at the event)
+    assert read_csv(tmp_path / "r.csv").time[-1] == pytest.approx(0.8)      # the last point before it
+
+
 def test_plugins_lists_compilers_and_engines(capsys):
     assert main(["plugins"]) == 0
     out = capsys.readouterr().out
