@@ -144,6 +144,48 @@ end Heat;
     assert np.allclose(res.states[:, 0], t / 2, rtol=1e-6, atol=1e-9)
 
 
+def test_a_function_with_while_loops_runs_them_bounded(tmp_path):
+    """rumoca refuses a function's while loop it cannot evaluate while compiling; mcl compiles
+    it again with each while loop a bounded for loop: a Newton iteration (inside a table search's
+    loop) solves y^3 + y = x as written, and a loop that would run on stops the run with the
+    assert mcl adds, not with a wrong value."""
+    f = tmp_path / "Solve.mo"
+    f.write_text("""model Solve
+  function cubic "y with y^3 + y = x, by Newton's method from the nearest tabulated x"
+    input Real x;
+    input Real xs[:] = {0, 2, 10, 30};
+    output Real y;
+  protected
+    Integer i = 1;
+    Real step = 1;
+  algorithm
+    while i < size(xs, 1) and x > xs[i + 1] loop
+      i := i + 1;
+    end while;
+    y := i - 1;
+    while abs(step) > 1e-12 loop
+      step := (y^3 + y - x) / (3*y^2 + 1);
+      y := y - step;
+    end while;
+  end cubic;
+  Real x(start = 0, fixed = true);
+  output Real y = cubic(x);
+equation
+  der(x) = 1;
+end Solve;
+""")
+    model = compile_model([f], "Solve")
+    t = np.linspace(0.0, 20.0, 41)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    y = res.outputs[:, 0]
+    assert np.allclose(y**3 + y, t, atol=1e-9)
+    g = tmp_path / "Forever.mo"
+    g.write_text(f.read_text().replace("Solve", "Forever").replace("abs(step) > 1e-12", "abs(step) >= 0"))
+    res = simulate(compile_model([g], "Forever"), series(t), t_out=t)
+    assert not res.ok and "a while loop did not end in 100 passes" in res.reason
+
+
 WALL = """model Wall "a wall of n layers of rising heat capacity, warmed by the room"
   import Modelica.Thermal.HeatTransfer.Components;
   import Modelica.Thermal.HeatTransfer.Sources.FixedTemperature;

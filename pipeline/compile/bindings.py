@@ -13,13 +13,14 @@ kept).
 rumoca 0.10 also fails on a component array modified by an array expression other than a
 literal or a reference, ``HeatCapacitor cap[n](C = linspace(10, 30, n))`` (unbalanced, or
 "expression shape mismatch"): :func:`distributed` writes the value element by element,
-``C = {(linspace(10, 30, n))[i] for i in 1:n}``, which it reads. The compile tries both only
-after rumoca refused the model as written.
+``C = {(linspace(10, 30, n))[i] for i in 1:n}``, which it reads. The compile tries these, and
+while loops bounded (:mod:`.loops`), only after rumoca refused the model as written.
 """
 from __future__ import annotations
 
 import re
 
+from .loops import bounded
 from .sources import KEYWORDS, masked
 
 #: a scalar Real or Integer parameter's declaration, up to its name (a Complex-valued SI type is
@@ -31,8 +32,9 @@ _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
 
 
 def restated(text: str) -> str:
-    """``text`` with both restatements (:func:`called`, :func:`distributed`)."""
-    return distributed(called(text))
+    """``text`` with the restatements rumoca reads (:func:`called`, :func:`distributed`,
+    :func:`.loops.bounded`)."""
+    return bounded(distributed(called(text)))
 
 
 def called(text: str) -> str:

@@ -172,7 +172,7 @@ class _Front:
 
 
 #: rumoca's errors on the bindings :func:`.bindings.restated` writes as it reads them
-_RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch")
+_RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a checked DAE owner")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
 
@@ -487,8 +487,8 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
                 compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True))
             except rumoca.RumocaError:
                 raise exc from None
-            log.info("%s: compiled with its bindings to function calls (f(...) + 0) and its component "
-                     "arrays' array modifiers ({(e)[i] for i in 1:n}) restated, as rumoca reads them", model)
+            log.info("%s: compiled restated as rumoca reads it (bindings to calls as f(...) + 0, array "
+                     "modifiers of component arrays element by element, while loops as bounded for loops)", model)
             return compiled
         if _UNVALUED.search(str(exc)):
             compiled = _started(front, prep, model, libs, exc)
