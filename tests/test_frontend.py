@@ -242,6 +242,10 @@ def test_a_component_array_modified_by_an_array_expression_takes_its_elements(tm
      "    der(c*x) = -x;\n  end M;\n", r"der\(\) of an expression", "der(c*x)"),
     ("  model M\n    output Real y;\n    Real x(start=0);\n  equation\n    der(x) = -x;\n"
      "    y = delay(x, 0.5);\n  end M;\n", r"delay\(\)", "delay("),
+    # a limit of rumoca's, said as one: a member of a 2-D component array read as an array
+    ("  model Cap\n    Real T(start = 1, fixed = true);\n  equation\n    der(T) = -T;\n  end Cap;\n"
+     "  model M\n    Cap c[2, 2];\n    output Real y[2, 2] = c.T;\n  end M;\n",
+     r"the Modelica front end \(rumoca\) cannot translate .*`c\.T`", "= c.T"),
 ])
 def test_unsupported_constructs_are_refused_not_miscompiled(tmp_path, body, construct, needle):
     f = write(tmp_path, body)

@@ -723,7 +723,7 @@ def _located_error(exc, model: str, files: list[Path], real: dict | None = None)
     lines = [ln.strip() for ln in text.splitlines() if ln.strip()]
     detail = next((ln.lstrip("×").strip() for ln in lines if ln.startswith("×")), None)
     detail = detail or (lines[0].split(": ", 1)[-1] if lines else type(exc).__name__)
-    detail = re.sub(rf"^{re.escape(model)} (could not be compiled|failed in \w+):?\s*", "", detail)
+    detail = re.sub(rf"^(?:{re.escape(model)}|{ENTRY}) (could not be compiled|failed in \w+):?\s*", "", detail)
     import rumoca
 
     if isinstance(exc, rumoca.ParseError) or re.search(r"parse|unexpected", text, re.I):
@@ -751,11 +751,19 @@ def _located_error(exc, model: str, files: list[Path], real: dict | None = None)
         return cls(words(hit, model), where=where or (_find(files, place) if place else
                                                       _find(files, rf"\b(model|block|class)\s+{model.split('.')[-1]}\b")))
     if where is None:
-        name = re.search(r"'([\w.]+)'", detail)
+        name = re.search(r"['`]([\w.\[\]]+)['`]", detail)
         if name:
-            where = _find(files, rf"\b{re.escape(name.group(1).split('.')[-1])}\b")
+            where = _find(files, rf"(?<![\w.]){re.escape(name.group(1))}\b") or \
+                _find(files, rf"\b{re.escape(name.group(1).split('.')[-1])}\b")
     cls = UnsupportedConstruct if "not supported" in detail.lower() or "unsupported" in detail.lower() else ModelicaError
+    if _INTERNAL.search(detail):        # rumoca's own terms: say whose limit it is
+        return UnsupportedConstruct(f"cannot compile {model}: the Modelica front end (rumoca) cannot translate a "
+                                    f"construct of it ({detail})", where=where)
     return cls(f"cannot compile {model}: {detail}", where=where)
+
+
+#: rumoca's words for a construct it cannot translate (its limits, not the model's errors)
+_INTERNAL = re.compile(r"Flat semantic owner|Flat reference|certificate|shape proof|canonical DAE")
 
 
 def _in_function(files: list[Path], name: str, pattern: str) -> str | None:
