@@ -186,6 +186,40 @@ end Solve;
     assert not res.ok and "a while loop did not end in 100 passes" in res.reason
 
 
+@needs_msl()
+def test_a_record_array_sized_by_its_sibling_reaches_a_function(tmp_path):
+    """A pump curve as engineers write it (``head[size(q, 1)]``) passed to a function: rumoca
+    cannot resolve ``q`` there; mcl compiles it again with the bound array declared ``[:]``,
+    and the head is the curve's, interpolated."""
+    f = tmp_path / "Pumps.mo"
+    f.write_text("""package Pumps
+  record Curve "head over flow"
+    parameter Real q[:] = {0, 1, 2, 3} "flow";
+    parameter Real head[size(q, 1)] = {10, 9.5, 8, 5} "head at each flow";
+  end Curve;
+  function headAt
+    input Curve c;
+    input Real rate;
+    output Real h;
+  algorithm
+    h := Modelica.Math.Vectors.interpolate(c.q, c.head, rate);
+  end headAt;
+  model Test
+    parameter Curve curve(head = {12, 11, 9, 4});
+    Real rate(start = 0, fixed = true);
+    output Real h = headAt(curve, rate);
+  equation
+    der(rate) = 1;
+  end Test;
+end Pumps;
+""")
+    model = compile_model([f], "Pumps.Test", libraries=[msl_path()])
+    t = np.linspace(0.0, 3.0, 13)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    assert np.allclose(res.outputs[:, 0], np.interp(t, [0, 1, 2, 3], [12, 11, 9, 4]), atol=1e-9)
+
+
 WALL = """model Wall "a wall of n layers of rising heat capacity, warmed by the room"
   import Modelica.Thermal.HeatTransfer.Components;
   import Modelica.Thermal.HeatTransfer.Sources.FixedTemperature;

@@ -13,8 +13,10 @@ kept).
 rumoca 0.10 also fails on a component array modified by an array expression other than a
 literal or a reference, ``HeatCapacitor cap[n](C = linspace(10, 30, n))`` (unbalanced, or
 "expression shape mismatch"): :func:`distributed` writes the value element by element,
-``C = {(linspace(10, 30, n))[i] for i in 1:n}``, which it reads. The compile tries these, and
-while loops bounded (:mod:`.loops`), only after rumoca refused the model as written.
+``C = {(linspace(10, 30, n))[i] for i in 1:n}``, which it reads. A record's bound parameter
+array sized by a sibling (``head[size(q, 1)] = {...}``) is declared ``[:]`` (:func:`unsized`).
+The compile tries these, and while loops bounded (:mod:`.loops`), only after rumoca refused
+the model as written.
 """
 from __future__ import annotations
 
@@ -33,8 +35,19 @@ _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
 
 def restated(text: str) -> str:
     """``text`` with the restatements rumoca reads (:func:`called`, :func:`distributed`,
-    :func:`.loops.bounded`)."""
-    return bounded(distributed(called(text)))
+    :func:`unsized`, :func:`.loops.bounded`)."""
+    return bounded(unsized(distributed(called(text))))
+
+
+#: a bound parameter array sized by another's size: ``parameter Real head[size(q, 1)] = {...}``
+_SIZED = re.compile(r"(\bparameter\s+[A-Za-z_][\w.]*\s+\w+\s*\[)((?:\s*size\s*\([^()]*\)\s*,?)+)(\]\s*=)")
+
+
+def unsized(text: str) -> str:
+    """``text`` with each bound parameter array sized by ``size(...)`` of another declared
+    ``[:]`` (its binding gives its size): rumoca cannot resolve the other name where a record
+    holding both is passed to a function."""
+    return _SIZED.sub(lambda m: m[1] + ", ".join([":"] * m[2].count("size")) + m[3], text)
 
 
 def called(text: str) -> str:

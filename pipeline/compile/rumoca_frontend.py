@@ -172,7 +172,8 @@ class _Front:
 
 
 #: rumoca's errors on the bindings :func:`.bindings.restated` writes as it reads them
-_RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a checked DAE owner")
+_RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a checked DAE owner|"
+                         r"unresolved Flat reference|function shape proof")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
 
