@@ -174,3 +174,26 @@ end Levels;
     np.testing.assert_allclose(total, rho * 2.5, rtol=1e-6)
     assert np.all(np.diff(state("full.m")) <= 1e-3)          # (it settles to 5e-8 of its mass)
     np.testing.assert_allclose([state("full.m")[-1], state("low.m")[-1]], rho * 1.25, rtol=1e-3)
+
+
+def test_a_battery_cell_with_one_rc_element_charges_it(tmp_path, monkeypatch):
+    """CellRCStack gives its RC elements R and C from the cell's record array (an array modifier
+    of a component array, which rumoca misreads; the overlay writes it element by element). A
+    cell with one RC element (R = 0.01 Ohm, C = 1000 F) carrying 10 A charges its capacitor to
+    I*R*(1 - exp(-t/(R*C))) = 0.1*(1 - exp(-t/10)) V."""
+    state = _run(tmp_path, monkeypatch, """
+model Cell
+  import Modelica.Electrical.Batteries;
+  import Modelica.Electrical.Analog;
+  parameter Batteries.ParameterRecords.TransientData.CellData data(Qnom = 18000, OCVmax = 4.2,
+    OCVmin = 2.5, Ri = 0.02, nRC = 1, rcData = {Batteries.ParameterRecords.TransientData.RCData(R = 0.01, C = 1000)});
+  Batteries.BatteryStacks.CellRCStack cell(cellData = data, useHeatPort = false, SOC(fixed = true, start = 0.5));
+  Analog.Basic.Ground ground;
+  Analog.Sources.ConstantCurrent load(I = 10);
+equation
+  connect(cell.n, ground.p);
+  connect(load.p, ground.p);
+  connect(load.n, cell.p);
+end Cell;
+""", "Cell", t := np.linspace(0.0, 40.0, 41))
+    assert np.abs(state("cell.capacitor[1].v") - 0.1 * (1 - np.exp(-t / 10))).max() < 1e-5     # of 0.1 V

@@ -44,6 +44,7 @@ class ClassInfo:
     starts: dict[str, str] = field(default_factory=dict)   # a declaration's literal start value
     imports: dict[str, str] = field(default_factory=dict)  # import A.B.C / X = A.B: the short name's class
     wildcards: list[str] = field(default_factory=list)     # import A.B.*: the packages searched
+    bound: set[str] = field(default_factory=set)           # members given a value: a binding, an extends modifier
 
 #: a literal start value in a declaration's modifier: ``period(final min=small, start=1)``
 _START = re.compile(r"\bstart\s*=\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|true|false)\s*[,)]")
@@ -111,6 +112,40 @@ def _without_nested(body: str) -> str:
         if not end:
             return body[:m.start()]
         body = body[:m.start()] + " " + tail[end.end():]
+
+
+def _modified(mods: str) -> set[str]:
+    """The names a modification ``(a = 1, final b(start = 2) = c, ...)`` gives a value to, at its
+    top level."""
+    names, depth = set(), 0
+    for m in re.finditer(r"[()\[\]{}]|(?<![\w.])(?:(?:final|each)\s+)*([A-Za-z_]\w*)\s*(?==(?!=)|\()", mods):
+        if m.group(1) is None:
+            depth += 1 if m.group() in "([{" else -1
+        elif depth == 1 and (m.start() == 0 or mods[:m.start()].rstrip()[-1:] in "(,"):
+            names.add(m.group(1))
+    return names
+
+
+def _binds(statement: str, name: str) -> bool:
+    """Whether the declaration ``statement`` of ``name`` binds it (``= ...`` after its dimensions
+    and modification)."""
+    m = re.search(rf"(?<![\w.]){re.escape(name)}\b", statement)
+    if m is None:
+        return False
+    rest, k = statement, m.end()
+    while True:
+        k = len(rest) - len(rest[k:].lstrip())
+        if rest.startswith(("[", "("), k):
+            depth, j = 0, k
+            while j < len(rest):
+                depth += rest[j] in "([{"
+                depth -= rest[j] in ")]}"
+                j += 1
+                if depth == 0:
+                    break
+            k = j
+            continue
+        return rest.startswith("=", k) and not rest.startswith("==", k)
 
 
 def _statements(body: str):
@@ -186,7 +221,10 @@ class LibraryClasses:
                 _read_import(info, st)
                 continue
             if words[0] == "extends":
-                info.extends.append(re.match(r"extends\s+([\w.]+)", st).group(1))
+                head = re.match(r"extends\s+([\w.]+)\s*", st)
+                info.extends.append(head.group(1))
+                if st.startswith("(", head.end()):
+                    info.bound |= _modified(st[head.end():])
                 continue
             tokens = re.findall(r"[A-Za-z_][\w.]*|[\[\](=]", st)
             prefixes = set()
@@ -205,6 +243,8 @@ class LibraryClasses:
                 continue
             conditional = bool(re.search(r"\bif\b", st))
             info.declarations.append((prefixes, type_name, tokens[k], conditional))
+            if _binds(st, tokens[k]):
+                info.bound.add(tokens[k])
             start = _START.search(st)
             if start:
                 info.starts[tokens[k]] = start.group(1)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from . import redeclares
+from . import bindings, redeclares
+from .bindings import distributed
 from .redeclares import lifted
 
 
@@ -263,9 +264,15 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
 }
 
 
+#: files whose component arrays rumoca reads only with their array modifiers written element by
+#: element (:func:`.bindings.distributed`): the RC elements of a battery cell take their R and C
+#: from the cell's record array
+DISTRIBUTED = {("Modelica", ("Electrical", "Batteries", "BatteryStacks", "CellRCStack.mo"))}
+
+
 def files_of(library: str) -> list[tuple[str, ...]]:
     """The files of ``library`` (below its directory) that a rewrite may change."""
-    return [unit for lib, unit in REWRITES if lib == library]
+    return [unit for lib, unit in [*REWRITES, *DISTRIBUTED] if lib == library]
 
 
 def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
@@ -278,10 +285,13 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
         assert old.count("\n") == new.count("\n"), "a rewrite keeps the line count"
         if text.count(old) == (times or [1])[0]:
             text = text.replace(old, new)
+    if (library, tuple(unit)) in DISTRIBUTED:
+        text = distributed(text)
     text = lifted(text)       # (any library's redeclarations with modifiers: :mod:`.redeclares`)
     return text if text != original else None
 
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
-VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + Path(redeclares.__file__).read_text()).encode()).hexdigest()[:12]
+VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + Path(redeclares.__file__).read_text()
+                          + Path(bindings.__file__).read_text()).encode()).hexdigest()[:12]
