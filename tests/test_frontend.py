@@ -220,6 +220,33 @@ end Pumps;
     assert np.allclose(res.outputs[:, 0], np.interp(t, [0, 1, 2, 3], [12, 11, 9, 4]), atol=1e-9)
 
 
+def test_integer_of_an_enumeration_variable_is_its_literals_position(tmp_path):
+    """rumoca refuses Integer() of an enumeration variable; mcl compiles it again with the call
+    written as comparisons: a thermostat heats (mode 2) until its sampled temperature passes
+    1.2 at t = 1.5, then rests (mode 1)."""
+    f = tmp_path / "Thermostat.mo"
+    f.write_text("""package Thermostat
+  type Mode = enumeration(Off "resting", Heating "heater on");
+  model Room
+    discrete Mode mode(start = Mode.Off, fixed = true);
+    Real T(start = 0, fixed = true);
+    output Real m = Integer(mode) "the mode, as its position";
+  equation
+    der(T) = if mode == Mode.Heating then 1 else 0;
+    when sample(0, 0.5) then
+      mode = if T < 1.2 then Mode.Heating else Mode.Off;
+    end when;
+  end Room;
+end Thermostat;
+""")
+    t = np.linspace(0.0, 3.0, 13)
+    res = simulate(compile_model([f], "Thermostat.Room"), series(t), t_out=t)
+    assert res.ok, res.reason
+    m = res.outputs[:, 0]
+    assert np.all(m[t < 1.5] == 2) and np.all(m[t > 1.5] == 1)
+    assert res.states[-1, 0] == pytest.approx(1.5, abs=1e-6)
+
+
 WALL = """model Wall "a wall of n layers of rising heat capacity, warmed by the room"
   import Modelica.Thermal.HeatTransfer.Components;
   import Modelica.Thermal.HeatTransfer.Sources.FixedTemperature;

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import re
 
+from .enums import enumerated
 from .loops import bounded
 from .sources import KEYWORDS, masked
 
@@ -35,8 +36,8 @@ _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
 
 def restated(text: str) -> str:
     """``text`` with the restatements rumoca reads (:func:`called`, :func:`distributed`,
-    :func:`unsized`, :func:`.loops.bounded`)."""
-    return bounded(unsized(distributed(called(text))))
+    :func:`unsized`, :func:`.loops.bounded`, :func:`.enums.enumerated`)."""
+    return enumerated(bounded(unsized(distributed(called(text)))))
 
 
 #: a bound parameter array sized by another's size: ``parameter Real head[size(q, 1)] = {...}``
