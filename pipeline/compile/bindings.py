@@ -1,5 +1,7 @@
-"""Bindings restated so that rumoca reads them as written: parameters bound to a bare function
-call, and the modifiers of a component array that give one array for all its elements.
+"""A model's text restated, with the same meaning, where rumoca misreads it as written: bindings
+to a bare function call, a component array's array modifiers, a record array sized by its
+sibling (here), while loops (:mod:`.loops`), Integer() of an enumeration (:mod:`.enums`).
+:func:`restated` applies them all; the compile tries it only after rumoca refused the model.
 
 rumoca 0.10 counts the binding of a scalar parameter to a call of a function with an array
 argument (``parameter Real L = Modelica.Math.Vectors.length(r)``, a gear's efficiency
@@ -15,8 +17,6 @@ literal or a reference, ``HeatCapacitor cap[n](C = linspace(10, 30, n))`` (unbal
 "expression shape mismatch"): :func:`distributed` writes the value element by element,
 ``C = {(linspace(10, 30, n))[i] for i in 1:n}``, which it reads. A record's bound parameter
 array sized by a sibling (``head[size(q, 1)] = {...}``) is declared ``[:]`` (:func:`unsized`).
-The compile tries these, and while loops bounded (:mod:`.loops`), only after rumoca refused
-the model as written.
 """
 from __future__ import annotations
 
