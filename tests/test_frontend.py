@@ -247,6 +247,39 @@ end Thermostat;
     assert res.states[-1, 0] == pytest.approx(1.5, abs=1e-6)
 
 
+@needs_msl()
+def test_a_redeclared_controller_drops_the_modifiers_of_the_one_it_replaces(tmp_path):
+    """A PI controller redeclared as a PID: Modelica drops the PI's own modifiers (T = 0.5, which
+    a PID has no parameter for); rumoca keeps them and refuses the model, and mcl compiles it
+    again with them in a short class of the default controller: the PID runs with its own."""
+    f = write(tmp_path, """  model Loop "a speed loop with a replaceable controller"
+    import Modelica.Blocks;
+    replaceable Blocks.Continuous.PI ctrl(k = 2, T = 0.5, initType = Blocks.Types.Init.InitialState)
+      constrainedby Blocks.Interfaces.SISO;
+    Blocks.Continuous.FirstOrder plant(k = 1, T = 0.2, initType = Blocks.Types.Init.InitialState);
+    Blocks.Math.Feedback err;
+    Blocks.Sources.Constant ref(k = 1);
+    output Real y = plant.y;
+  equation
+    connect(ref.y, err.u1);
+    connect(err.y, ctrl.u);
+    connect(ctrl.y, plant.u);
+    connect(plant.y, err.u2);
+  end Loop;
+  model WithPID
+    extends Loop(redeclare Modelica.Blocks.Continuous.PID ctrl(k = 3, Ti = 0.4, Td = 0.01,
+      initType = Modelica.Blocks.Types.Init.InitialState));
+  end WithPID;
+""")
+    model = compile_model([f], "P.WithPID", libraries=[msl_path()])
+    values = dict(zip(model.ode.p_names, model.ode.p_values))
+    assert (values["ctrl.k"], values["ctrl.Ti"], values["ctrl.Td"]) == (3, 0.4, 0.01)
+    assert not any(n == "ctrl.T" for n in model.variable_names)
+    t = np.linspace(0.0, 5.0, 11)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok and abs(res.outputs[-1, 0] - 1) < 1e-3          # the integral action settles it
+
+
 WALL = """model Wall "a wall of n layers of rising heat capacity, warmed by the room"
   import Modelica.Thermal.HeatTransfer.Components;
   import Modelica.Thermal.HeatTransfer.Sources.FixedTemperature;

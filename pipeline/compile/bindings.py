@@ -1,6 +1,7 @@
 """A model's text restated, with the same meaning, where rumoca misreads it as written: bindings
 to a bare function call, a component array's array modifiers, a record array sized by its
-sibling (here), while loops (:mod:`.loops`), Integer() of an enumeration (:mod:`.enums`).
+sibling (here), while loops (:mod:`.loops`), Integer() of an enumeration (:mod:`.enums`), a
+replaceable component's own modifiers (:func:`.redeclares.defaults_lifted`).
 :func:`restated` applies them all; the compile tries it only after rumoca refused the model.
 
 rumoca 0.10 counts the binding of a scalar parameter to a call of a function with an array
@@ -36,8 +37,11 @@ _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
 
 def restated(text: str) -> str:
     """``text`` with the restatements rumoca reads (:func:`called`, :func:`distributed`,
-    :func:`unsized`, :func:`.loops.bounded`, :func:`.enums.enumerated`)."""
-    return enumerated(bounded(unsized(distributed(called(text)))))
+    :func:`unsized`, :func:`.loops.bounded`, :func:`.enums.enumerated`,
+    :func:`.redeclares.defaults_lifted`)."""
+    from .redeclares import defaults_lifted       # (it reads this module's closing())
+
+    return defaults_lifted(enumerated(bounded(unsized(distributed(called(text))))))
 
 
 #: a bound parameter array sized by another's size: ``parameter Real head[size(q, 1)] = {...}``

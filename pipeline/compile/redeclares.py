@@ -69,6 +69,38 @@ def lifted(text: str) -> str:
     return "".join(out)
 
 
+#: a replaceable component with its own modifiers, up to their parenthesis
+_REPLACEABLE = re.compile(r"\breplaceable\s+(?:(?:discrete|input|output|inner|outer)\s+)*"
+                          r"(?P<type>(?!(?:model|block|record|package|function|class|connector|type|Real|Integer"
+                          r"|Boolean|String)\b)"
+                          r"[A-Za-z_][\w.]*)\s+(?P<name>[A-Za-z_]\w*)\s*(?:\[[^\[\]]*\]\s*)?\(")
+#: the name the short classes of replaceable components' modifiers take
+DEFAULTS = "MclReplaceable_"
+
+
+def defaults_lifted(text: str) -> str:
+    """``text`` with each replaceable component's own modifiers moved into a local short class
+    it is declared with (``class MclReplaceable_1 = A(T = 2); replaceable MclReplaceable_1 c
+    constrainedby ...``). Modelica drops them where the component is redeclared; rumoca 0.10
+    keeps them and refuses a redeclared class without those parameters ("unknown modifier");
+    in a short class they stay with the default class alone. (A replaceable parameter record
+    is left as it is: rumoca cannot read a record's short class as a parameter's type.)"""
+    blank, edits, inserts = masked(text), [], {}
+    for n, m in enumerate(_REPLACEABLE.finditer(blank), 1):
+        close = closing(blank, m.end() - 1)
+        start = _element_start(blank, m.end())       # (at the keyword, or a prefix before it)
+        if close is None or start is None:
+            continue
+        mods = text[m.end() - 1:close]
+        name = f"{DEFAULTS}{n}"
+        edits += [(m.start("type"), m.end("type"), name), (m.end() - 1, close, "\n" * mods.count("\n"))]
+        inserts.setdefault(start, []).append(f"class {name} = {m['type']}{' '.join(_without_comments(mods).split())}; ")
+    edits += [(pos, pos, "".join(defs)) for pos, defs in inserts.items()]
+    for a, b, new in sorted(edits, key=lambda e: (e[0], e[1]), reverse=True):
+        text = text[:a] + new + text[b:]
+    return text
+
+
 def tree_copy(top: Path, place: Path) -> Path:
     """Where the lifted copy of the package directory under ``top`` (its root ``package.mo``)
     is made: ``place`` named by the tree's content, the directory's own name kept."""

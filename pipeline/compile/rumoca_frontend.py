@@ -173,7 +173,7 @@ class _Front:
 
 #: rumoca's errors on the bindings :func:`.bindings.restated` writes as it reads them
 _RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a checked DAE owner|"
-                         r"unresolved Flat reference|function shape proof|found Enumeration")
+                         r"unresolved Flat reference|function shape proof|found Enumeration|unknown modifier")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
 
@@ -490,7 +490,7 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
                 raise exc from None
             log.info("%s: compiled restated as rumoca reads it (bindings to calls as f(...) + 0, array "
                      "modifiers of component arrays element by element, while loops as bounded for loops, Integer() of "
-                     "an enumeration as comparisons)", model)
+                     "an enumeration as comparisons, replaceable components' own modifiers in short classes)", model)
             return compiled
         if _UNVALUED.search(str(exc)):
             compiled = _started(front, prep, model, libs, exc)
