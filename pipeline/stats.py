@@ -274,14 +274,18 @@ def misfit_significance(residual, noise, t=None, n_params: int = 0, alpha: float
     sigma_all = float(np.sqrt(sig2_total / sum(p["n"] for p in per)))
     too_large = level_p < alpha
     correlated = p_white < alpha and structure >= min_structure
+    # (the ratio weighs each output by its own noise: with several outputs it is not the pooled RMS
+    # over the pooled noise)
+    against = "the noise" if m == 1 else "the noise (each output against its own; pooled"
+    close = "" if m == 1 else ")"
     if too_large:
-        reason = (f"misfit: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x the noise {sigma_all:.3g} "
+        reason = (f"misfit: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x {against} {sigma_all:.3g}{close} "
                   f"(chance from noise {level_p:.2g})")
     elif correlated:
         reason = (f"misfit: residual RMS {res_rms:.3g} is near the noise {sigma_all:.3g} but not white "
                   f"(Ljung-Box chance {p_white:.2g}; correlated part {structure:.2g} of the noise)")
     else:
-        reason = (f"not significant: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x the noise {sigma_all:.3g} "
+        reason = (f"not significant: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x {against} {sigma_all:.3g}{close} "
                   f"(chance {level_p:.2g}) and {'white' if p_white >= alpha else 'its correlated part small'} "
                   f"(Ljung-Box chance {p_white:.2g})")
     return Significance(bool(too_large or correlated), reason, res_rms, sigma_all, level_p, p_white,

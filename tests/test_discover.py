@@ -324,3 +324,17 @@ def test_laws_of_one_component_the_data_do_not_choose_between_are_named_together
     causes, why_not, _ = decide(cands, spec, np.ones(100), None, {}, None, 1e3)
     assert why_not is None and causes[0]["equation"] == "i = c*va^3"
     assert [(a["equation"], a["score_difference"]) for a in causes[0]["alternatives"]] == [("i = a*sqrt(va)", 0.5 * EQUAL)]
+
+
+def test_screening_keeps_laws_predicted_as_a_tie_with_the_last_one_kept():
+    """The screening's linearised prediction cannot part two laws predicted within a few percent
+    (a drive's two bearings, one seen through a gear): the one just past the limit is fitted
+    too, where one predicted far behind is not."""
+    from mcl.discovery.search import promising
+
+    predicted = [("motorBearing", 3130.8), ("bearing", 3152.9), ("motorBearing", 3270.7), ("bearing", 3307.8),
+                 ("shaft", 36755.6)]
+    screening = [{"component": c, "predicted_rss": rss, "n_params": 7} for c, rss in predicted]
+    assert sorted(promising(screening, 3)) == [0, 1, 2, 3]
+    apart = [{"component": c, "predicted_rss": rss, "n_params": 7} for c, rss in [("a", 100), ("b", 101), ("a", 112)]]
+    assert sorted(promising(apart, 2)) == [0, 1]

@@ -73,14 +73,18 @@ def blocked(template, rates: dict, component: str) -> str | None:
 
 
 # -- screening -----------------------------------------------------------------------------------
+#: predicted RSS this close (relative) to the last one kept by the screening: a tie, fitted too
+TIE = 0.05
+
+
 def promising(screening: list[dict], limit: int, ratio: float = 10.0, score=None) -> list[int]:
     """Indices of the candidates worth a full fit: at most ``limit``, best predicted first, and
     only those whose predicted RSS after one Gauss-Newton step is within ``ratio`` of the best
     prediction (a candidate predicted 10x worse loses by n ln 10 in any criterion unless the
     linearisation is badly wrong). ``score(rss, k)``, the criterion of a law with ``k`` free
     terms, orders them: a small law predicted a little behind a large one in RSS may well be
-    ahead in the criterion (default: by RSS alone). Laws that could not be screened are always
-    fitted."""
+    ahead in the criterion (default: by RSS alone). Laws predicted within :data:`TIE` of the
+    last one kept are kept too, and laws that could not be screened are always fitted."""
     rank = score or (lambda rss, k: rss)
     ok = sorted((rank(s["predicted_rss"], s.get("n_params", 1) - 1), s["predicted_rss"], k)
                 for k, s in enumerate(screening) if s.get("predicted_rss") is not None)
@@ -88,7 +92,12 @@ def promising(screening: list[dict], limit: int, ratio: float = 10.0, score=None
     if not ok:
         return unscreened
     floor = max(min(pred for _, pred, _ in ok), 1e-300)
-    return [k for _, pred, k in ok[:limit] if pred <= ratio * floor] + unscreened
+    kept = [(pred, k) for _, pred, k in ok[:limit] if pred <= ratio * floor]
+    last = max((pred for pred, _ in kept), default=floor)
+    # a prediction within TIE of one kept is a tie the linearised prediction cannot part (two
+    # bearings of a drive, one reflected through a gear): it is fitted too
+    ties = [k for _, pred, k in ok[limit:] if pred <= (1 + TIE) * last and pred <= ratio * floor]
+    return [k for _, k in kept] + ties + unscreened
 
 
 class Screening:
