@@ -168,6 +168,10 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+#: output points a run without input data may record (10 million: 80 MB per variable)
+MAX_POINTS = 10_000_000
+
+
 def _time_grid(model, args):
     """The inputs of a model that has none: its time grid, from --stop-time and --interval, else
     from the model's experiment annotation, else from its own time scales (500 intervals)."""
@@ -188,10 +192,14 @@ def _time_grid(model, args):
     elif (exp := of_fmu(model.path)) is None:
         raise ConfigError(f"{model.name} has no inputs and its FMU no default experiment: give the time to "
                           f"simulate with --stop-time")
-    step = args.interval or exp.step or (exp.stop - exp.start) / 500
-    if not step > 0:
-        raise ConfigError(f"--interval must be > 0, not {step}")
-    n = int(round((exp.stop - exp.start) / step))
+    span = exp.stop - exp.start
+    if args.interval is not None and not 0 < args.interval <= span:
+        raise ConfigError(f"--interval must be > 0 and at most the {span:g} s simulated, not {args.interval}")
+    step = args.interval or exp.step or span / 500
+    n = int(round(span / step))
+    if n > MAX_POINTS:
+        raise ConfigError(f"{n + 1} output points ({span:g} s every {step:g} s) are too many to record: "
+                          f"give a larger --interval (at most {MAX_POINTS} points)")
     t = np.linspace(exp.start, exp.start + n * step, n + 1)
     if args.stop_time is None:
         why = ("the model's experiment" if exp.source == "annotation"

@@ -78,6 +78,10 @@ def test_a_model_without_inputs_runs_its_experiment_recording_every_variable(tmp
     assert main(["simulate", str(fmu), "-o", str(a), "-V", "h*"]) == 0
     assert main(["simulate", str(src), "-m", "Drain", "-o", str(b), "-V", "h*", "--stop-time", "20",
                  "--interval", "0.5"]) == 0
+    for grid, says in ((["--interval", "50"], "at most the 20 s simulated"),
+                       (["--stop-time", "1e9", "--interval", "1e-6"], "too many to record")):
+        assert main(["simulate", str(src), "-m", "Drain", "-o", str(tmp_path / "c.csv"), *grid]) == 2
+        assert says in capsys.readouterr().err
     ra, rb = read_csv(a), read_csv(b)
     assert ra.names == rb.names == ["h1", "h2"]
     assert np.allclose(ra.time, rb.time) and np.allclose(ra.values, rb.values, atol=1e-5)
@@ -120,6 +124,8 @@ def test_plugins_lists_compilers_and_engines(capsys):
       "-p", "nope=1"], "no free parameter 'nope'"),
     (["compile", "{bad}", "-m", "B.M", "-o", "x.fmu"], "syntax error"),
     (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-o", "x.csv"], "give their values with --input"),
+    (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-i", "{input}", "-o", "x.csv", "--stop-time", "2"],
+     "--stop-time and --interval are for a model without inputs"),
     (["simulate", "{lib}", "-m", "MCL.Examples.CauerFilter", "-i", "{input}", "-o", "x.csv", "-V", "C9*"],
      "--variables C9*: no variable of MCL.Examples.CauerFilter matches"),
     (["compile", "{lib}", "-m", "MCL.Examples.CauerFilter", "-o", "x.fmu", "--compiler", "openmodelica"],
