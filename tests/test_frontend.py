@@ -659,3 +659,12 @@ def test_a_package_directory_keeps_the_modifiers_of_its_redeclared_classes(tmp_p
     c.write_text(c.read_text().replace("b.r.c + b.z;", "b.r.c + b.z + missing;"))
     with pytest.raises(ModelicaError, match=rf"{c}:7: .*missing"):
         compile_model([pkg], "P.C")
+
+
+def test_restating_a_malformed_declaration_leaves_it_as_written():
+    """The retry's rewrites read text rumoca refused, which may be malformed: an unclosed array
+    size of thirty size() calls (which once took exponential time) comes back as it was."""
+    from mcl.compile.bindings import restated
+
+    text = "model M\n  parameter Real x[" + "size(a) " * 30 + "q\nend M;\n"
+    assert restated(text) == text

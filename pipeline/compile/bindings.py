@@ -45,7 +45,8 @@ def restated(text: str) -> str:
 
 
 #: a bound parameter array sized by another's size: ``parameter Real head[size(q, 1)] = {...}``
-_SIZED = re.compile(r"(\bparameter\s+[A-Za-z_][\w.]*\s+\w+\s*\[)((?:\s*size\s*\([^()]*\)\s*,?)+)(\]\s*=)")
+_SIZED = re.compile(r"(\bparameter\s+[A-Za-z_][\w.]*\s+\w+\s*\[)((?:\s*size\s*\([^()]*\)\s*,)*\s*size\s*\([^()]*\)\s*)"
+                    r"(\]\s*=)")
 
 
 def unsized(text: str) -> str:
