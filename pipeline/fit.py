@@ -590,7 +590,7 @@ class LevenbergMarquardt(Fitter):
             if self.give_up is not None and self._hopeless(problem, start, r, g, H, costs, trusted):
                 message = "stopped: it cannot beat another candidate"
                 break
-            step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-30), g)
+            step = self._step(A, g, H, lam)
             # the Gauss-Newton model's predicted decrease: below tol, no step can pay for a
             # simulation (at the optimum, the solver's own noise would only reject steps)
             predicted = (r @ r - np.sum((r + A @ step) ** 2)) / max(r @ r, 1e-300)
@@ -626,6 +626,18 @@ class LevenbergMarquardt(Fitter):
         if 0 < y[start:].sum() < len(y[start:]):
             q.fit(W[start:], y[start:])
         return w, current[2], message, q
+
+    @staticmethod
+    def _step(A, g, H, lam) -> np.ndarray:
+        """The damped Gauss-Newton step. A coordinate the residual does not depend on at this
+        point is not moved: the scale inside a term whose coefficient is still 0 (tanh(v/s1)
+        at the start) has a zero column, and the damping alone would let it jump anywhere."""
+        norms = np.linalg.norm(A, axis=0)
+        live = norms > 1e-12 * max(float(norms.max()) if norms.size else 0.0, 1e-300)
+        step = np.zeros(len(g))
+        Hl = H[np.ix_(live, live)]
+        step[live] = -np.linalg.solve(Hl + lam * np.diag(np.diag(Hl) + 1e-30), g[live])
+        return step
 
     def _hopeless(self, problem, start, r, g, H, costs, trusted) -> bool:
         """Whether ``give_up`` stops the fit, told what it can reach: what the Gauss-Newton

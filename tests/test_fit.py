@@ -182,3 +182,16 @@ def test_algorithm3_starts_from_a_pretrained_feasibility_model(rc_template, tmp_
     res = Algorithm3("Powell", maxfev=600, feasibility=pre.model).fit(problem, [0.1, 0.1, 0.1])
     assert res.feasibility is pre.model and pre.model.n_updates_ > 0   # updated online from there
     assert max(map(abs, recovered(res))) < 0.05
+
+
+def test_a_coordinate_the_residual_does_not_depend_on_is_not_moved():
+    """The scale inside a term whose coefficient is still 0 has a zero Jacobian column: the LM
+    step leaves it where it is (the damping alone once sent tanh(v/s1)'s s1 from 0.01 to 1e14)
+    and solves for the others as if it were not there."""
+    rng = np.random.default_rng(1)
+    A = np.column_stack([rng.normal(size=50), np.zeros(50), rng.normal(size=50)])
+    r = rng.normal(size=50)
+    step = LevenbergMarquardt._step(A, A.T @ r, A.T @ A, 1e-3)
+    live = A[:, [0, 2]]
+    alone = LevenbergMarquardt._step(live, live.T @ r, live.T @ live, 1e-3)
+    assert step[1] == 0.0 and np.allclose(step[[0, 2]], alone)
