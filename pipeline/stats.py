@@ -276,16 +276,16 @@ def misfit_significance(residual, noise, t=None, n_params: int = 0, alpha: float
     correlated = p_white < alpha and structure >= min_structure
     # (the ratio weighs each output by its own noise: with several outputs it is not the pooled RMS
     # over the pooled noise)
-    against = "the noise" if m == 1 else "the noise (each output against its own; pooled"
-    close = "" if m == 1 else ")"
+    noise = (f"the noise {sigma_all:.3g}" if m == 1
+             else f"the noise (each output against its own; pooled {sigma_all:.3g})")
     if too_large:
-        reason = (f"misfit: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x {against} {sigma_all:.3g}{close} "
+        reason = (f"misfit: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x {noise} "
                   f"(chance from noise {level_p:.2g})")
     elif correlated:
         reason = (f"misfit: residual RMS {res_rms:.3g} is near the noise {sigma_all:.3g} but not white "
                   f"(Ljung-Box chance {p_white:.2g}; correlated part {structure:.2g} of the noise)")
     else:
-        reason = (f"not significant: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x {against} {sigma_all:.3g}{close} "
+        reason = (f"not significant: residual RMS {res_rms:.3g} is {np.sqrt(stat):.3g}x {noise} "
                   f"(chance {level_p:.2g}) and {'white' if p_white >= alpha else 'its correlated part small'} "
                   f"(Ljung-Box chance {p_white:.2g})")
     return Significance(bool(too_large or correlated), reason, res_rms, sigma_all, level_p, p_white,

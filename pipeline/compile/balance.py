@@ -44,7 +44,7 @@ def unconnected_inputs(model: str, docs: dict[Path, tuple[str, set]], search) ->
 def _inputs(lib: LibraryClasses, cls) -> list[str]:
     """The unconditional input connectors of class ``cls`` that it gives no value itself (a
     binding, a modifier of a class it extends)."""
-    found, bound = [], _bound(lib, cls)
+    found, bound = [], lib.bound(cls)
     for prefixes, port_cls, _, port, conditional in lib.members(cls):
         if conditional or port in bound or "protected" in prefixes or "output" in prefixes or "parameter" in prefixes:
             continue
@@ -52,15 +52,6 @@ def _inputs(lib: LibraryClasses, cls) -> list[str]:
         if "input" in prefixes or short.split()[:1] == ["input"]:
             found.append(port)
     return found
-
-
-def _bound(lib: LibraryClasses, cls, seen=None) -> set[str]:
-    """The members ``cls`` and the classes it extends give a value."""
-    seen = seen if seen is not None else set()
-    if cls.name in seen:
-        return set()
-    seen.add(cls.name)
-    return set(cls.bound).union(*(_bound(lib, b, seen) for b in lib.bases(cls)))
 
 
 def _named(text: str, component: str, port: str) -> bool:

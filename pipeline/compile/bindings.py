@@ -25,7 +25,8 @@ import re
 
 from .enums import enumerated
 from .loops import bounded
-from .sources import KEYWORDS, masked
+from .redeclares import defaults_lifted
+from .sources import KEYWORDS, closing, masked
 
 #: a scalar Real or Integer parameter's declaration, up to its name (a Complex-valued SI type is
 #: a record: a call there is its constructor, and a record plus 0 is no Modelica)
@@ -39,8 +40,6 @@ def restated(text: str) -> str:
     """``text`` with the restatements rumoca reads (:func:`called`, :func:`distributed`,
     :func:`unsized`, :func:`.loops.bounded`, :func:`.enums.enumerated`,
     :func:`.redeclares.defaults_lifted`)."""
-    from .redeclares import defaults_lifted       # (it reads this module's closing())
-
     return defaults_lifted(enumerated(bounded(unsized(distributed(called(text))))))
 
 
@@ -83,29 +82,6 @@ def called(text: str) -> str:
         pos = end
     out.append(text[pos:])
     return "".join(out)
-
-
-def closing(text: str, k: int) -> int | None:
-    """The index just past the parenthesis that closes the one at ``k`` (strings skipped)."""
-    depth, i, n = 0, k, len(text)
-    while i < n:
-        c = text[i]
-        if c == '"':
-            i = text.find('"', i + 1)
-            while i > 0 and text[i - 1] == "\\":
-                i = text.find('"', i + 1)
-            if i < 0:
-                return None
-        elif c == "(":
-            depth += 1
-        elif c == ")":
-            depth -= 1
-            if depth == 0:
-                return i + 1
-        elif c == ";":
-            return None
-        i += 1
-    return None
 
 
 def _skip_space(text: str, k: int) -> int:
@@ -180,18 +156,7 @@ def _as_is(value: str) -> bool:
         return False
     if value[0] == '"':
         return value.find('"', 1) == len(value) - 1
-    return _closing_any(value, opening.end() - 1) == len(value)
-
-
-def _closing_any(text: str, k: int) -> int | None:
-    """The index just past the bracket that closes the one at ``k``."""
-    depth = 0
-    for i in range(k, len(text)):
-        depth += text[i] in "([{"
-        depth -= text[i] in ")]}"
-        if depth == 0:
-            return i + 1
-    return None
+    return closing(value, opening.end() - 1) == len(value)
 
 
 def _arguments(masked: str, start: int, stop: int) -> list[tuple[int, int]]:

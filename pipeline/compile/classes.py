@@ -13,7 +13,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .sources import COMMENT_OR_STRING
+from .sources import COMMENT_OR_STRING, closing
 
 _KEYWORDS = r"(?:model|block|connector|record|package|class|type|function|operator)"
 _PREFIXES = {"parameter", "constant", "input", "output", "flow", "stream", "discrete", "final", "inner",
@@ -132,20 +132,14 @@ def _binds(statement: str, name: str) -> bool:
     m = re.search(rf"(?<![\w.]){re.escape(name)}\b", statement)
     if m is None:
         return False
-    rest, k = statement, m.end()
+    k = m.end()
     while True:
-        k = len(rest) - len(rest[k:].lstrip())
-        if rest.startswith(("[", "("), k):
-            depth, j = 0, k
-            while j < len(rest):
-                depth += rest[j] in "([{"
-                depth -= rest[j] in ")]}"
-                j += 1
-                if depth == 0:
-                    break
-            k = j
-            continue
-        return rest.startswith("=", k) and not rest.startswith("==", k)
+        k = len(statement) - len(statement[k:].lstrip())
+        if not statement.startswith(("[", "("), k):
+            return statement.startswith("=", k) and not statement.startswith("==", k)
+        k = closing(statement, k)
+        if k is None:
+            return False
 
 
 def _statements(body: str):
@@ -292,6 +286,15 @@ class LibraryClasses:
         if name in info.starts:
             return info.starts[name]
         return next((v for b in self.bases(info) if (v := self.start_of(b, name, seen)) is not None), None)
+
+    def bound(self, info: ClassInfo, seen=None) -> set[str]:
+        """The members ``info`` and the classes it extends give a value (a binding, an extends
+        modifier)."""
+        seen = seen if seen is not None else set()
+        if info.name in seen:
+            return set()
+        seen.add(info.name)
+        return set(info.bound).union(*(self.bound(b, seen) for b in self.bases(info)))
 
     def bases(self, info: ClassInfo) -> list[ClassInfo]:
         """The classes ``info`` extends that are found (looked up from its enclosing scope, then

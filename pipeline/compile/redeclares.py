@@ -19,8 +19,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from .bindings import closing, restated
-from .sources import COMMENT_OR_STRING, masked
+from .sources import COMMENT_OR_STRING, closing, masked
 
 _REDECLARE = re.compile(r"\bredeclare\s+(?:(?:final|each|replaceable)\s+)*(model|block|record)\s+(\w+)\s*=\s*"
                         r"(?P<type>[A-Za-z_][\w.]*)\s*\(")
@@ -108,20 +107,19 @@ def tree_copy(top: Path, place: Path) -> Path:
 
 
 @functools.lru_cache(maxsize=64)
-def lifted_tree(top: Path, place: Path, restate: bool = False) -> Path:
+def lifted_tree(top: Path, place: Path, transform=None) -> Path:
     """The root ``package.mo`` to load for the package directory of ``top``: ``top`` itself where
     no file of the tree has a redeclaration to lift, else :func:`tree_copy`, made once: each
     ``.mo`` file lifted (rumoca reads a package directory itself, so its files cannot be handed
     over one by one as a single-file model's text is), every other file a link to its own.
     Read once per process for each ``place`` (named by the tree's content): a compile loads the
-    tree twice, to register it and to compile its model. ``restate``: the files also restated
-    (:func:`.bindings.restated`), in a copy of their own under ``place``."""
+    tree twice, to register it and to compile its model. ``transform``: a rewrite of each file's
+    text applied first (:func:`.bindings.restated`; the copy is made, changed or not)."""
     root = top.parent
     texts = {f: f.read_text(encoding="utf-8", errors="replace") for f in sorted(root.rglob("*.mo"))}
-    if restate:                                     # (:func:`.bindings.restated`)
-        place = place / "restated"
-        texts = {f: restated(t) for f, t in texts.items()}
-    if all(lifted(t) == t for t in texts.values()) and not restate:
+    if transform is not None:
+        texts = {f: transform(t) for f, t in texts.items()}
+    elif all(lifted(t) == t for t in texts.values()):
         return top
     copy = tree_copy(top, place)
     if copy.is_file():

@@ -111,8 +111,8 @@ class _Front:
         self.uses = False                   # the libraries named (:meth:`_use_libraries`)
 
     def compile(self, docs: dict[Path, tuple[str, set]], model: str, restate: bool = False):
-        """rumoca's compiled ``model`` from ``docs``; ``restate``: each document with its bindings
-        restated (:mod:`.bindings`)."""
+        """rumoca's compiled ``model`` from ``docs``; ``restate``: each document restated
+        (:func:`.bindings.restated`)."""
         import rumoca
 
         if restate:
@@ -164,14 +164,15 @@ class _Front:
         """A package directory is read as a tree; a single file under a name of its own, so that
         rumoca does not also read the files beside it (a run directory holds many)."""
         if path.name == "package.mo":
-            return self.session.load(str(lifted_tree(path, _copies(digest), digest.endswith(_RESTATED))),
-                                     model=model)
+            again = digest.endswith(_RESTATED)
+            tree = lifted_tree(path, _copies(digest, again), restated if again else None)
+            return self.session.load(str(tree), model=model)
         text = lifted(path.read_text(encoding="utf-8", errors="replace"))
         return self.session.loads(restated(text) if digest.endswith(_RESTATED) else text, model=model,
                                   filename=virtual_name(path, digest))
 
 
-#: rumoca's errors on the bindings :func:`.bindings.restated` writes as it reads them
+#: rumoca's errors on the constructs :func:`.bindings.restated` writes in forms it reads
 _RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a checked DAE owner|"
                          r"unresolved Flat reference|function shape proof|found Enumeration|unknown modifier")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
@@ -243,9 +244,11 @@ def _real(path: str, roots: str) -> str:
     return real
 
 
-def _copies(digest: str) -> Path:
-    """Where the lifted copy of a package directory of content ``digest`` is made."""
-    return roots_dir() / "lifted" / digest[:16]
+def _copies(digest: str, restated_: bool = False) -> Path:
+    """Where the lifted copy of a package directory of content ``digest`` is made (``restated_``:
+    its restated copy)."""
+    place = roots_dir() / "lifted" / digest[:16]
+    return place / "restated" if restated_ else place
 
 
 def virtual_name(path: Path, digest: str) -> str:
@@ -394,7 +397,7 @@ class Prepared:
             if p.name != "package.mo":
                 out[virtual_name(p, h)] = str(p)
                 continue
-            for place in (_copies(h), _copies(h) / "restated"):
+            for place in (_copies(h), _copies(h, True)):
                 copy = tree_copy(p, place).parent
                 out.update({str(copy / f.relative_to(p.parent)): str(f) for f in p.parent.rglob("*.mo")})
         return out
@@ -484,9 +487,8 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
         return _guarded(front, lambda: front.compile(prep.docs, model))
     except rumoca.RumocaError as exc:
         if _RESTATE_ON.search(str(exc)) and _restatable(prep.docs):
-            # rumoca's count of a parameter bound to a call, its reading of an array expression
-            # modifying a component array (:mod:`.bindings`): the model again with those
-            # bindings restated, else its own error
+            # a construct rumoca misreads (:func:`.bindings.restated`): the model again with its
+            # files restated, else rumoca's own error
             try:
                 compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True))
             except rumoca.RumocaError:

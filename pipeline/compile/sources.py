@@ -73,3 +73,33 @@ def masked(text: str) -> str:
         inside = re.sub(r"[^\n]", " ", part[1:-1] if part.startswith('"') else part)
         return f'"{inside}"' if part.startswith('"') else inside
     return COMMENT_OR_STRING.sub(blank, text)
+
+
+#: the bracket each opening one is closed by
+_CLOSER = {"(": ")", "[": "]", "{": "}"}
+
+
+def closing(text: str, k: int) -> int | None:
+    """The index just past the bracket that closes the one at ``k`` (a parenthesis, bracket or
+    brace; strings skipped); None where a ``;`` or the text's end comes first."""
+    opener = text[k]
+    closer = _CLOSER[opener]
+    depth, i, n = 0, k, len(text)
+    while i < n:
+        c = text[i]
+        if c == '"':
+            i = text.find('"', i + 1)
+            while i > 0 and text[i - 1] == "\\":
+                i = text.find('"', i + 1)
+            if i < 0:
+                return None
+        elif c == opener:
+            depth += 1
+        elif c == closer:
+            depth -= 1
+            if depth == 0:
+                return i + 1
+        elif c == ";":
+            return None
+        i += 1
+    return None
