@@ -131,8 +131,8 @@ def cmd_simulate(args) -> int:
 
     params = _parse_params(args.param)
     limit = RUN_TIME_LIMIT if args.time_limit is None else args.time_limit
-    options = SimulationOptions.from_dict({"rtol": args.rtol, "atol": args.atol, "time_limit": limit},
-                                          option=_flag)
+    options = SimulationOptions.from_dict({"rtol": args.rtol, "atol": args.atol, "time_limit": limit,
+                                           "partial": True}, option=_flag)
     _libraries(args)
     if args.input is not None and (args.stop_time is not None or args.interval is not None):
         raise ConfigError("--stop-time and --interval are for a model without inputs: with --input, "
@@ -150,7 +150,15 @@ def cmd_simulate(args) -> int:
     inputs = read_csv(data) if data else _time_grid(model, args)
     result = simulate(model, inputs, params, options=options, engine=args.engine)
     if not result.ok:
-        print(f"mcl: simulation failed: {result.reason}", file=sys.stderr)
+        reached = result.reached()
+        if reached is None:
+            print(f"mcl: simulation failed: {result.reason}", file=sys.stderr)
+        else:      # what the run computed before it failed is the user's to look at
+            write_csv(out, reached.as_series())
+            record(out)
+            n = len(reached.time)
+            print(f"mcl: simulation failed: {result.reason.rstrip('.')}; the {n} sample{'s' * (n > 1)} up to "
+                  f"t = {reached.time[-1]:g} -> {args.output}", file=sys.stderr)
         return EXIT_FAILED
     write_csv(out, result.as_series())
     record(out)

@@ -264,7 +264,8 @@ def _without_blank_tail(rows: list[list[str]]) -> list[list[str]]:
 
 
 def write_csv(path, series: TimeSeries) -> None:
-    """Write atomically (temporary file + rename): a reader never sees half a file."""
+    """Write atomically (temporary file + rename): a reader never sees half a file. A value
+    not computed (NaN) is a blank cell, as :func:`read_csv` reads one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -273,7 +274,7 @@ def write_csv(path, series: TimeSeries) -> None:
             w = csv.writer(fh)
             w.writerow(["time", *series.names])
             for t, row in zip(series.time, series.values):
-                w.writerow([repr(float(t)), *(repr(float(v)) for v in row)])
+                w.writerow([repr(float(t)), *(repr(float(v)) if v == v else "" for v in row)])
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -145,6 +145,13 @@ class _SolverFailed(_Stop):
     first looks for a crossing it ran into (:meth:`_Hybrid.probe`)."""
 
 
+class _Unlimited:
+    """A budget that never stops a run (the outputs of one that already failed)."""
+
+    def check(self, t: float):
+        pass
+
+
 class _Budget:
     """Wall time and solver steps: what is spent, and how big the next call may be."""
 
@@ -583,6 +590,36 @@ class _Plan:
         result.method = self.method
         return result
 
+    def evaluated(self, traj: np.ndarray, p: np.ndarray, npu: int, budget) -> tuple:
+        """(states, parameters and guesses, (outputs, loop residuals, drift)) at the output points
+        of the integration points' states ``traj``."""
+        t_out, N = self.t_out, len(self.t_out)
+        traj = traj[:, self.out_idx]
+        X = traj[: self.nx]
+        P = np.repeat(p[:, None], N, axis=1)
+        if self.ng:       # the guesses each point's call had (a point set by an event: its last call's)
+            P[npu:] = _filled_forward(self.guesses)[:, self.out_idx]
+            if self.branched:    # (held comparisons: the branch at the point, not at its call's start)
+                P[npu:] = np.array(self.at_guesses(X, self.u_out, P, t_out[None, :]))
+        at = (X, self.u_out, P, t_out[None, :])
+        if self.split is not None:
+            at = (*at[:3], np.repeat(self.q[:, None], N, 1), at[3])
+        return X, P, self.checked(at, budget)
+
+    def reached(self, traj: np.ndarray, p: np.ndarray, npu: int) -> np.ndarray:
+        """The outputs at the output points a failed run reached (NaN after them); all NaN where
+        they cannot be evaluated."""
+        reached = np.isfinite(traj[: self.nx, self.out_idx]).all(axis=0)
+        none = np.full((len(self.t_out), len(self.ode.y_names)), np.nan)
+        if not reached.any():
+            return none
+        try:      # (the points not reached: the last state reached, as after a terminate())
+            y = self.evaluated(_filled_forward(traj), p, npu, _Unlimited())[2][0].T
+        except (RuntimeError, _Stop):
+            return none
+        y[~reached] = np.nan
+        return y
+
     def _run(self, p: np.ndarray, opts: SimulationOptions, clock: Stopwatch, adams: bool) -> SimulationResult:
         ode, t_out, N = self.ode, self.t_out, len(self.t_out)
         npu = len(p)
@@ -600,9 +637,11 @@ class _Plan:
             self.tail = np.concatenate([self.tail, self.q, self.qp])
         names = ode.y_names
 
-        def fail(reason):
+        def fail(reason, traj=None):
             res = SimulationResult.failed(reason, t_out, names, "casadi", clock.elapsed)
             res.steps = budget.steps
+            if traj is not None and opts.partial:      # the points before the failure, for the user
+                res.partial = self.reached(traj, p, npu)
             return res
 
         u0 = self.u_out[:, 0]
@@ -648,24 +687,14 @@ class _Plan:
             # (the solver gave up, where another method may not; a solution that diverged or
             # left the model's domain does so whichever integrates it)
             self.gave_up = isinstance(stop, (_SolverFailed, _OverBudget))
-            return fail(str(stop))
+            return fail(str(stop), traj)
         except RuntimeError as exc:
             self.gave_up = True
-            return fail(f"solver error: {_last_line(exc)}")
+            return fail(f"solver error: {_last_line(exc)}", traj)
         if ended is not None:       # (the points after it: its state, for the mapped functions)
             traj[:, ended[0] + 1:] = traj[:, ended[0]:ended[0] + 1]
-        traj = traj[:, self.out_idx]
-        X = traj[: self.nx]
-        P = np.repeat(p[:, None], N, axis=1)
-        if self.ng:       # the guesses each point's call had (a point set by an event: its last call's)
-            P[npu:] = _filled_forward(self.guesses)[:, self.out_idx]
-            if self.branched:    # (held comparisons: the branch at the point, not at its call's start)
-                P[npu:] = np.array(self.at_guesses(X, self.u_out, P, t_out[None, :]))
         try:
-            at = (X, self.u_out, P, t_out[None, :])
-            if self.split is not None:
-                at = (*at[:3], np.repeat(self.q[:, None], N, 1), at[3])
-            y, res, drift = self.checked(at, budget)
+            X, P, (y, res, drift) = self.evaluated(traj, p, npu, budget)
         except RuntimeError as exc:
             return fail(f"evaluating the outputs failed: {_last_line(exc)}")
         except _Stop as stop:

@@ -7,6 +7,8 @@ detection needs every one of these checks).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import contextlib
 import logging
 import math
@@ -39,6 +41,7 @@ class SimulationOptions:
     residual_tol: float = 1e-6      # algebraic loops: max |g| accepted (relative to scale)
     drift_tol: float = 1e-3         # invariants of index reduction: max |I| accepted
     fmu_substeps: int = 4           # FMU engine: communication steps per output interval
+    partial: bool = False           # a failed run also gives its outputs up to where it failed
 
     def __post_init__(self):
         _check_options(vars(self), lambda name: name)
@@ -97,6 +100,9 @@ class SimulationResult:
     method: str = ""                # the solver's method ("bdf", "adams"), where the engine chose one
     #: where the model called terminate() ("t = ...: its message"): the run ends at that point
     terminated: str | None = None
+    #: a failed run's outputs at the points it reached (NaN after), for the user to look at
+    #: (its ``outputs`` stay NaN: a fit must not read them)
+    partial: np.ndarray | None = None
 
     def output(self, name: str) -> np.ndarray:
         return self.outputs[:, self.output_names.index(name)]
@@ -132,6 +138,17 @@ class SimulationResult:
         return SimulationResult.failed(f"the model terminated the run at {self.terminated}, before the "
                                        f"data's end (t = {time[-1]:g})", time, self.output_names,
                                        self.engine, self.seconds)
+
+    def reached(self) -> SimulationResult | None:
+        """A failed run's points up to the last with any finite output (None where it has none,
+        or no outputs): what it computed before it failed."""
+        outputs = self.outputs if self.partial is None else self.partial
+        finite = np.isfinite(outputs).any(axis=1) if outputs.size else np.zeros(0, bool)
+        if not finite.any():
+            return None
+        n = int(np.flatnonzero(finite)[-1]) + 1
+        return dataclasses.replace(self, time=self.time[:n], outputs=outputs[:n], sensitivities=None, partial=None,
+                                   states=None if self.states is None else self.states[:n])
 
     @classmethod
     def failed(cls, reason, time, output_names, engine, seconds=0.0):

@@ -40,12 +40,39 @@ def test_saved_model_directory_runs_in_process(tmp_path, input_csv):
     assert len(read_csv(tmp_path / "r.csv").time) == 201
 
 
-def test_failed_simulation_exits_1_with_the_reason(tmp_path, input_csv, capsys):
+def test_failed_simulation_exits_1_with_the_reason_and_what_it_reached(tmp_path, input_csv, capsys):
+    """A run that fails writes the points it reached (the user's to look at) and says so."""
     code = main(["simulate", str(LIB), "-m", "MCL.Examples.CauerFilter", "-i", str(input_csv),
                  "-o", str(tmp_path / "r.csv"), "-p", "Rnl.w1=-0.1"])
     assert code == 1
-    assert "simulation failed" in capsys.readouterr().err
-    assert not (tmp_path / "r.csv").exists()
+    err = capsys.readouterr().err
+    assert "simulation failed" in err
+    r = read_csv(tmp_path / "r.csv")
+    assert 1 < len(r.time) < 201 and np.isfinite(r.values).all()
+    assert f"the {len(r.time)} samples up to t = {r.time[-1]:g}" in err
+
+
+BLOW = """model Blow "a level that runs away, past the domain of its outflow law at t = ln 2"
+  Real h(start = 1, fixed = true);
+  Real q = sqrt(2 - h) "defined below 2 only";
+equation
+  der(h) = h;
+end Blow;
+"""
+
+
+def test_a_run_past_a_laws_domain_fails_keeping_the_points_before(tmp_path, capsys):
+    src = tmp_path / "Blow.mo"
+    src.write_text(BLOW)
+    assert main(["simulate", str(src), "-m", "Blow", "--stop-time", "2", "--interval", "0.01",
+                 "-o", str(tmp_path / "b.csv")]) == 1
+    assert "non-finite output at t = 0.7" in capsys.readouterr().err
+    r = read_csv(tmp_path / "b.csv")
+    q, h = r.select(["q"]).values[:, 0], r.select(["h"]).values[:, 0]
+    before = r.time < np.log(2)
+    assert np.allclose(h, np.exp(r.time), rtol=1e-4)
+    assert np.allclose(q[before], np.sqrt(2 - np.exp(r.time[before])), atol=1e-4)
+    assert np.isnan(q[r.time > 0.7]).all()
 
 
 DRAIN = """model Drain "two tanks, the first draining into the second"

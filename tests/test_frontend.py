@@ -324,6 +324,75 @@ def test_a_component_array_modified_by_an_array_expression_takes_its_elements(tm
     assert {f: f.read_text() for f in tmp_path.rglob("*.mo")} == text       # the user's files untouched
 
 
+STACK = """model Stack "RC elements discharging, as many as the cell's record says"
+  import Modelica.Electrical.Analog.Basic;
+  parameter Cell cellData = Cell() "the cell";
+  Basic.Resistor resistor[cellData.nRC](final R = cellData.rcData.R, each T_ref = 300);
+  Basic.Capacitor capacitor[cellData.nRC](each v(fixed = true, start = 1), final C = cellData.rcData.C);
+  Basic.Ground ground;
+equation
+  for i in 1:cellData.nRC loop
+    connect(resistor[i].p, capacitor[i].p);
+    connect(resistor[i].n, capacitor[i].n);
+    connect(capacitor[i].n, ground.p);
+  end for;
+end Stack;
+"""
+CELL = """record RCData
+  parameter Real R "resistance";
+  parameter Real C "capacitance";
+end RCData;
+record Cell
+  parameter Integer nRC = 1 "number of RC elements";
+  parameter RCData rcData[nRC] = {RCData(R = 0, C = 0)};
+end Cell;
+record Example "a cell of two RC elements"
+  extends Cell(nRC = 2, rcData = {RCData(R = 1, C = 1), RCData(R = 2, C = 3)});
+end Example;
+"""
+TWO_RC = "nRC = 2, rcData = {RCData(R = 1, C = 1), RCData(R = 2, C = 3)}"
+
+
+@needs_msl()
+@pytest.mark.parametrize("data,stack,as_package", [
+    (f"parameter Cell c0({TWO_RC});\n  parameter Cell data = c0;", "bound", False),    # bound to another record
+    (f"parameter Cell c0({TWO_RC});\n  parameter Cell data = c0;", "unbound", False),
+    (f"parameter Cell data = Cell({TWO_RC});", "bound", False),                        # to its constructor
+    (f"parameter Cell data = Cell({TWO_RC});", "unbound", False),
+    (f"parameter Cell data = Cell({TWO_RC});", "bound", True),
+    ("parameter Example data;", "unbound", False),          # a record whose extends sets its size, passed whole
+    ("parameter Example data;", "sized", False),
+], ids=["reference", "reference-unbound-stack", "constructor", "constructor-unbound-stack", "constructor-package",
+        "passed-subtype", "passed-subtype-sized-stack"])
+def test_a_record_bound_by_declaration_keeps_its_array_members_and_sizes(tmp_path, data, stack, as_package):
+    """rumoca copies a record bound by declaration, or passed whole to a component, only where
+    a member is a scalar it can bind: the RC elements' record array was left 0 and the component
+    arrays sized by the record class's default (one element of two, or a division by C = 0,
+    or a time constant of 2 s for 7 s), or the model is refused as unbalanced. Both RC
+    elements discharge at their own rate 1/(R_i C_i)."""
+    test = f"model Test\n  {data}\n  Stack s(cellData = data);\nend Test;\n"
+    stack = {"bound": STACK, "unbound": STACK.replace(" = Cell()", ""),
+             "sized": STACK.replace(" = Cell()", "").replace("cellData.nRC", "2")}[stack]
+    if as_package:
+        (tmp_path / "Bat").mkdir()
+        (tmp_path / "Bat" / "package.mo").write_text("package Bat\n" + CELL + "end Bat;\n")
+        for name, text in (("Stack", stack), ("Test", test)):
+            (tmp_path / "Bat" / f"{name}.mo").write_text("within Bat;\n" + text)
+        source, name = tmp_path / "Bat", "Bat.Test"
+    else:
+        source, name = tmp_path / "Bat.mo", "Bat.Test"
+        source.write_text("package Bat\n" + CELL + stack + test + "end Bat;\n")
+    text = {f: f.read_text() for f in tmp_path.rglob("*.mo")}
+    v = ["s.capacitor[1].v", "s.capacitor[2].v"]
+    model = compile_model([source], name, libraries=[msl_path()]).with_outputs(v, only=True)
+    assert model.ode.y_names == v
+    t = np.linspace(0.0, 3.0, 7)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    assert np.allclose(res.outputs, np.exp(-np.outer(t, [1.0, 1 / 6])), rtol=1e-5, atol=1e-8)
+    assert {f: f.read_text() for f in tmp_path.rglob("*.mo")} == text       # the user's files untouched
+
+
 @pytest.mark.parametrize("body,construct,needle", [
     ("  function f\n    input Real x;\n    output Real y;\n  protected\n    Integer i;\n  algorithm\n"
      "    y := 0;\n    i := 0;\n    while i < 3 loop\n      y := y + x;\n      i := i + 1;\n    end while;\n"
@@ -668,3 +737,25 @@ def test_restating_a_malformed_declaration_leaves_it_as_written():
 
     text = "model M\n  parameter Real x[" + "size(a) " * 30 + "q\nend M;\n"
     assert restated(text) == text
+
+
+def test_records_are_copied_as_modifiers_only_where_exact():
+    """A record bound to its constructor with named arguments takes them as its modifiers, one
+    bound or passed whole (as listed) takes each member; positional arguments, another class's
+    constructor, a call in an equation and an unlisted binding stay as written, line breaks
+    where they were."""
+    from mcl.compile.records import copied
+
+    text = ("model M\n  parameter Cell a = Cell(nRC = 2,\n    rcData = {RCData(R = 1, C = 1)}) \"doc\";\n"
+            "  parameter Cell b = c0 annotation(x = 1);\n  Complex z = Complex(1, 2);\n"
+            "  parameter Cell e = Example(nRC = 1);\n  parameter Real k = k0;\n"
+            "  Stack s(cellData = b, k = k);\nequation\n  y = Cell(nRC = 1).nRC;\nend M;\n")
+    records = (("", "s.cellData=b", ("nRC", "rcData")), ("Cell", "b", ("nRC", "rcData")))
+    out = copied(text, records)
+    assert "parameter Cell a(nRC = 2,\n    rcData = {RCData(R = 1, C = 1)}) \"doc\";" in out
+    assert "parameter Cell b(nRC = c0.nRC, rcData = c0.rcData) annotation(x = 1);" in out
+    assert "Stack s(cellData(nRC = b.nRC, rcData = b.rcData), k = k);" in out
+    for kept in ("Complex z = Complex(1, 2);", "Cell e = Example(nRC = 1);", "Real k = k0;", "y = Cell(nRC = 1).nRC;"):
+        assert kept in out
+    assert out.count("\n") == text.count("\n")
+    assert copied(text, records, calls=False).count("Cell a = Cell(") == 1      # a constructor not listed

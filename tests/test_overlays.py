@@ -197,3 +197,29 @@ equation
 end Cell;
 """, "Cell", t := np.linspace(0.0, 40.0, 41))
     assert np.abs(state("cell.capacitor[1].v") - 0.1 * (1 - np.exp(-t / 10))).max() < 1e-5     # of 0.1 V
+
+
+def test_the_msl_cccv_charging_example_has_its_two_rc_elements(monkeypatch):
+    """CCCVcharging passes its cell record (ExampleData, whose extends modifier sets nRC = 2 and
+    the RC elements' R and C) whole to the stack; rumoca sized the stack's RC elements by the
+    record class's default (unbalanced by 10). The overlay passes it member by member: two RC
+    elements of time constants 60 s and 10 s (R = 0.2 Ri and 0.1 Ri, Ri = 4.2/1200 Ohm), each
+    capacitor following C dv/dt = i - v/R with the stack's current."""
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    v, R = ["battery.capacitor[1].v", "battery.capacitor[2].v"], ["battery.resistor[1].R_actual", "battery.resistor[2].R_actual"]
+    names = [*v, *R, "battery.r0.i", "battery.cellData.rcData[1].R", "battery.cellData.rcData[1].C",
+             "battery.cellData.rcData[2].R", "battery.cellData.rcData[2].C"]
+    model = mcl.compile_model([], "Modelica.Electrical.Batteries.Examples.CCCVcharging").with_outputs(names, only=True)
+    assert model.ode.y_names == names
+    t = np.linspace(0.0, 600.0, 6001)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    y = {n: res.output(n) for n in names}
+    Ri = 4.2 / 1200
+    for k, (share, tau) in enumerate(((0.2, 60.0), (0.1, 10.0)), 1):
+        Rk, Ck = y[f"battery.cellData.rcData[{k}].R"][0], y[f"battery.cellData.rcData[{k}].C"][0]
+        assert Rk == pytest.approx(share * Ri) and Rk * Ck == pytest.approx(tau)
+        vk, Rs = y[v[k - 1]], y[R[k - 1]]
+        dv = np.gradient(vk, t)
+        inside = slice(10, -10)     # (the charger's switch from constant current to voltage: a kink)
+        assert np.abs(dv - (y["battery.r0.i"] * Rs - vk) / tau)[inside].max() < 1e-2 * np.abs(dv).max()

@@ -21,10 +21,9 @@ def unconnected_inputs(model: str, docs: dict[Path, tuple[str, set]], search) ->
     (``docs``: the user's documents, as :func:`.rumoca_frontend.documents` gives them)."""
     from .library import available
 
-    user = {name: (p.parent if p.name == "package.mo" else p) for p, (_, names) in docs.items() for name in names}
-    if model.split(".")[0] not in user:
+    if not any(model.split(".")[0] in names for _, names in docs.values()):
         return []
-    lib = LibraryClasses({**available(search), **user})
+    lib = LibraryClasses.with_user(available(search), docs)
     info = lib.find(model)
     if info is None:
         return []

@@ -26,7 +26,8 @@ import re
 from .enums import enumerated
 from .loops import bounded
 from .redeclares import defaults_lifted
-from .sources import KEYWORDS, closing, masked
+from .records import copied
+from .sources import KEYWORDS, arguments, closing, masked
 
 #: a scalar Real or Integer parameter's declaration, up to its name (a Complex-valued SI type is
 #: a record: a call there is its constructor, and a record plus 0 is no Modelica)
@@ -39,8 +40,8 @@ _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
 def restated(text: str) -> str:
     """``text`` with the restatements rumoca reads (:func:`called`, :func:`distributed`,
     :func:`unsized`, :func:`.loops.bounded`, :func:`.enums.enumerated`,
-    :func:`.redeclares.defaults_lifted`)."""
-    return defaults_lifted(enumerated(bounded(unsized(distributed(called(text))))))
+    :func:`.redeclares.defaults_lifted`, :func:`.records.copied`)."""
+    return defaults_lifted(enumerated(bounded(unsized(distributed(called(copied(text)))))))
 
 
 #: a bound parameter array sized by another's size: ``parameter Real head[size(q, 1)] = {...}``
@@ -127,7 +128,7 @@ def _values(masked: str, start: int, stop: int) -> list[tuple[int, int]]:
     """The spans of the values to write element by element in the modification
     ``masked[start:stop]`` (inside its parentheses), its nested modifications' included."""
     edits = []
-    for a, b in _arguments(masked, start, stop):
+    for a, b in arguments(masked, start, stop):
         arg = _ARGUMENT.match(masked, a, b)
         if arg is None or re.match(r"\s*(each|redeclare|replaceable|extends)\b", masked[a:b]):
             continue
@@ -157,22 +158,6 @@ def _as_is(value: str) -> bool:
     if value[0] == '"':
         return value.find('"', 1) == len(value) - 1
     return closing(value, opening.end() - 1) == len(value)
-
-
-def _arguments(masked: str, start: int, stop: int) -> list[tuple[int, int]]:
-    """The spans of the comma-separated arguments of ``masked[start:stop]`` (nesting kept)."""
-    spans, depth, a = [], 0, start
-    for i in range(start, stop):
-        c = masked[i]
-        if c in "([{":
-            depth += 1
-        elif c in ")]}":
-            depth -= 1
-        elif c == "," and depth == 0:
-            spans.append((a, i))
-            a = i + 1
-    spans.append((a, stop))
-    return spans
 
 
 def _elementwise(value: str, dims: list[str]) -> str:

@@ -167,6 +167,13 @@ class LibraryClasses:
     def __init__(self, libraries: dict[str, Path]):
         self.libraries = libraries
 
+    @classmethod
+    def with_user(cls, libraries: dict[str, Path], docs) -> "LibraryClasses":
+        """The classes of ``libraries`` and of the user's documents ``docs`` (as
+        :func:`.rumoca_frontend.documents` gives them), which hide the libraries' of their names."""
+        user = {name: (p.parent if p.name == "package.mo" else p) for p, (_, names) in docs.items() for name in names}
+        return cls({**libraries, **user})
+
     def file_of(self, qualified: str) -> tuple[Path, list[str]] | None:
         """The file that holds class ``qualified`` (a package directory walked down as far as
         its structure goes), and the class names from that file's top to the class."""

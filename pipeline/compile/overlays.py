@@ -10,7 +10,7 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from . import bindings, redeclares
+from . import bindings, records, redeclares
 from .bindings import distributed
 from .redeclares import lifted
 
@@ -270,9 +270,16 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
 DISTRIBUTED = {("Modelica", ("Electrical", "Batteries", "BatteryStacks", "CellRCStack.mo"))}
 
 
+#: files that pass a record whole to a component whose record's size parameter comes from an
+#: extends modifier of the record passed (a cell's ExampleData with two RC elements): rumoca
+#: reads it only member by member (:mod:`.records`)
+PASSED = {("Modelica", ("Electrical", "Batteries", "Examples", f"{name}.mo"))
+          for name in ("CCCV_CellRC", "CCCVcharging")}
+
+
 def files_of(library: str) -> list[tuple[str, ...]]:
     """The files of ``library`` (below its directory) that a rewrite may change."""
-    return [unit for lib, unit in [*REWRITES, *DISTRIBUTED] if lib == library]
+    return [unit for lib, unit in [*REWRITES, *DISTRIBUTED, *PASSED] if lib == library]
 
 
 def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
@@ -287,11 +294,17 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
             text = text.replace(old, new)
     if (library, tuple(unit)) in DISTRIBUTED:
         text = distributed(text)
+    if (library, tuple(unit)) in PASSED:
+        from .classes import LibraryClasses
+
+        root = path.parents[len(unit) - 1]
+        text = records.copied(text, records.declared_records([text], LibraryClasses({library: root})), calls=False)
     text = lifted(text)       # (any library's redeclarations with modifiers: :mod:`.redeclares`)
     return text if text != original else None
 
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
-VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + Path(redeclares.__file__).read_text()
-                          + Path(bindings.__file__).read_text()).encode()).hexdigest()[:12]
+VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + repr(sorted(PASSED))
+                          + Path(redeclares.__file__).read_text()
+                          + Path(bindings.__file__).read_text() + Path(records.__file__).read_text()).encode()).hexdigest()[:12]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import hashlib
 import itertools
 import logging
 import os
@@ -21,10 +22,12 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import tables, xorshift
+from . import overlays, tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
 from .balance import unconnected_inputs
 from .bindings import restated
+from .classes import LibraryClasses
+from .records import bound_records, copied, declared_records
 from .redeclares import lifted, lifted_tree, tree_copy
 from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import KEYWORDS, first_line
@@ -110,13 +113,15 @@ class _Front:
         self.owner: dict[str, str] = {}     # top-level class -> path
         self.uses = False                   # the libraries named (:meth:`_use_libraries`)
 
-    def compile(self, docs: dict[Path, tuple[str, set]], model: str, restate: bool = False):
+    def compile(self, docs: dict[Path, tuple[str, set]], model: str, restate: bool = False, records=()):
         """rumoca's compiled ``model`` from ``docs``; ``restate``: each document restated
-        (:func:`.bindings.restated`)."""
+        (:func:`.bindings.restated`); ``records``: its record components bound by declaration
+        written as modifiers (:func:`.records.copied`)."""
         import rumoca
 
-        if restate:
-            docs = {p: (h + _RESTATED, names) for p, (h, names) in docs.items()}
+        mark = _mark(restate, records)
+        if mark:
+            docs = {p: (h + mark, names) for p, (h, names) in docs.items()}
         if any(self.docs.get(str(p), h) != h or any(self.owner.get(n, str(p)) != str(p) for n in names)
                for p, (h, names) in docs.items()):
             self.session.clear()
@@ -163,12 +168,12 @@ class _Front:
     def _load(self, path: Path, digest: str, model: str):
         """A package directory is read as a tree; a single file under a name of its own, so that
         rumoca does not also read the files beside it (a run directory holds many)."""
+        rewrite = _rewrite(digest[_DIGEST:])
         if path.name == "package.mo":
-            again = digest.endswith(_RESTATED)
-            tree = lifted_tree(path, _copies(digest, again), restated if again else None)
+            tree = lifted_tree(path, _copies(digest), rewrite)
             return self.session.load(str(tree), model=model)
         text = lifted(path.read_text(encoding="utf-8", errors="replace"))
-        return self.session.loads(restated(text) if digest.endswith(_RESTATED) else text, model=model,
+        return self.session.loads(rewrite(text) if rewrite else text, model=model,
                                   filename=virtual_name(path, digest))
 
 
@@ -177,16 +182,43 @@ _RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a 
                          r"unresolved Flat reference|function shape proof|found Enumeration|unknown modifier")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
+#: the length of a document's own digest (sha256, hex), before the marks of its rewrites
+_DIGEST = 64
+#: the record components a mark stands for (:func:`_mark`)
+_RECORD_MARKS: dict[str, tuple] = {}
 
 
-def _restatable(docs: dict[Path, tuple[str, set]]) -> bool:
-    """Whether restating changes any of the documents' files (:meth:`_Front._load`): a model
-    unbalanced for another reason is not compiled twice."""
+def _mark(restate: bool, records) -> str:
+    """The mark a document's digest carries when compiled rewritten (:meth:`_Front._load`)."""
+    mark = _RESTATED if restate else ""
+    if records:
+        key = "+records" + hashlib.sha256(repr(records).encode()).hexdigest()[:12]
+        _RECORD_MARKS[key] = records
+        mark += key
+    return mark
+
+
+@functools.lru_cache(maxsize=32)
+def _rewrite(mark: str):
+    """The rewrite of a document's text that ``mark`` stands for; None for the text as written.
+    (One function per mark: a tree's lifted copy is looked up by it.)"""
+    if not mark:
+        return None
+    records = next((r for k, r in _RECORD_MARKS.items() if k in mark), ())
+    if mark.startswith(_RESTATED):
+        return lambda text: copied(restated(text), records)
+    return lambda text: copied(text, records, calls=False)
+
+
+def _restatable(docs: dict[Path, tuple[str, set]], records=()) -> bool:
+    """Whether restating (and ``records`` copied: :func:`.records.copied`) changes any of the
+    documents' files (:meth:`_Front._load`): a model unbalanced for another reason is not
+    compiled twice."""
     for path in docs:
         for f in sorted(path.parent.rglob("*.mo")) if path.name == "package.mo" else [path]:
             text = f.read_text(encoding="utf-8", errors="replace")
             try:
-                if restated(text) != text:
+                if copied(restated(text), records) != text:
                     return True
             except Exception:     # noqa: BLE001 - text rumoca refused, which a rewrite misread: no retry
                 return False
@@ -244,11 +276,14 @@ def _real(path: str, roots: str) -> str:
     return real
 
 
-def _copies(digest: str, restated_: bool = False) -> Path:
-    """Where the lifted copy of a package directory of content ``digest`` is made (``restated_``:
-    its restated copy)."""
+def _copies(digest: str) -> Path:
+    """Where the lifted copy of a package directory of content ``digest`` is made: a rewritten
+    copy (:func:`_mark`) in a folder named by the rewrite and the rewriting code's version."""
     place = roots_dir() / "lifted" / digest[:16]
-    return place / "restated" if restated_ else place
+    mark = digest[_DIGEST:]
+    if not mark:
+        return place
+    return place / ("rewritten-" + hashlib.sha256((mark + overlays.VERSION).encode()).hexdigest()[:12])
 
 
 def virtual_name(path: Path, digest: str) -> str:
@@ -285,8 +320,6 @@ def _front(roots) -> _Front:
 def documents(paths) -> tuple[dict[Path, tuple[str, set]], list[Path]]:
     """The top-level documents of ``paths`` (a package directory's root ``package.mo``, or a
     file of top-level classes) with their content hash and class names, and every file."""
-    import hashlib
-
     from .sources import checked, expand, top_level_names
 
     files = expand(checked(paths))
@@ -318,10 +351,8 @@ def library_roots(libraries=(), shadowed=(), used=None, texts=None) -> list[str]
     with ``used`` (library paths), only those: rumoca parses every library of its root, so a
     model that uses none of the MSL must not have it there (89 s and 1.75 GB otherwise); with
     ``texts`` (the sources), only the files of them the texts reach (:mod:`.subset`)."""
-    import hashlib
     import tempfile
 
-    from . import overlays
     from .library import available, library_path
     from .subset import link_whole, mirror, units_needed
 
@@ -397,7 +428,9 @@ class Prepared:
             if p.name != "package.mo":
                 out[virtual_name(p, h)] = str(p)
                 continue
-            for place in (_copies(h), _copies(h, True)):
+            base = _copies(h)
+            rewritten = [d for d in base.glob("rewritten-*") if d.is_dir()] if base.is_dir() else []
+            for place in (base, *rewritten):
                 copy = tree_copy(p, place).parent
                 out.update({str(copy / f.relative_to(p.parent)): str(f) for f in p.parent.rglob("*.mo")})
         return out
@@ -451,6 +484,14 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
                 raise
             compiled, subset = _compile(prep, prep.whole, model, libs), False   # a file the subset missed
         flat = compiled.to_dict("flat")
+        records = _bound_records(prep, flat, libs)
+        if records:
+            try:
+                compiled = _compile(prep, prep.whole if not subset else prep.roots, model, libs, records)
+                flat = compiled.to_dict("flat")
+            except rumoca.RumocaError as exc:
+                log.warning("%s: records passed whole may have lost array members or sizes (rumoca refused "
+                            "them written as modifiers: %s)", model, _first_line(exc))
         again = _outer_restated(prep, prep.whole if not subset else prep.roots, model, flat)
         if again is not None:
             compiled, flat = again, again.to_dict("flat")
@@ -474,7 +515,29 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
     return ir, located
 
 
-def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]):
+def _bound_records(prep: Prepared, flat: dict, libs: dict[str, Path]) -> tuple:
+    """The record components of ``flat``, and the records passed whole in modifications, where
+    one of the user's files binds one to another record (:mod:`.records`): rumoca reads them
+    right only written as modifiers."""
+    passed = [r for r in _declared_records(prep, libs) if not r[0]]
+    records = bound_records(flat, passed)
+    if not records:
+        return ()
+    for path in prep.docs:
+        for f in sorted(path.parent.rglob("*.mo")) if path.name == "package.mo" else [path]:
+            text = f.read_text(encoding="utf-8", errors="replace")
+            if copied(text, records, calls=False) != text:
+                return records
+    return ()
+
+
+def _declared_records(prep: Prepared, libs: dict[str, Path]) -> tuple:
+    """:func:`.records.declared_records` of the user's files."""
+    texts = [f.read_text(encoding="utf-8", errors="replace") for f in prep.files]
+    return declared_records(texts, LibraryClasses.with_user(libs, prep.docs))
+
+
+def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path], records=()):
     """rumoca's compiled ``model``. Where rumoca cannot lower a discrete signal fanned out to
     vector elements (:mod:`.fanout`): a copy of the model with those connections as equations.
     Where it needs the value of a parameter declared with a start value alone (a sample()
@@ -484,13 +547,15 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
 
     front = _front(roots)
     try:
-        return _guarded(front, lambda: front.compile(prep.docs, model))
+        return _guarded(front, lambda: front.compile(prep.docs, model, records=records))
     except rumoca.RumocaError as exc:
-        if _RESTATE_ON.search(str(exc)) and _restatable(prep.docs):
+        if _RESTATE_ON.search(str(exc)):
+            records = records or _declared_records(prep, libs)
+        if _RESTATE_ON.search(str(exc)) and _restatable(prep.docs, records):
             # a construct rumoca misreads (:func:`.bindings.restated`): the model again with its
             # files restated, else rumoca's own error
             try:
-                compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True))
+                compiled = _guarded(front, lambda: front.compile(prep.docs, model, restate=True, records=records))
             except rumoca.RumocaError:
                 raise exc from None
             log.info("%s: compiled restated as rumoca reads it (bindings to calls as f(...) + 0, array "

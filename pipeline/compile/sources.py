@@ -103,3 +103,19 @@ def closing(text: str, k: int) -> int | None:
             return None
         i += 1
     return None
+
+
+def arguments(masked: str, start: int, stop: int) -> list[tuple[int, int]]:
+    """The spans of the comma-separated arguments of ``masked[start:stop]`` (nesting kept)."""
+    spans, depth, a = [], 0, start
+    for i in range(start, stop):
+        c = masked[i]
+        if c in "([{":
+            depth += 1
+        elif c in ")]}":
+            depth -= 1
+        elif c == "," and depth == 0:
+            spans.append((a, i))
+            a = i + 1
+    spans.append((a, stop))
+    return spans
