@@ -631,12 +631,12 @@ class LevenbergMarquardt(Fitter):
     def _step(A, g, H, lam) -> np.ndarray:
         """The damped Gauss-Newton step. A coordinate the residual does not depend on at this
         point is not moved: the scale inside a term whose coefficient is still 0 (tanh(v/s1)
-        at the start) has a zero column, and the damping alone would let it jump anywhere."""
-        norms = np.linalg.norm(A, axis=0)
-        live = norms > 1e-12 * max(float(norms.max()) if norms.size else 0.0, 1e-300)
-        step = np.zeros(len(g))
-        Hl = H[np.ix_(live, live)]
-        step[live] = -np.linalg.solve(Hl + lam * np.diag(np.diag(Hl) + 1e-30), g[live])
+        at the start) has a zero column, and the damping alone would let it jump anywhere.
+        Only an exact zero: a column a trillion times smaller than another is a parameter of
+        another scale (the rise of exp(h/s) behind a coefficient of 1e-11), still fitted (a
+        threshold relative to the largest column froze it, and the tanks' outflow law was lost)."""
+        step = -np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-30), g)
+        step[~np.any(A != 0, axis=0)] = 0.0
         return step
 
     def _hopeless(self, problem, start, r, g, H, costs, trusted) -> bool:

@@ -65,6 +65,23 @@ def test_coulomb_like_friction_gets_a_tanh_law(tmp_path):
     assert_gain(report)
 
 
+def test_dry_friction_with_a_sharp_step_gets_a_tanh_law_at_its_component_alone(tmp_path):
+    """Coulomb friction whose step at rest is far narrower than the speeds visited (0.01 m/s):
+    the law is the damper's, with a Coulomb-like term, and right away from the step; no other
+    component is blamed for what the rounded step leaves."""
+    f = lambda v: 0.2 * v + 0.4 * np.tanh(v / 0.01)
+    slider(tmp_path / "train.csv", 11, f)
+    slider(tmp_path / "validate.csv", 12, f)
+    report = discover(tmp_path, "Slider")
+    cause = report["cause"]
+    assert cause["component"] == "D" and "tanh" in cause["law"]["equation"]
+    assert [c["component"] for c in report["causes"]] == ["D"]
+    xs, fs = np.array(cause["law"]["curve"]).T
+    away = np.abs(xs) > 0.1
+    assert np.max(np.abs(fs - f(xs))[away]) < 0.05 * np.max(np.abs(f(xs)))
+    assert_gain(report)
+
+
 def test_voltage_dependent_capacitance(tmp_path):
     # C2(v) = 1 + 0.8 v^2: i = C2(v) v'
     law = lambda v2, i2: i2 / (1 + 0.8 * v2**2)

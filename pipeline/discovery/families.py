@@ -125,15 +125,21 @@ def unit_of(x) -> float:
     return 1.0 if 0.3 <= s <= 3.0 else s
 
 
+#: the scales of the rate family's Coulomb-like terms, as shares of the rate's span: a sharp
+#: one (dry friction's step at 0, which the wider ones round off over a fifth of the span) and
+#: two wider (a friction that builds up, a saturation)
+RATE_TANH = (0.01, 0.05, 0.25)
+
+
 def families(role: str, env: dict | None = None, signal: bool = False, sensor: bool = False) -> list[dict]:
     """The template specs tried for a component of this role. A law in the rate also gets
     Coulomb-like friction terms tanh(dv/s), the dissipative element's classic non-polynomial
-    part, at two fixed scales (a twentieth and a quarter of the rate's nominal span: the law
-    stays linear in its parameters, and pruning keeps what the data need; the shape stage
-    fits the scale itself), and a constant (the offset force of a positioning axis's friction,
+    part, at fixed scales (:data:`RATE_TANH` of the rate's nominal span: the law stays linear
+    in its parameters, and pruning keeps what the data need; the shape stage fits the scale
+    itself), and a constant (the offset force of a positioning axis's friction,
     M q'' = tau - Fv q' - Fc sign(q') - offset: without it a law bends its other terms to mimic
     one, and an open-loop position drifts). A signal block's law is static, its output in its
-    input, with saturation terms tanh(v/s) at the same two fixed scales of the input's span:
+    input, with saturation terms tanh(v/s) at two fixed scales (a twentieth and a quarter of the input's span):
     the effect a block diagram most often lacks (an amplifier's or a valve's limits, which a
     cubic cannot follow beyond its knee). A sensor's law is its reading in what it measures,
     with those terms, a zero offset and |v|: a counter blind to the direction (a pulse
@@ -149,7 +155,7 @@ def families(role: str, env: dict | None = None, signal: bool = False, sensor: b
         out[0]["rhs"] = [*out[0]["rhs"], f"tanh(v/{0.05 * reach:.3g})", f"tanh(v/{0.25 * reach:.3g})"]
     for f in out:
         if f.get("family") == "rate":
-            f["rhs"] = ["1", *f["rhs"], f"tanh(dv/{0.05 * span:.3g})", f"tanh(dv/{0.25 * span:.3g})"]
+            f["rhs"] = ["1", *f["rhs"], *(f"tanh(dv/{k * span:.3g})" for k in RATE_TANH)]
         if f.get("family") == "static" and env is not None and _constant(env):
             f["rhs"] = ["1", *f["rhs"]]       # the nominal law has a constant: so may the law
     if signal and env is not None and np.min(env["v"]) > 0:
