@@ -77,6 +77,14 @@ def _model_from_args(args):
         from .services import compile_model
 
         return compile_model(args.sources, args.model, args.compiler, libraries=args.library)
+    sources = [Path(p) for p in args.sources]
+    if any(p.suffix == ".mo" for p in sources):
+        from .compile.sources import top_level_names
+
+        names = sorted(top_level_names([], {p: p.read_text(encoding="utf-8", errors="replace")
+                                            for p in sources if p.suffix == ".mo" and p.is_file()}))
+        raise ConfigError("Modelica sources need --model NAME, the class to simulate"
+                          + (f" (defined here: {', '.join(names[:8])})" if names else ""))
     return load_model(args.sources, args.model, args.compiler)
 
 

@@ -52,6 +52,14 @@ def test_failed_simulation_exits_1_with_the_reason_and_what_it_reached(tmp_path,
     assert f"the {len(r.time)} samples up to t = {r.time[-1]:g}" in err
 
 
+def test_modelica_sources_without_a_class_name_are_told_which_to_give(tmp_path, capsys):
+    src = tmp_path / "AB.mo"
+    src.write_text("model A\n  Real x;\nequation\n  x = time;\nend A;\nmodel B\n  Real y;\nequation\n  y = time;\nend B;\n")
+    assert main(["simulate", str(src), "--stop-time", "1", "-o", str(tmp_path / "r.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "need --model NAME" in err and "A, B" in err and "Traceback" not in err
+
+
 BLOW = """model Blow "a level that runs away, past the domain of its outflow law at t = ln 2"
   Real h(start = 1, fixed = true);
   Real q = sqrt(2 - h) "defined below 2 only";
