@@ -119,7 +119,7 @@ class _Front:
         written as modifiers (:func:`.records.copied`)."""
         import rumoca
 
-        mark = _mark(restate, records)
+        mark, rewrite = _mark(restate, records), _rewrite(restate, tuple(records))
         if mark:
             docs = {p: (h + mark, names) for p, (h, names) in docs.items()}
         if any(self.docs.get(str(p), h) != h or any(self.owner.get(n, str(p)) != str(p) for n in names)
@@ -131,7 +131,7 @@ class _Front:
                 if p.name == "package.mo" and not self.uses:
                     self._use_libraries()
                 try:   # registers the document; naming no class of it, nothing is compiled yet
-                    self._load(p, h, "MclNoClass_")
+                    self._load(p, h, "MclNoClass_", rewrite)
                 except rumoca.RumocaError:
                     pass
                 self.docs[str(p)] = h
@@ -139,7 +139,7 @@ class _Front:
         top = model.split(".")[0]
         if top in self.owner:
             p = Path(self.owner[top])
-            return self._load(p, self.docs[str(p)], model)
+            return self._load(p, self.docs[str(p)], model, rewrite)
         # a class of a library on the path: compiled through a one-line model extending it
         stub = f"model {ENTRY}\n  extends {model};\nend {ENTRY};\n"
         return self.session.loads(stub, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo")
@@ -165,10 +165,10 @@ class _Front:
         self.session.clear()
         self.docs, self.owner, self.uses = {}, {}, False
 
-    def _load(self, path: Path, digest: str, model: str):
+    def _load(self, path: Path, digest: str, model: str, rewrite=None):
         """A package directory is read as a tree; a single file under a name of its own, so that
-        rumoca does not also read the files beside it (a run directory holds many)."""
-        rewrite = _rewrite(digest[_DIGEST:])
+        rumoca does not also read the files beside it (a run directory holds many). ``rewrite``:
+        the change to its text that ``digest``'s mark stands for (:func:`_rewrite`)."""
         if path.name == "package.mo":
             tree = lifted_tree(path, _copies(digest), rewrite)
             return self.session.load(str(tree), model=model)
@@ -184,44 +184,44 @@ _RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a 
 _RESTATED = "+restated"
 #: the length of a document's own digest (sha256, hex), before the marks of its rewrites
 _DIGEST = 64
-#: the record components a mark stands for (:func:`_mark`)
-_RECORD_MARKS: dict[str, tuple] = {}
 
 
 def _mark(restate: bool, records) -> str:
-    """The mark a document's digest carries when compiled rewritten (:meth:`_Front._load`)."""
+    """The mark a document's digest carries when compiled rewritten (:func:`_rewrite`): a
+    document is loaded again when its mark changes."""
     mark = _RESTATED if restate else ""
-    if records:
-        key = "+records" + hashlib.sha256(repr(records).encode()).hexdigest()[:12]
-        _RECORD_MARKS[key] = records
-        mark += key
-    return mark
+    return mark + ("+records" + hashlib.sha256(repr(records).encode()).hexdigest()[:12] if records else "")
 
 
 @functools.lru_cache(maxsize=32)
-def _rewrite(mark: str):
-    """The rewrite of a document's text that ``mark`` stands for; None for the text as written.
-    (One function per mark: a tree's lifted copy is looked up by it.)"""
-    if not mark:
-        return None
-    records = next((r for k, r in _RECORD_MARKS.items() if k in mark), ())
-    if mark.startswith(_RESTATED):
+def _rewrite(restate: bool, records: tuple):
+    """The rewrite of a document's text: restated, and its ``records`` copied as modifiers
+    (:func:`.records.copied`); None for the text as written. (One function for the same
+    arguments: a tree's lifted copy is looked up by it.)"""
+    if restate:
         return lambda text: copied(restated(text), records)
-    return lambda text: copied(text, records, calls=False)
+    if records:
+        return lambda text: copied(text, records, calls=False)
+    return None
+
+
+def _doc_texts(docs: dict[Path, tuple[str, set]]):
+    """The text of every file of the user's documents (a package directory's, each)."""
+    for path in docs:
+        for f in sorted(path.parent.rglob("*.mo")) if path.name == "package.mo" else [path]:
+            yield f.read_text(encoding="utf-8", errors="replace")
 
 
 def _restatable(docs: dict[Path, tuple[str, set]], records=()) -> bool:
     """Whether restating (and ``records`` copied: :func:`.records.copied`) changes any of the
     documents' files (:meth:`_Front._load`): a model unbalanced for another reason is not
     compiled twice."""
-    for path in docs:
-        for f in sorted(path.parent.rglob("*.mo")) if path.name == "package.mo" else [path]:
-            text = f.read_text(encoding="utf-8", errors="replace")
-            try:
-                if copied(restated(text), records) != text:
-                    return True
-            except Exception:     # noqa: BLE001 - text rumoca refused, which a rewrite misread: no retry
-                return False
+    for text in _doc_texts(docs):
+        try:
+            if copied(restated(text), records) != text:
+                return True
+        except Exception:     # noqa: BLE001 - text rumoca refused, which a rewrite misread: no retry
+            return False
     return False
 
 
@@ -519,21 +519,14 @@ def _bound_records(prep: Prepared, flat: dict, libs: dict[str, Path]) -> tuple:
     """The record components of ``flat``, and the records passed whole in modifications, where
     one of the user's files binds one to another record (:mod:`.records`): rumoca reads them
     right only written as modifiers."""
-    passed = [r for r in _declared_records(prep, libs) if not r[0]]
+    texts = list(_doc_texts(prep.docs))
+    passed = [r for r in _declared_records(texts, prep, libs) if not r[0]]
     records = bound_records(flat, passed)
-    if not records:
-        return ()
-    for path in prep.docs:
-        for f in sorted(path.parent.rglob("*.mo")) if path.name == "package.mo" else [path]:
-            text = f.read_text(encoding="utf-8", errors="replace")
-            if copied(text, records, calls=False) != text:
-                return records
-    return ()
+    return records if any(copied(text, records, calls=False) != text for text in texts) else ()
 
 
-def _declared_records(prep: Prepared, libs: dict[str, Path]) -> tuple:
-    """:func:`.records.declared_records` of the user's files."""
-    texts = [f.read_text(encoding="utf-8", errors="replace") for f in prep.files]
+def _declared_records(texts: list[str], prep: Prepared, libs: dict[str, Path]) -> tuple:
+    """:func:`.records.declared_records` of the user's files' ``texts``."""
     return declared_records(texts, LibraryClasses.with_user(libs, prep.docs))
 
 
@@ -549,9 +542,10 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
     try:
         return _guarded(front, lambda: front.compile(prep.docs, model, records=records))
     except rumoca.RumocaError as exc:
-        if _RESTATE_ON.search(str(exc)):
-            records = records or _declared_records(prep, libs)
-        if _RESTATE_ON.search(str(exc)) and _restatable(prep.docs, records):
+        restate = _RESTATE_ON.search(str(exc)) is not None
+        if restate:
+            records = records or _declared_records(list(_doc_texts(prep.docs)), prep, libs)
+        if restate and _restatable(prep.docs, records):
             # a construct rumoca misreads (:func:`.bindings.restated`): the model again with its
             # files restated, else rumoca's own error
             try:
