@@ -294,6 +294,12 @@ def _slots(pattern: str) -> list[str]:
     return [g for g in ("s", "w") if "{" + g + "}" in pattern]
 
 
+#: the scales a shape starts from, as shares of the visited span: the sharp ones for a step
+#: (dry friction's at 0, which from a wider start the least squares of the distillation
+#: rounds off with other shapes before its scale is fitted)
+SHAPE_SCALES = (0.01, 0.03, 0.1, 0.3, 1.0)
+
+
 def basis(x: np.ndarray, name: str, sensor: bool = False) -> list[tuple[str, tuple | None]]:
     """Candidate terms in the variable ``name`` for a law visited over ``x``, as (pattern, scales):
     polynomials, |x| x, and the shapes of friction, saturation and exponential laws at scales
@@ -307,9 +313,9 @@ def basis(x: np.ndarray, name: str, sensor: bool = False) -> list[tuple[str, tup
     terms = [(t, None) for t in ("{x}", "{x}^2", "{x}^3", "{x}*abs({x})", "sqrt(abs({x}))*sign({x})")]
     if sensor:
         terms[:0] = [("1", None), ("abs({x})", None)]
-    shapes = [(shape, (k * span,)) for k in (0.05, 0.1, 0.2, 0.5, 1.0) for shape in _SHAPES]
+    shapes = [(shape, (k * span,)) for k in SHAPE_SCALES for shape in _SHAPES]
     shapes += [(knee, (k * span, w * span)) for knee in _KNEES for k in (0.1, 0.3, 0.6) for w in (0.03, 0.15)]
-    if name in ("va", "vb"):
+    if name in ("va", "vb") and not sensor:
         terms.insert(0, ("1", None))
     if np.min(x) > 0:      # a level (or a drop) that stays above 0: an opening may sit above its datum
         shapes += [(_TORRICELLI, (k * float(np.min(x)),)) for k in (0.25, 0.5, 0.75, 0.9)]
@@ -362,12 +368,14 @@ def _fit_scales(chosen, x, f, name):
 
 
 def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
-                  refine_best: int = 6, sensor: bool = False) -> list[tuple[list[str], np.ndarray, float]]:
+                  refine_best: int = 6, sensor: bool = False, constant: bool = False) -> list[tuple[list[str], np.ndarray, float]]:
     """Sparse laws f(x) ~ sum_k c_k phi_k(x) over :func:`basis`, the best of one, two, ...
     ``max_terms`` terms: every subset is fitted by least squares at the grid's scales, the
     ``refine_best`` best of each size get their shapes' scales fitted. Returns (terms, c, rms
     error) per size; a simulation fit of each then decides (the curve is only a network's
-    reading of the data). Each law is a dict: terms (scales named s1, s2, ...), scales, c, err."""
+    reading of the data). Each law is a dict: terms (scales named s1, s2, ...), scales, c, err.
+    ``constant``: every law has a constant beside its terms (the law it stands for keeps one: a
+    friction's offset force, small on the curve, drives an open-loop position away)."""
     import heapq
     from itertools import combinations
 
@@ -375,9 +383,12 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
     ok = np.isfinite(f)
     x, f = x[ok], f[ok]
     terms = basis(x, name, sensor)
+    if constant and ("1", None) not in terms:
+        terms.append(("1", None))
+    fixed = (terms.index(("1", None)),) if constant else ()
     Phi = np.column_stack([_values(t, x, name) for t in terms])
-    usable = [k for k in range(len(terms))
-              if np.all(np.isfinite(Phi[:, k])) and (np.ptp(Phi[:, k]) > 0 or terms[k][0] == "1")]
+    usable = [k for k in range(len(terms)) if k not in fixed
+              and np.all(np.isfinite(Phi[:, k])) and (np.ptp(Phi[:, k]) > 0 or terms[k][0] == "1")]
     Phi = Phi / np.where(np.abs(Phi).max(axis=0) > 0, np.abs(Phi).max(axis=0), 1.0)   # conditioning
     scale = float(np.ptp(f)) or 1.0
     span = float(np.max(np.abs(x))) or 1.0
@@ -385,9 +396,9 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
     for size in range(1, max_terms + 1):
         errs = []
         for combo in combinations(usable, size):
-            A = Phi[:, combo]
+            A = Phi[:, fixed + combo]
             c, *_ = np.linalg.lstsq(A, f, rcond=None)
-            errs.append((float(np.sqrt(np.mean((f - A @ c) ** 2))), combo))
+            errs.append((float(np.sqrt(np.mean((f - A @ c) ** 2))), fixed + combo))
         best = (np.inf, None)
         for _, combo in heapq.nsmallest(refine_best, errs):
             chosen = [terms[k] for k in combo]

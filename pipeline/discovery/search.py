@@ -41,6 +41,10 @@ SPREAD = 1e3
 #: family indices of the hysteresis laws, the laws in both potentials and the inverse law
 #: (:func:`potential_items`)
 HYSTERESIS_INDEX, POTENTIALS_INDEX, INVERSE_INDEX = 85, 90, 95
+#: family index of the plainer laws distilled from a wordy best law (:func:`plainer`)
+TIDY_INDEX = 110
+#: a law of one variable with more terms than this (beside a constant) is distilled further
+READABLE = 3
 
 
 def balanced(base: Base, train: TimeSeries, comp) -> bool:
@@ -344,12 +348,15 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     or a connector's own potential), fitted to the data, then distilled into a sparse readable
     law over tanh, sinh, |x| x, sqrt(|x|), x/sqrt(1 + x^2), exp and polynomial terms
     (:func:`families.distillations`) and fitted and pruned like any candidate. Skipped when the
-    polynomial law already fits to the noise, or when it is not a law of one variable."""
+    polynomial law already fits to the noise, or when it is not a law of one variable. A best
+    law that keeps many terms is then distilled itself (:func:`plainer`)."""
     from ..services import registry
 
     done = _ranked(cands)
-    if not done or done_at_noise(done[0], sigma):
+    if not done:
         return []
+    if done_at_noise(done[0], sigma):
+        return plainer(fit, done[0])
     items = potential_items(fit.ctx, done)
     out = fit(items) if items else []
     done = _ranked(cands + out)
@@ -374,15 +381,54 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     n = neural[0]
     if n.get("score") is None or not n.get("law_range"):
         return out
-    template = registry().template(n["template"])
-    xs = np.linspace(*n["law_range"], 201)
-    laws = distillations(xs, template.curve(np.asarray(n["w"]), xs), var,
-                         sensor=fit.ctx.base.structure.components[best["component"]].sensor)
-    items = [Item(best["component"], SHAPE_INDEX + k,
-                  {"name": "polynomial", "lhs": ["i"], "rhs": law["terms"], "scales": law["scales"],
-                   "start": [1.0, *map(float, law["c"])], "family": "shape"})
-             for k, law in enumerate(laws)]
-    return out + fit(items)
+    out += distilled(fit, best["component"], n, SHAPE_INDEX, constant=keeps_constant(best))
+    return out + plainer(fit, _ranked(cands + out)[0])
+
+
+def distilled(fit: Batch, component: str, law: dict, index: int, constant: bool = False) -> list[dict]:
+    """The sparse readable laws (:func:`families.distillations`) of ``law``'s curve over the
+    range its variable visited, fitted at ``component`` (items from ``index`` on)."""
+    from ..services import registry
+
+    template = registry().template(law["template"])
+    xs = np.linspace(*law["law_range"], 201)
+    w = np.asarray(law["w"]) * np.asarray(law.get("active", np.ones(len(law["w"]), bool)))
+    curve = template.curve(w, xs)
+    if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(curve))):
+        return []
+    laws = distillations(xs, curve, law["law_variable"], constant=constant,
+                         sensor=fit.ctx.base.structure.components[component].sensor)
+    return fit([Item(component, index + k,
+                     {"name": "polynomial", "lhs": ["i"], "rhs": d["terms"], "scales": d["scales"],
+                      "start": [1.0, *map(float, d["c"])], "family": "shape"})
+                for k, d in enumerate(laws)])
+
+
+def keeps_constant(law: dict) -> bool:
+    """Whether a fitted law keeps a constant term (a friction's offset force)."""
+    return any(t == "1" and on for t, on in zip(law.get("terms") or [], law.get("active") or []))
+
+
+def wordy(law: dict) -> bool:
+    """Whether a fitted law of one variable keeps more than :data:`READABLE` terms beside a
+    constant: a law a person cannot read at a glance."""
+    if law.get("family") not in ("static", "rate", "absolute") or law.get("law_variable") not in ("v", "dv", "va", "vb"):
+        return False
+    kept = [t for t, on in zip((law.get("terms") or [])[1:], (law.get("active") or [])[1:]) if on and t != "1"]
+    return len(kept) > READABLE
+
+
+def plainer(fit: Batch, best: dict) -> list[dict]:
+    """Plainer laws for a best law that is :func:`wordy`: its own curve distilled into laws of
+    at most three terms (and its constant) whose shapes' scales are fitted. The fixed scales of
+    a family's Coulomb-like terms only approximate a step, so pruning keeps several of them where
+    one tanh of the right scale is the law (dry friction tau = 0.1 w + 0.15 tanh(w/0.01) came as
+    five terms, three of them tanh at the family's scales); the criterion decides between them."""
+    if not wordy(best) or not best.get("law_range"):
+        return []
+    log.info("      %s's law has %d terms: plainer laws distilled from its curve", best["component"],
+             int(np.sum(best["active"])) - 1)
+    return distilled(fit, best["component"], best, TIDY_INDEX, constant=keeps_constant(best))
 
 
 # -- a round ------------------------------------------------------------------------------------

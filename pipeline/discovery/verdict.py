@@ -142,12 +142,14 @@ def plainest(best: dict, close: list[dict]) -> dict:
     :data:`EQUAL`), the one with the fewest parameters, the better score on a tie: the data do
     not choose, so the plainer law is named (a drain's sqrt(|dp|) tanh(dp/s), 0.7 behind a
     four-parameter law whose saturation term does not extrapolate: validation RMS 2.7e-3
-    against 7.8e-3)."""
+    against 7.8e-3). A shape law in the same variable counts as the same kind of law: it is
+    a family's law distilled (:func:`.search.plainer`)."""
     if "parts" in best:
         return best
     size = lambda c: int(np.sum(np.asarray(c["active"], bool))) if "active" in c else len(c.get("w") or ())  # noqa: E731
-    same = [c for c in close if c is best or (c.get("component") == best["component"] and "parts" not in c
-                                              and c.get("family") == best.get("family"))]
+    kin = lambda c: c.get("family") == best.get("family") or (  # noqa: E731
+        "shape" in (c.get("family"), best.get("family")) and c.get("law_variable") == best.get("law_variable"))
+    same = [c for c in close if c is best or (c.get("component") == best["component"] and "parts" not in c and kin(c))]
     return min(same, key=lambda c: (size(c), c["score"]))
 
 
