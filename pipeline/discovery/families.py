@@ -368,14 +368,16 @@ def _fit_scales(chosen, x, f, name):
 
 
 def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
-                  refine_best: int = 6, sensor: bool = False, constant: bool = False) -> list[tuple[list[str], np.ndarray, float]]:
+                  refine_best: int = 6, sensor: bool = False, keep: tuple = ()) -> list[tuple[list[str], np.ndarray, float]]:
     """Sparse laws f(x) ~ sum_k c_k phi_k(x) over :func:`basis`, the best of one, two, ...
     ``max_terms`` terms: every subset is fitted by least squares at the grid's scales, the
     ``refine_best`` best of each size get their shapes' scales fitted. Returns (terms, c, rms
     error) per size; a simulation fit of each then decides (the curve is only a network's
     reading of the data). Each law is a dict: terms (scales named s1, s2, ...), scales, c, err.
-    ``constant``: every law has a constant beside its terms (the law it stands for keeps one: a
-    friction's offset force, small on the curve, drives an open-loop position away)."""
+    ``keep``: basis terms ("1", "{x}") every law has beside its own, the law it stands for
+    keeping them (a friction's offset force, small on the curve, drives an open-loop position
+    away; a damper's viscous term, without which a sharp step and a line came as a step, a dead
+    zone and a correction)."""
     import heapq
     from itertools import combinations
 
@@ -383,9 +385,8 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
     ok = np.isfinite(f)
     x, f = x[ok], f[ok]
     terms = basis(x, name, sensor)
-    if constant and ("1", None) not in terms:
-        terms.append(("1", None))
-    fixed = (terms.index(("1", None)),) if constant else ()
+    terms += [(t, None) for t in keep if (t, None) not in terms]
+    fixed = tuple(terms.index((t, None)) for t in keep)
     Phi = np.column_stack([_values(t, x, name) for t in terms])
     usable = [k for k in range(len(terms)) if k not in fixed
               and np.all(np.isfinite(Phi[:, k])) and (np.ptp(Phi[:, k]) > 0 or terms[k][0] == "1")]

@@ -381,13 +381,14 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     n = neural[0]
     if n.get("score") is None or not n.get("law_range"):
         return out
-    out += distilled(fit, best["component"], n, SHAPE_INDEX, constant=keeps_constant(best))
+    out += distilled(fit, best["component"], n, SHAPE_INDEX, keep=("1",) if "1" in kept_terms(best) else ())
     return out + plainer(fit, _ranked(cands + out)[0])
 
 
-def distilled(fit: Batch, component: str, law: dict, index: int, constant: bool = False) -> list[dict]:
+def distilled(fit: Batch, component: str, law: dict, index: int, keep: tuple = (), size: int = 3) -> list[dict]:
     """The sparse readable laws (:func:`families.distillations`) of ``law``'s curve over the
-    range its variable visited, fitted at ``component`` (items from ``index`` on)."""
+    range its variable visited, of up to ``size`` terms beside the basis terms ``keep``, fitted
+    at ``component`` (items from ``index`` on)."""
     from ..services import registry
 
     template = registry().template(law["template"])
@@ -396,7 +397,7 @@ def distilled(fit: Batch, component: str, law: dict, index: int, constant: bool 
     curve = template.curve(w, xs)
     if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(curve))):
         return []
-    laws = distillations(xs, curve, law["law_variable"], constant=constant,
+    laws = distillations(xs, curve, law["law_variable"], max_terms=size, keep=keep,
                          sensor=fit.ctx.base.structure.components[component].sensor)
     return fit([Item(component, index + k,
                      {"name": "polynomial", "lhs": ["i"], "rhs": d["terms"], "scales": d["scales"],
@@ -404,9 +405,9 @@ def distilled(fit: Batch, component: str, law: dict, index: int, constant: bool 
                 for k, d in enumerate(laws)])
 
 
-def keeps_constant(law: dict) -> bool:
-    """Whether a fitted law keeps a constant term (a friction's offset force)."""
-    return any(t == "1" and on for t, on in zip(law.get("terms") or [], law.get("active") or []))
+def kept_terms(law: dict) -> list[str]:
+    """The terms a fitted law keeps (not its scale anchor)."""
+    return [t for t, on in zip((law.get("terms") or [])[1:], (law.get("active") or [])[1:]) if on]
 
 
 def wordy(law: dict) -> bool:
@@ -414,21 +415,23 @@ def wordy(law: dict) -> bool:
     constant: a law a person cannot read at a glance."""
     if law.get("family") not in ("static", "rate", "absolute") or law.get("law_variable") not in ("v", "dv", "va", "vb"):
         return False
-    kept = [t for t, on in zip((law.get("terms") or [])[1:], (law.get("active") or [])[1:]) if on and t != "1"]
-    return len(kept) > READABLE
+    return len([t for t in kept_terms(law) if t != "1"]) > READABLE
 
 
 def plainer(fit: Batch, best: dict) -> list[dict]:
     """Plainer laws for a best law that is :func:`wordy`: its own curve distilled into laws of
-    at most three terms (and its constant) whose shapes' scales are fitted. The fixed scales of
-    a family's Coulomb-like terms only approximate a step, so pruning keeps several of them where
-    one tanh of the right scale is the law (dry friction tau = 0.1 w + 0.15 tanh(w/0.01) came as
-    five terms, three of them tanh at the family's scales); the criterion decides between them."""
+    at most :data:`READABLE` terms beside a constant, the line and the constant it keeps kept,
+    the shapes' scales fitted. The fixed scales of a family's Coulomb-like terms only
+    approximate a step, so pruning keeps several of them where one tanh of the right scale is
+    the law (dry friction tau = 0.1 w + 0.15 tanh(w/0.01) came as five terms, three of them tanh
+    at the family's scales); the criterion decides between them."""
     if not wordy(best) or not best.get("law_range"):
         return []
     log.info("      %s's law has %d terms: plainer laws distilled from its curve", best["component"],
              int(np.sum(best["active"])) - 1)
-    return distilled(fit, best["component"], best, TIDY_INDEX, constant=keeps_constant(best))
+    var = best["law_variable"]
+    keep = tuple(t for t in ("1", "{x}") if t.format(x=var) in kept_terms(best))
+    return distilled(fit, best["component"], best, TIDY_INDEX, keep=keep, size=READABLE - ("{x}" in keep))
 
 
 # -- a round ------------------------------------------------------------------------------------
