@@ -325,8 +325,8 @@ def directional(ranked: list[dict], comp: str) -> bool:
     law = next((c for c in ranked if c["component"] == comp), None)
     if law is None or law.get("family") != "storage":
         return False
-    kept = [t for t, on in zip(law.get("terms") or [], law.get("active") or []) if on]
-    return any("dv" in t for t in kept[1:]) and any(re.search(r"\bv\b", t) for t in kept[1:])
+    kept = kept_terms(law)
+    return any("dv" in t for t in kept) and any(re.search(r"\bv\b", t) for t in kept)
 
 
 def softening(law: dict) -> bool:
@@ -362,16 +362,13 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     done = _ranked(cands + out)
     if done_at_noise(done[0], sigma) or done[0].get("family") in ("potentials", "inverse", "hysteresis"):
         return out
-    one = [c for c in done if c.get("family") in ("static", "rate", "absolute")
-           and c.get("law_variable") in ("v", "dv", "va", "vb")]
+    one = [c for c in done if one_variable(c)]
     if not one:
         return out
     best, var = one[0], one[0]["law_variable"]
     log.info("      shape of %s's law in %s: neural fit, then a sparse law distilled from it", best["component"], var)
-    poly = registry().template(best["template"])
-    xs = np.linspace(*(best.get("law_range") or [-1.0, 1.0]), 201)
-    curve = poly.curve(np.asarray(best["w"]) * np.asarray(best["active"]), xs)
-    if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(curve))):      # (a law that overflows on its range)
+    xs, curve = law_curve(best)
+    if curve is None:      # (a law that overflows on its range)
         log.info("      no shape stage: %s's best law is not finite over its range", best["component"])
         return out
     spec = {"name": "neural", "hidden": 4, "x": var, "coupled": False, "family": "reference"}
@@ -389,13 +386,8 @@ def distilled(fit: Batch, component: str, law: dict, index: int, keep: tuple = (
     """The sparse readable laws (:func:`families.distillations`) of ``law``'s curve over the
     range its variable visited, of up to ``size`` terms beside the basis terms ``keep``, fitted
     at ``component`` (items from ``index`` on)."""
-    from ..services import registry
-
-    template = registry().template(law["template"])
-    xs = np.linspace(*law["law_range"], 201)
-    w = np.asarray(law["w"]) * np.asarray(law.get("active", np.ones(len(law["w"]), bool)))
-    curve = template.curve(w, xs)
-    if not (np.all(np.isfinite(xs)) and np.all(np.isfinite(curve))):
+    xs, curve = law_curve(law)
+    if curve is None:
         return []
     laws = distillations(xs, curve, law["law_variable"], max_terms=size, keep=keep,
                          sensor=fit.ctx.base.structure.components[component].sensor)
@@ -403,6 +395,22 @@ def distilled(fit: Batch, component: str, law: dict, index: int, keep: tuple = (
                      {"name": "polynomial", "lhs": ["i"], "rhs": d["terms"], "scales": d["scales"],
                       "start": [1.0, *map(float, d["c"])], "family": "shape"})
                 for k, d in enumerate(laws)])
+
+
+def law_curve(law: dict):
+    """(x, f(x)): a fitted law's curve at 201 points over the range its variable visited
+    ([-1, 1] where not told); f None where the law is not finite there."""
+    from ..services import registry
+
+    xs = np.linspace(*(law.get("law_range") or [-1.0, 1.0]), 201)
+    w = np.asarray(law["w"]) * np.asarray(law.get("active", np.ones(len(law["w"]), bool)))
+    curve = registry().template(law["template"]).curve(w, xs)
+    return (xs, curve) if np.all(np.isfinite(xs)) and np.all(np.isfinite(curve)) else (xs, None)
+
+
+def one_variable(law: dict) -> bool:
+    """Whether a fitted law is a polynomial family's law of one variable (v, dv or a potential)."""
+    return law.get("family") in ("static", "rate", "absolute") and law.get("law_variable") in ("v", "dv", "va", "vb")
 
 
 def kept_terms(law: dict) -> list[str]:
@@ -413,9 +421,7 @@ def kept_terms(law: dict) -> list[str]:
 def wordy(law: dict) -> bool:
     """Whether a fitted law of one variable keeps more than :data:`READABLE` terms beside a
     constant: a law a person cannot read at a glance."""
-    if law.get("family") not in ("static", "rate", "absolute") or law.get("law_variable") not in ("v", "dv", "va", "vb"):
-        return False
-    return len([t for t in kept_terms(law) if t != "1"]) > READABLE
+    return one_variable(law) and len([t for t in kept_terms(law) if t != "1"]) > READABLE
 
 
 def plainer(fit: Batch, best: dict) -> list[dict]:
@@ -428,7 +434,7 @@ def plainer(fit: Batch, best: dict) -> list[dict]:
     if not wordy(best) or not best.get("law_range"):
         return []
     log.info("      %s's law has %d terms: plainer laws distilled from its curve", best["component"],
-             int(np.sum(best["active"])) - 1)
+             len(kept_terms(best)))
     var = best["law_variable"]
     keep = tuple(t for t in ("1", "{x}") if t.format(x=var) in kept_terms(best))
     return distilled(fit, best["component"], best, TIDY_INDEX, keep=keep, size=READABLE - ("{x}" in keep))
