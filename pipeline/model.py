@@ -73,7 +73,7 @@ class CompiledModel:
     def __repr__(self) -> str:
         o = self.ode
         return (f"CompiledModel({self.name!r}: {len(o.x_names)} states, {len(o.u_names)} inputs, "
-                f"{len(o.y_names)} outputs, {len(o.p_names)} free parameters)")
+                f"{len(o.y_names)} outputs, {sum(not n.startswith('$') for n in o.p_names)} free parameters)")
 
     def _repr_html_(self) -> str:
         """A table in notebooks: the model's inputs, outputs, states and parameters with units."""
@@ -82,7 +82,7 @@ class CompiledModel:
         o, units = self.ode, self.info.get("units", {})
         rows = [("input", n, "") for n in o.u_names] + [("output", n, "") for n in o.y_names]
         rows += [("state", n, "") for n in o.x_names]
-        rows += [("parameter", n, f"{v:g}") for n, v in zip(o.p_names, o.p_values)]
+        rows += [("parameter", n, f"{v:g}") for n, v in zip(o.p_names, o.p_values) if not n.startswith("$")]
         body = "".join(f"<tr><td>{k}</td><td>{html.escape(n)}</td><td>{html.escape(units.get(n, ''))}</td>"
                        f"<td>{v}</td></tr>" for k, n, v in rows[:200])
         more = f"<p>... and {len(rows) - 200} more</p>" if len(rows) > 200 else ""
@@ -94,8 +94,8 @@ class CompiledModel:
         p = self.ode.p_values.astype(float).copy()
         for k, v in (overrides or {}).items():
             if k not in self.ode.p_names:
-                raise MclError(f"model {self.name} has no free parameter '{k}' "
-                               f"(free parameters: {', '.join(self.ode.p_names)})")
+                raise MclError(f"model {self.name} has no free parameter '{k}' (free parameters: "
+                               f"{', '.join(n for n in self.ode.p_names if not n.startswith('$'))})")
             p[self.ode.p_names.index(k)] = float(v)
         return p
 

@@ -22,7 +22,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import overlays, tables, xorshift
+from . import homotopy, overlays, tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
 from .balance import unconnected_inputs
 from .bindings import restated
@@ -68,7 +68,7 @@ _FUNCTIONS = {
     # [a; b] and [a, b]: scalars and vectors are promoted to one-column matrices
     "promoted_cat1": lambda *a: ca.vertcat(*a), "promoted_cat2": lambda *a: ca.horzcat(*a),
     "product": lambda a: functools.reduce(ca.times, ca.vertsplit(flat(a)), ca.SX(1)), "noEvent": lambda a: a, "no_event": lambda a: a, "smooth": lambda _o, a: a,
-    "homotopy": lambda actual, _simplified: actual, "div": lambda a, b: ca.sign(a / b) * ca.floor(ca.fabs(a / b)),   # truncation toward zero
+    "homotopy": homotopy.homotopy, "div": lambda a, b: ca.sign(a / b) * ca.floor(ca.fabs(a / b)),   # truncation toward zero
     "mod": lambda a, b: a - ca.floor(a / b) * b, "rem": lambda a, b: ca.fmod(a, b), "integer": ca.floor,
     "asinh": ca.asinh, "acosh": ca.acosh, "atanh": ca.atanh, "exp10": lambda a: 10 ** a,
     "identity": lambda n: ca.SX.eye(as_int(n)), "transpose": lambda a: a.T,
@@ -2130,6 +2130,9 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
             value = bind(value_of(i, ("start",)))
             preferred.update(zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(value)))
     preferred = {n: e for n, e in preferred.items() if not ca.depends_on(e, ca.vertcat(x, z, u, t, d))}
+    if ca.depends_on(ca.vertcat(residual, init_residual, relations, d_update, x_reinit, asserts,
+                                *[ca.vec(ca.SX(e)) for e in exprs.values()]), homotopy.SYMBOL):
+        p, p_names, p_values = ca.vertcat(p, homotopy.SYMBOL), [*p_names, homotopy.NAME], np.append(p_values, 0.0)
 
     return merge_common(_started_discretes(fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,

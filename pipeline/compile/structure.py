@@ -28,6 +28,8 @@ import scipy.linalg
 
 from .dae import CSE_MIN, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
+from . import homotopy
+from .hidden import revealed
 
 log = logging.getLogger(__name__)
 
@@ -250,7 +252,7 @@ def _blocks(sp: ca.Sparsity, nz: int):
 
 
 def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes: ca.SX | None = None,
-              guess: ca.SX | None = None, nominal: list[np.ndarray] | None = None):
+              guess: ca.SX | None = None, nominal: list[np.ndarray] | None = None, homotopic=None):
     """Solve 0 = g(z, args) for z block by block; returns (Function args -> z, #nonlinear blocks,
     the Newton form or None). ``guess`` (a symbol like z): the loops' Newton methods start
     there, an argument after ``args`` (a run passes the last solution), instead of ``z_guess``;
@@ -270,7 +272,8 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     None when there is no loop, or a block is too large to solve symbolically.
 
     ``nominal``: values of ``args`` (start values, parameters) where a loop's branches are
-    compared (see :data:`HOLD_BRANCHES`).
+    compared (see :data:`HOLD_BRANCHES`). ``homotopic``: (g with homotopy's lambda, lambda):
+    a loop that reads lambda starts where lambda leads it (its entries of ``z_guess`` set).
     """
     sp = ca.jacobian_sparsity(g, z)     # structural: an unknown read in a condition counts
     blocks = _blocks(sp, z.numel())
@@ -308,6 +311,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         own = sum(1 << c for c in cols)
         linear = not ca.depends_on(A, zk) and not any(stepped[r] & own for r in rows)
         torn, residual, whole = ([], None, None) if linear else _tear([gs[r] for r in rows], [zs[c] for c in cols])
+        if len(torn) > 1 and guess is not None and nominal is not None and HOLD_BRANCHES is not False:
+            torn, residual, whole = _torn_to_one(gk, zk, zprev, rows, cols, gs, zs, ca.vertcat(z, running), args, nominal,
+                                                 (torn, residual, whole))
         sol_free = None
         if linear:
             b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
@@ -333,6 +339,8 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             block = (lambda pv, f=f: f(pv, *mx_args))
             sol_newton = f(prev_sx, *args) if newton is not None else None
         else:
+            if homotopic is not None and nominal is not None:
+                _homotopy_start(homotopic, rows, zk, zprev, args, mx_args, prev_free, nominal, z_guess, cols)
             tears = ca.vertcat(*[zs[cols[i]] for i in torn])
             n_nonlinear += 1
             par = ca.vertcat(zprev, *args)
@@ -344,7 +352,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             def block(pv, resid=resid, first=first, spread=spread, name=f"loop{k}", extra=(), at=at):
                 t_sol = _loop_solve(name, resid, first, ca.vertcat(pv, *mx_args, *extra),
                                     start=None if guess is None else z_guess[at])
-                return spread(t_sol, pv, *mx_args), t_sol
+                return spread(t_sol, pv, *mx_args, *extra), t_sol
             cmps = _replay(resid, [tears, par])[1] if guess is not None and len(torn) == 1 and HOLD_BRANCHES is not False else []
             if cmps and HOLD_BRANCHES is None and (nominal is None or not _several_solutions(
                     resid, [tears, par], cmps, z_guess[at], _nominal_par(nominal, z_guess, prev))):
@@ -363,7 +371,12 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 held.append(ca.MX.sym(f"held{k}", len(cmps)))
                 sol_free, t_free = block(prev_free)
                 now.append(ca.Function(f"cmp{k}", [tears, par], [ca.vertcat(*cmps)])(t_free, ca.vertcat(prev_free, *mx_args)))
-                sol, t_sol = block(prev_mx, resid=resid_h, name=f"loop{k}h", extra=(held[-1],))
+                # (the unknowns computed from the tearing variable read the same comparisons,
+                # held too: an amplifier's output from its input, where the input is torn)
+                sp_in = [tears, zprev, *args]
+                spread_h = ca.Function(f"torn{k}h", [*sp_in, h], _replay(
+                    ca.Function(f"torn{k}", sp_in, [whole]), sp_in, h, match=cross)[0])
+                sol, t_sol = block(prev_mx, resid=resid_h, name=f"loop{k}h", extra=(held[-1],), spread=spread_h)
                 crossings.append(ca.Function(f"cross{k}", [tears, par, h], [ca.vertcat(*cross)])(
                     t_sol, ca.vertcat(prev_mx, *mx_args), held[-1]))
                 ops += how
@@ -408,6 +421,25 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     return fun, n_nonlinear, form, ops
 
 
+def _homotopy_start(homotopic, rows, zk, zprev, args, mx_args, prev_free, nominal, z_guess, cols):
+    """The loop's start values (``z_guess[cols]``) where homotopy leads it, its unknowns solved
+    before it at the start values (see :mod:`homotopy`)."""
+    g_h, lam = homotopic
+    rows_h = ca.vertcat(*[g_h[r] for r in rows])
+    if not ca.depends_on(rows_h, lam):
+        return
+    at = [*nominal, z_guess][:len(mx_args)]
+    try:
+        pv = np.array(ca.Function("prev", mx_args, [prev_free])(*at), float).ravel() if zprev.numel() else np.zeros(0)
+    except RuntimeError:
+        return
+    par = ca.vertcat(zprev, *args[:len(nominal)])
+    found = homotopy.guess(rows_h, lam, zk, par, np.concatenate([pv, *[np.ravel(a) for a in nominal]]),
+                           np.asarray(z_guess)[cols])
+    if found is not None:
+        z_guess[cols] = found
+
+
 def _several_solutions(resid: ca.Function, inputs: list, cmps: list, t0, par0) -> bool:
     """Whether a loop of one unknown t with branches may have several solutions: its residual
     rises in t on one branch and falls on another, at the start values and parameters. An
@@ -441,10 +473,11 @@ def _nominal_par(nominal: list[np.ndarray], z_guess: np.ndarray, prev: list[int]
     return np.concatenate([np.asarray(z_guess)[prev], *[np.ravel(a) for a in nominal], z_guess])
 
 
-def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None):
+def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None, match: list | None = None):
     """``f`` (an SX Function) rebuilt on ``inputs``: (its outputs, its comparisons a < b and a <=
     b in order, their crossing functions a - b, their operators), with the comparisons'
-    values taken from ``held`` where it is given."""
+    values taken from ``held`` where it is given: the k-th comparison's from held[k], or with
+    ``match`` (crossing functions) from the entry of the one it equals (none: not held)."""
     work, outs = {}, [[None] * f.nnz_out(i) for i in range(f.n_out())]
     cmps, cross, ops = [], [], []
     for k in range(f.n_instructions()):
@@ -462,7 +495,9 @@ def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None):
             ops.append("less" if op == ca.OP_LT else "less_equal")
             # (a value held < 0: none yet, the comparison itself, as where the loop starts
             # from its start values: an FMU's, the initial system's)
-            h = held[len(cmps) - 1] if held is not None else None
+            h = held[len(cmps) - 1] if held is not None and match is None else None
+            if match is not None:
+                h = next((held[i] for i, c in enumerate(match) if ca.is_equal(c, cross[-1], 64)), None)
             work[o[0]] = cmps[-1] if h is None else ca.if_else(h < 0, cmps[-1], h)
         elif len(i) == 1:
             work[o[0]] = ca.SX.unary(op, work[i[0]])
@@ -472,7 +507,28 @@ def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None):
     return outs, cmps, cross, ops
 
 
-def _tear(rows: list, unknowns: list):
+def _torn_to_one(gk, zk, zprev, rows, cols, gs, zs, moving, args, nominal, torn):
+    """A loop with branches (an amplifier's limits) torn to one unknown, where dividing by
+    coefficients of parameters alone (a resistance), nonzero at their values, makes it so:
+    only such a loop is held on its branch (see :func:`causalise`); else ``torn`` as it is."""
+    par = ca.vertcat(zprev, *args)
+    if not _replay(ca.Function("rows", [zk, par], [gk]), [zk, par])[1]:
+        return torn
+    values = [np.ravel(a) for a in nominal]
+
+    def steady(coef):
+        if ca.depends_on(coef, moving):
+            return False
+        try:
+            v = float(ca.Function("coef", args[:len(nominal)], [coef])(*values))
+        except RuntimeError:
+            return False
+        return math.isfinite(v) and abs(v) > 0
+    loose = _tear([gs[r] for r in rows], [zs[c] for c in cols], steady)
+    return loose if len(loose[0]) == 1 else torn
+
+
+def _tear(rows: list, unknowns: list, steady=None):
     """An algebraic loop torn: (the positions of its tearing variables t among ``unknowns``,
     residual r(t), the loop's unknowns as expressions of t). An unknown that an equation gives explicitly once the ones before are
     known (it appears there linearly, with a constant coefficient: a parameter's could be set
@@ -480,7 +536,8 @@ def _tear(rows: list, unknowns: list):
     iterated; where none is, the unknown read by most open equations becomes a tearing
     variable (the usual greedy heuristic). Newton's method then runs on t alone and never
     starts where an explicit unknown's start value is meaningless: a spring's length of 0
-    dividing a force (three MultiBody springs meeting at a massless point)."""
+    dividing a force (three MultiBody springs meeting at a massless point). ``steady(coef)``:
+    whether a coefficient that is not constant may still be divided by."""
     n = len(unknowns)
     g, z = ca.vertcat(*rows), ca.vertcat(*unknowns)
     reads: list[set] = [set() for _ in rows]
@@ -493,7 +550,7 @@ def _tear(rows: list, unknowns: list):
     def pivot(r, j):                            # (asked again each pass: kept)
         if (r, j) not in pivots:
             coef = ca.jacobian(rows[r], unknowns[j])
-            pivots[r, j] = coef.is_constant() and float(coef) != 0 and \
+            pivots[r, j] = (coef.is_constant() and float(coef) != 0 or steady is not None and steady(coef)) and \
                 not stepped[r] >> j & 1
         return pivots[r, j]
 
@@ -862,11 +919,13 @@ def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Fun
 def build_ode(dae: Dae, name: str = "model") -> Ode:
     """Index reduction + causalisation + initialisation: the model's explicit ODE (a pure
     function of ``dae``; a hybrid model's discrete part included)."""
-    return with_start_guesses(_hybrid(dae, name) if dae.hybrid else _build(dae, name))
+    dae, homotopic = homotopy.split(revealed(dae))
+    return with_start_guesses(_hybrid(dae, name, homotopic) if dae.hybrid else _build(dae, name, homotopic))
 
 
-def _build(dae: Dae, name: str = "model") -> Ode:
-    """The continuous model's ODE."""
+def _build(dae: Dae, name: str = "model", homotopic=None) -> Ode:
+    """The continuous model's ODE (``homotopic``: see :func:`homotopy.split`)."""
+    own = dae.residual
     semi, state_to_orig, invariants, index = reduce_index(dae)
     moved = _preferred_states(dae, semi, state_to_orig)
     if moved is not dae:
@@ -878,6 +937,8 @@ def _build(dae: Dae, name: str = "model") -> Ode:
         if reduced[0]["x"].numel() - semi["x"].numel() - n_moved <= n_moved:
             dae = moved
             semi, state_to_orig, invariants, index = reduced
+    # (the residual with homotopy's lambda has the rows of semi's where those are the model's own)
+    homotopic = homotopic if homotopic is not None and semi["alg"] is own else None
     xs, zs = semi["x"], semi["z"]
     up = semi["p"]
     nu = dae.u.numel()
@@ -897,7 +958,8 @@ def _build(dae: Dae, name: str = "model") -> Ode:
     xs0 = np.array([to_orig.get(str(s), 0.0) for s in ca.vertsplit(xs)])
     zfun, n_nl, newton, cross_ops = causalise(semi["alg"], zs, [xs, up, t], z_guess, modes,
                                               guess=ca.SX.sym("g", zs.numel()),
-                                              nominal=[xs0, np.concatenate([u0, p0]), np.zeros(1)])
+                                              nominal=[xs0, np.concatenate([u0, p0]), np.zeros(1)],
+                                              homotopic=homotopic)
     X, U, P0, T = (ca.MX.sym(n, k) for n, k in
                    (("x", xs.numel()), ("u", nu), ("p", dae.p.numel()), ("t", 1)))
     # a model with loops: a run's functions take the loops' guesses and the comparisons their
@@ -1114,7 +1176,7 @@ def _newton_functions(newton, args, names, sx_fun, probe_at, U, P, G, H):
     return loops, expanded(given)
 
 
-def _hybrid(dae: Dae, name: str) -> Ode:
+def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
     """A hybrid model's ODE: the discrete variables (and pre(), the flags) are parameters of the
     continuous model while it is causalised; its functions then take them from the end of the
     state vector. The update at an event and the asserts are read through the same solve of the
@@ -1140,7 +1202,7 @@ def _hybrid(dae: Dae, name: str) -> Ode:
         exprs=exprs,     # (the values at the start: initial() true)
         d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1), z_pre=ca.SX(0, 1),
         flags=ca.SX(0, 1), d_update=ca.SX(0, 1), x_reinit=ca.SX(0, 1), asserts=ca.SX(0, 1))
-    inner = _build(aug, name)
+    inner = _build(aug, name, homotopic)
     nx = len(inner.x_names)
     pos = {n: j for j, n in enumerate(inner.x_names)}
     # reinit() and pre(x) of an original state: its place among the semi-explicit states
