@@ -56,6 +56,10 @@ class CompiledModel:
     def parameters(self) -> dict[str, float]:
         return dict(zip(self.ode.p_names, map(float, self.ode.p_values)))
 
+    def _named_parameters(self) -> list[tuple[str, float]]:
+        """(name, value) of the parameters a user sets: not the compiler's own ($homotopy)."""
+        return [(n, v) for n, v in zip(self.ode.p_names, self.ode.p_values) if not n.startswith("$")]
+
     @property
     def initial_parameters(self) -> list[str]:
         """The free parameters that only the initial equations read (an initial position, a
@@ -73,7 +77,7 @@ class CompiledModel:
     def __repr__(self) -> str:
         o = self.ode
         return (f"CompiledModel({self.name!r}: {len(o.x_names)} states, {len(o.u_names)} inputs, "
-                f"{len(o.y_names)} outputs, {sum(not n.startswith('$') for n in o.p_names)} free parameters)")
+                f"{len(o.y_names)} outputs, {len(self._named_parameters())} free parameters)")
 
     def _repr_html_(self) -> str:
         """A table in notebooks: the model's inputs, outputs, states and parameters with units."""
@@ -82,7 +86,7 @@ class CompiledModel:
         o, units = self.ode, self.info.get("units", {})
         rows = [("input", n, "") for n in o.u_names] + [("output", n, "") for n in o.y_names]
         rows += [("state", n, "") for n in o.x_names]
-        rows += [("parameter", n, f"{v:g}") for n, v in zip(o.p_names, o.p_values) if not n.startswith("$")]
+        rows += [("parameter", n, f"{v:g}") for n, v in self._named_parameters()]
         body = "".join(f"<tr><td>{k}</td><td>{html.escape(n)}</td><td>{html.escape(units.get(n, ''))}</td>"
                        f"<td>{v}</td></tr>" for k, n, v in rows[:200])
         more = f"<p>... and {len(rows) - 200} more</p>" if len(rows) > 200 else ""
@@ -95,7 +99,7 @@ class CompiledModel:
         for k, v in (overrides or {}).items():
             if k not in self.ode.p_names:
                 raise MclError(f"model {self.name} has no free parameter '{k}' (free parameters: "
-                               f"{', '.join(n for n in self.ode.p_names if not n.startswith('$'))})")
+                               f"{', '.join(n for n, _ in self._named_parameters())})")
             p[self.ode.p_names.index(k)] = float(v)
         return p
 

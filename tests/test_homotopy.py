@@ -20,31 +20,37 @@ equation
 end Bistable;
 """
 
-MULTIVIBRATOR = """
-model Flasher "an astable multivibrator: a Schmitt trigger fed back through R and C"
+GENERATOR = """
+model Triangle "a Schmitt trigger and an integrator: square and triangle waves"
   import Modelica.Electrical.Analog.Basic;
   import Modelica.Electrical.Analog.Ideal.IdealizedOpAmpLimited;
   import Modelica.Blocks.Types.LimiterHomotopy;
-  parameter Real f = 50 "designed frequency";
-  parameter Real R1 = 2000, R2 = 1000, R = 10000;
-  parameter Real C = 1/f/(2*R*log(1 + 2*R1/R2));
-  IdealizedOpAmpLimited amp(Vps = 12, Vns = -12, homotopyType = LimiterHomotopy.LowerLimit);
+  parameter Real Vs = 12 "supply";
+  parameter Real A = 8 "triangle amplitude";
+  parameter Real f = 25 "designed frequency";
+  parameter Real R1 = 1000, R2 = R1*Vs/A, R = 1000;
+  parameter Real C = Vs/A/(4*f*R);
+  IdealizedOpAmpLimited trigger(Vps = Vs, Vns = -Vs, strict = false,
+    homotopyType = LimiterHomotopy.UpperLimit);
+  IdealizedOpAmpLimited integrator(Vps = Vs, Vns = -Vs, strict = false);
   Basic.Ground ground;
   Basic.Resistor r1(R = R1);
   Basic.Resistor r2(R = R2);
   Basic.Resistor r(R = R);
-  Basic.Capacitor c(C = C, v(start = 0.5, fixed = true));
-  output Real vc = c.v;
+  Basic.Capacitor c(C = C, v(start = 0, fixed = true));
+  output Real triangle = integrator.out.v;
 equation
-  connect(amp.out, r.p);
-  connect(r.n, c.p);
-  connect(c.n, ground.p);
-  connect(r.n, amp.in_n);
-  connect(amp.out, r2.p);
-  connect(r2.n, amp.in_p);
-  connect(amp.in_p, r1.p);
-  connect(r1.n, ground.p);
-end Flasher;
+  connect(trigger.out, r2.n);
+  connect(trigger.in_p, r2.p);
+  connect(trigger.in_n, ground.p);
+  connect(trigger.out, r.p);
+  connect(r.n, c.n);
+  connect(c.p, integrator.out);
+  connect(ground.p, integrator.in_p);
+  connect(c.n, integrator.in_n);
+  connect(r2.p, r1.p);
+  connect(integrator.out, r1.n);
+end Triangle;
 """
 
 
@@ -70,12 +76,16 @@ def test_a_loop_with_three_solutions_starts_where_its_simplified_law_leads(tmp_p
 
 
 @needs_msl()
-def test_a_schmitt_trigger_multivibrator_oscillates_at_its_designed_frequency(tmp_path):
-    (tmp_path / "Flasher.mo").write_text(MULTIVIBRATOR)
-    model = compile_model([tmp_path / "Flasher.mo"], "Flasher", libraries=[msl_path()])
-    t, res = _run(model, 0.1, 4001)
-    v = res.output("vc")
-    assert -8.1 < v.min() < -7.5 and 7.5 < v.max() < 8.1     # the thresholds: +-12 R1/(R1 + R2)
+def test_a_triangle_generator_starts_at_its_triggers_declared_limit(tmp_path):
+    """With the capacitor empty, the trigger's middle solution (output 0) is an equilibrium: a
+    Newton method from zero guesses stays there and the generator never starts. Its declared
+    start at the upper limit (homotopyType) starts it; it then swings +-A at f."""
+    (tmp_path / "Triangle.mo").write_text(GENERATOR)
+    model = compile_model([tmp_path / "Triangle.mo"], "Triangle", libraries=[msl_path()])
+    t, res = _run(model, 0.2, 4001)
+    v = res.output("triangle")
+    assert -8.1 < v.min() < -7.9 and 7.9 < v.max() < 8.1
+    assert v[np.searchsorted(t, 0.005)] < -0.9        # first down: the trigger starts high
     rising = t[1:][(v[:-1] < 0) & (v[1:] >= 0)]
     period = np.diff(rising).mean()
-    assert len(rising) >= 3 and abs(period - 1 / 50) < 0.01 / 50
+    assert len(rising) >= 3 and abs(period - 1 / 25) < 0.01 / 25

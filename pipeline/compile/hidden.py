@@ -51,20 +51,19 @@ def revealed(dae: Dae) -> Dae:
     # this looks for are Kirchhoff's and d'Alembert's, short rows; differentiating IF97 water
     # in a fluid's block cost 7 s)
     rows_of = [ca.vertcat(*[residual[r] for r in R]) for R, _ in blocks]
-    kept = [k for k, F in enumerate(rows_of) if ca.n_nodes(F) <= NODES_MAX]
-    if not kept:
+    blocks = [(R, C, F) for (R, C), F in zip(blocks, rows_of) if ca.n_nodes(F) <= NODES_MAX]
+    if not blocks:
         return dae
-    blocks = [blocks[k] for k in kept]
     hybrid = ca.vertcat(dae.d, dae.d_pre, dae.x_pre, dae.flags, dae.z_pre)
     args = [dae.x, w, dae.u, dae.p, dae.t, hybrid]
-    jacs = [ca.densify(ca.jacobian(rows_of[k], ca.vertcat(*[w[c] for c in C]))) for k, (_, C) in zip(kept, blocks)]
+    jacs = [ca.densify(ca.jacobian(F, ca.vertcat(*[w[c] for c in C]))) for _, C, F in blocks]
     jfun = ca.Function("hidden_jac", args, jacs, {"allow_free": True})
     if jfun.has_free():
         return dae
     points = _points(dae, hybrid.numel())
     mats = [[np.array(J, float) for J in jfun.call(pt)] for pt in points]
     changed = []
-    for k, (R, C) in enumerate(blocks):
+    for k, (R, C, _) in enumerate(blocks):
         for r, c in _combinations(dae, residual, w, R, C, [M[k] for M in mats], args, points):
             residual[r] = c
             changed.append(r)

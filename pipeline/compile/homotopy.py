@@ -17,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from .dae import Dae
+from .saved import SYMBOLS
 
 NAME = "$homotopy"
 SYMBOL = ca.SX.sym(NAME)
@@ -24,8 +25,6 @@ STEPS = 10              # lambda from 1 to 0 in this many steps
 ITERATIONS = 30         # Newton steps at each (damped)
 BLOCK_MAX = 100         # a larger loop keeps its start values
 TOL = 1e-9
-
-_SYMBOLS = {"x", "dx", "z", "u", "p", "t", "d", "d_pre", "x_pre", "flags", "z_pre"}
 
 
 def homotopy(actual, simplified):
@@ -41,7 +40,7 @@ def split(dae: Dae) -> tuple[Dae, tuple[ca.SX, ca.SX] | None]:
     where, exprs = [], []
     for f in dataclasses.fields(dae):
         value = getattr(dae, f.name)
-        if f.name in _SYMBOLS:
+        if f.name in SYMBOLS:        # (the symbols themselves stay)
             continue
         if isinstance(value, ca.SX):
             where.append((f.name, None))
@@ -65,8 +64,7 @@ def guess(rows: ca.SX, lam: ca.SX, unknowns: ca.SX, par: ca.SX, par0: np.ndarray
     """A loop's unknowns where 0 = ``rows`` (which read ``lam``) is solved from lambda = 1 to 0,
     each step's Newton method from the last one's solution and the first from ``start``;
     ``par`` at ``par0``. None where a step does not converge (the start values then stay)."""
-    n = unknowns.numel()
-    if n > BLOCK_MAX or not ca.depends_on(rows, lam):
+    if unknowns.numel() > BLOCK_MAX:
         return None
     s = ca.SX.sym("lambda")
     r = ca.substitute(rows, lam, s)

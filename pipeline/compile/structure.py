@@ -495,9 +495,10 @@ def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None, match: list
             ops.append("less" if op == ca.OP_LT else "less_equal")
             # (a value held < 0: none yet, the comparison itself, as where the loop starts
             # from its start values: an FMU's, the initial system's)
-            h = held[len(cmps) - 1] if held is not None and match is None else None
             if match is not None:
                 h = next((held[i] for i, c in enumerate(match) if ca.is_equal(c, cross[-1], 64)), None)
+            else:
+                h = held[len(cmps) - 1] if held is not None else None
             work[o[0]] = cmps[-1] if h is None else ca.if_else(h < 0, cmps[-1], h)
         elif len(i) == 1:
             work[o[0]] = ca.SX.unary(op, work[i[0]])
