@@ -78,6 +78,8 @@ class Dae:
     #: ``always``: where the initial equations leave states free, these are pinned first (a
     #: drum's pressure and level, not the mass and energy the balances differentiate)
     preferred: dict[str, ca.SX] = field(default_factory=dict)
+    #: each continuous variable's ``stateSelect`` other than default (Never, Avoid, Prefer, Always)
+    state_select: dict[str, str] = field(default_factory=dict)
 
     @property
     def hybrid(self) -> bool:

@@ -88,11 +88,11 @@ def _order(link: list[int]) -> list[int]:
     return order
 
 
-def reduce_index(impl: dict) -> tuple[dict, dict]:
-    """The index-reduced DAE of ``impl`` (keys x_impl, dx_impl, z, alg, t, p), with the keys and
-    meaning of ``casadi.dae_reduce_index``'s result (pole 0: no Baumgarte term)."""
-    x_impl, dx_impl, z, alg, t, p = (impl[k] for k in ("x_impl", "dx_impl", "z", "alg", "t", "p"))
-    nx, nz = x_impl.numel(), z.numel()
+def reduced(impl: dict):
+    """Pantelides' algorithm on ``impl`` (keys x_impl, dx_impl, z, alg, t, p): (the graph, every
+    variable's symbol, every equation with its derivatives, whose rows are written)."""
+    x_impl, dx_impl, z, alg, t = (impl[k] for k in ("x_impl", "dx_impl", "z", "alg", "t"))
+    nx = x_impl.numel()
     V = ca.vertcat(x_impl, dx_impl, z)
     rows, cols = ca.jacobian_sparsity(alg, V).get_triplet()
     incidence = [[] for _ in range(alg.numel())]
@@ -111,22 +111,31 @@ def reduce_index(impl: dict) -> tuple[dict, dict]:
         if j >= V.numel():
             var[j] = ca.SX.sym("d" + var[i].name())
     pairs = [i for i, j in enumerate(graph.der) if j >= 0]
-    xs = [var[i] for i in pairs]
-    dxs = [var[graph.der[i]] for i in pairs]
-    at = {i: k for k, i in enumerate(pairs)}          # a variable's place among xs (CasADi's slip)
-
+    j1, j2 = ca.vertcat(*[var[i] for i in pairs], t), ca.vertcat(*[var[graph.der[i]] for i in pairs], 1)
     eqs = ca.vertsplit(alg) + [None] * (len(graph.eqs) - alg.numel())
     eq_order = _order(graph.eq_der)
-    j1, j2 = ca.vertcat(*xs, t), ca.vertcat(*dxs, 1)
-    active = [True] * len(graph.eqs)
-    dropped = []
     for order in range(1, max(eq_order) + 1):
         sources = [e for e, d in enumerate(graph.eq_der) if d >= 0 and eq_order[d] == order]
-        dropped += [eqs[e] for e in sources]
         derived = ca.vertsplit(ca.jtimes(ca.vertcat(*[eqs[e] for e in sources]), j1, j2))
         for e, de in zip(sources, derived):
             eqs[graph.eq_der[e]] = de
-            active[e] = False
+    return graph, var, eqs
+
+
+def reduce_index(impl: dict) -> tuple[dict, dict]:
+    """The index-reduced DAE of ``impl`` (keys x_impl, dx_impl, z, alg, t, p), with the keys and
+    meaning of ``casadi.dae_reduce_index``'s result (pole 0: no Baumgarte term)."""
+    nx, nv = impl["x_impl"].numel(), 2 * impl["x_impl"].numel() + impl["z"].numel()
+    graph, var, eqs = reduced(impl)
+    z, t, p = impl["z"], impl["t"], impl["p"]
+    pairs = [i for i, j in enumerate(graph.der) if j >= 0]
+    xs = [var[i] for i in pairs]
+    dxs = [var[graph.der[i]] for i in pairs]
+    at = {i: k for k, i in enumerate(pairs)}          # a variable's place among xs (CasADi's slip)
+    eq_order = _order(graph.eq_der)
+    active = [d < 0 for d in graph.eq_der]
+    dropped = [eqs[e] for order in range(max(eq_order)) for e, d in enumerate(graph.eq_der)
+               if d >= 0 and eq_order[e] == order]
 
     var_order = _order(graph.der)
     parent = [-1] * len(graph.der)
@@ -144,7 +153,7 @@ def reduce_index(impl: dict) -> tuple[dict, dict]:
     explicit = sorted(set(explicit))
     implicit = sorted(set(range(len(xs))) - set(explicit))
     zs = ca.vertsplit(z)
-    z_new = [zs[i - 2 * nx] for i in range(2 * nx, V.numel()) if var_order[i] == 0 and graph.der[i] < 0]
+    z_new = [zs[i - 2 * nx] for i in range(2 * nx, nv) if var_order[i] == 0 and graph.der[i] < 0]
     pick = lambda items, idx: ca.vertcat(*[items[k] for k in idx]) if idx else ca.SX(0, 1)
     red = {"x": pick(xs, explicit), "ode": pick(dxs, explicit), "x_impl": pick(xs, implicit),
            "dx_impl": pick(dxs, implicit), "z": ca.vertcat(*z_new) if z_new else ca.SX(0, 1),

@@ -2124,8 +2124,10 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     z_pre = z_pre[read] if read else ca.SX(0, 1)
     exprs.update({f"$pre[{k}]": z[j] for k, j in enumerate(read)})
 
-    preferred = {}
+    preferred, state_select = {}, {}
     for i in index["x"] + index["z"]:
+        if attrs[i].get("state_select") not in (None, "Default"):
+            state_select.update(dict.fromkeys(_scalar_names(variables[i]["name"], dims[i]), attrs[i]["state_select"]))
         if attrs[i].get("state_select") in ("Prefer", "Always") and attrs[i]["start"] is not None:
             value = bind(value_of(i, ("start",)))
             preferred.update(zip(_scalar_names(variables[i]["name"], dims[i]), ca.vertsplit(value)))
@@ -2143,7 +2145,7 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
                d_start=d_start,
                d_pre=d_pre, x_pre=x_pre, z_pre=z_pre, flags=flags, d_update=d_update, x_reinit=x_reinit,
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
-               assert_info=assert_info, preferred=preferred))))
+               assert_info=assert_info, preferred=preferred, state_select=state_select))))
 
 
 def _discrete_starts(d: ca.SX, d_start: ca.SX, init: ca.SX, given: set, continuous: ca.SX):

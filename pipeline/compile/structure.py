@@ -28,7 +28,7 @@ import scipy.linalg
 
 from .dae import CSE_MIN, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
-from . import homotopy
+from . import dummy, homotopy
 from .hidden import revealed
 
 log = logging.getLogger(__name__)
@@ -126,8 +126,9 @@ class Ode:
     warm: "Ode | None" = None              # this model with the guesses an argument
 
 
-def reduce_index(dae: Dae):
-    """Index reduction (step 1); returns the semi-explicit DAE and the map back to ``dae``."""
+def reduce_index(dae: Dae, select: bool = True):
+    """Index reduction (step 1); returns the semi-explicit DAE and the map back to ``dae``
+    (``select``: states selected by dummy derivatives where the constraints are nonlinear)."""
     up = ca.vertcat(dae.u, dae.p)
     if dae.x.numel() == 0:     # purely algebraic: nothing to reduce (and CasADi crashes on it)
         xs = ca.SX(0, 1)
@@ -166,7 +167,50 @@ def reduce_index(dae: Dae):
             f"the model needs the time derivative of input(s) {', '.join(used)} (an input drives "
             "a constraint that index reduction differentiates, e.g. a voltage source directly "
             "across a capacitor); add a series element or give the input as a state")
+    if select and _nonlinear(red["I"], ca.vertcat(up, dae.t)):
+        # the states would drift off nonlinear constraints: states selected by dummy derivatives
+        selected = dummy.select(impl, [*dae.x_names, *dae.z_names], _state_select(dae),
+                                _start_values(ca.vertcat(dae.x, dae.z), dae),
+                                np.concatenate([np.asarray(dae.u_start, float).ravel(), dae.p_values]),
+                                ca.vertcat(*[dae.p[i] for i, n in enumerate(dae.p_names) if n.startswith("$")]))
+        if selected is not None:
+            return (*selected, ca.SX(0, 1), int(stats["index"]))
+        log.debug("no dummy derivatives: states integrated with their constraints dropped")
     return semi, state_to_orig, red["I"], int(stats["index"])
+
+
+def _state_select(dae: Dae) -> dict:
+    """Each unknown's ``stateSelect``, the highest of its own and its aliases' (a rolling
+    wheel's ``x``, declared ``always``, is an alias of its frame's ``r_0[1]``, ``avoid``)."""
+    name_of = {v.element_hash(): n for v, n in zip(ca.vertsplit(ca.vertcat(dae.x, dae.z)),
+                                                   [*dae.x_names, *dae.z_names])}
+    out = {}
+    for name, sel in dae.state_select.items():
+        e = dae.exprs.get(name)
+        syms = ca.symvar(e) if e is not None else []
+        target = name_of.get(syms[0].element_hash(), name) if len(syms) == 1 else name
+        if target not in out or dummy.RANK.get(sel, 0) > dummy.RANK.get(out[target], 0):
+            out[target] = sel
+    return out
+
+
+def _fixed_kept(dae: Dae, xs: ca.SX) -> Dae:
+    """``dae`` with the fixed start of each state that state selection made algebraic an
+    initial equation (x = start)."""
+    kept = {s.element_hash() for s in ca.vertsplit(xs)}
+    gone = [i for i, s in enumerate(ca.vertsplit(dae.x)) if dae.x_fixed[i] and s.element_hash() not in kept]
+    if not gone:
+        return dae
+    rows = ca.vertcat(*[dae.x[i] - dae.x_start[i] for i in gone])
+    return dataclasses.replace(dae, init_residual=ca.vertcat(dae.init_residual, rows))
+
+
+def _nonlinear(invariants: ca.SX, known: ca.SX) -> bool:
+    """Do the invariants index reduction dropped read their unknowns (not the ``known``
+    inputs, parameters and time) nonlinearly?"""
+    given = {s.element_hash() for s in ca.vertsplit(known)}
+    v = [s for s in ca.symvar(invariants) if s.element_hash() not in given]
+    return bool(v) and ca.depends_on(ca.jacobian(invariants, ca.vertcat(*v)), ca.vertcat(*v))
 
 
 def _preferred_states(dae: Dae, semi: dict, state_to_orig: ca.Function) -> Dae:
@@ -924,13 +968,14 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     return with_start_guesses(_hybrid(dae, name, homotopic) if dae.hybrid else _build(dae, name, homotopic))
 
 
-def _build(dae: Dae, name: str = "model", homotopic=None) -> Ode:
-    """The continuous model's ODE (``homotopic``: see :func:`homotopy.split`)."""
-    own = dae.residual
-    semi, state_to_orig, invariants, index = reduce_index(dae)
+def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -> Ode:
+    """The continuous model's ODE (``homotopic``: see :func:`homotopy.split`; ``select``: see
+    :func:`reduce_index`)."""
+    own, given = dae.residual, dae
+    semi, state_to_orig, invariants, index = reduce_index(dae, select)
     moved = _preferred_states(dae, semi, state_to_orig)
     if moved is not dae:
-        reduced = reduce_index(moved)
+        reduced = reduce_index(moved, select)
         # (kept where index reduction adds no more states than were preferred: a drum's
         # pressure made a state brought its saturation properties as five more, integrated
         # beside it, and a run 700x slower)
@@ -945,6 +990,8 @@ def _build(dae: Dae, name: str = "model", homotopic=None) -> Ode:
     nu = dae.u.numel()
     orig = state_to_orig(xf=xs, zf=zs)
     x_impl, z_orig = orig["x_impl"], orig["z"]
+    if semi.get("selected"):
+        dae = _fixed_kept(dae, xs)
 
     # start values of the semi-explicit unknowns (used as Newton guesses and pins)
     start_fun = ca.Function("start", [dae.p], [dae.x_start, dae.z_start])
@@ -984,7 +1031,8 @@ def _build(dae: Dae, name: str = "model", homotopic=None) -> Ode:
     exprs = ca.vertcat(*[dae.exprs[n] for n in probe_names])
     # der() of the original states: read by initial equations such as der(x) = 0 (steady
     # state) and by variables such as the MSL hysteresis' ascending = der(H) > 0
-    dxi_fun = ca.Function("dxi", [xs, zs, up, t], [ca.jtimes(x_impl, xs, semi["ode"])])
+    dxi_sx = orig["dx_impl"] if semi.get("selected") else ca.jtimes(x_impl, xs, semi["ode"])
+    dxi_fun = ca.Function("dxi", [xs, zs, up, t], [dxi_sx])
     probe_sx = ca.Function("probe_sx", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [exprs])
     orig_fun = ca.Function("orig", [xs, zs], [x_impl, z_orig])
 
@@ -1012,7 +1060,6 @@ def _build(dae: Dae, name: str = "model", homotopic=None) -> Ode:
 
     x_names = semi_state_names(xs, dae)
     # the initial system in all the unknowns, where the algebraic ones are not solved for
-    dxi_sx = ca.jtimes(x_impl, xs, semi["ode"])
     init_sx = ca.substitute(dae.init_residual, ca.vertcat(dae.x, dae.dx, dae.z),
                             ca.vertcat(x_impl, dxi_sx, z_orig))
     wish = _preferred(dae)
@@ -1024,6 +1071,12 @@ def _build(dae: Dae, name: str = "model", homotopic=None) -> Ode:
     start, init_start = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
                                      joint[2].numel() - wish_sx.numel(), x_names, joint)
     init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
+    if semi.get("selected") and not np.all(np.isfinite(np.array(init(u0, p0, 0.0)))):
+        # no consistent start in the selected states (six coordinates of point masses that
+        # make one rigid body, its rotation found from them by Newton's method): every
+        # differentiated variable a state, the constraints checked as invariants
+        log.debug("%s: no initial state in the selected states; the constraints dropped instead", name)
+        return _build(given, name, homotopic, select=False)
     if ng:
         init, start, init_start = (_guesses_ignored(f, ng) for f in (init, start, init_start))
     loops, given = _newton_functions(newton, args, names, sx_fun, probe_at, U, Pu, G, H)
@@ -1203,7 +1256,9 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
         exprs=exprs,     # (the values at the start: initial() true)
         d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1), z_pre=ca.SX(0, 1),
         flags=ca.SX(0, 1), d_update=ca.SX(0, 1), x_reinit=ca.SX(0, 1), asserts=ca.SX(0, 1))
-    inner = _build(aug, name, homotopic)
+    # (no dummy derivatives where there are discrete variables: chosen in the mode a model
+    # starts in, the states failed in another, a machine braked through a switch, SMPM_Braking)
+    inner = _build(aug, name, homotopic, select=not nd)
     nx = len(inner.x_names)
     pos = {n: j for j, n in enumerate(inner.x_names)}
     # reinit() and pre(x) of an original state: its place among the semi-explicit states
