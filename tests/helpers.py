@@ -78,6 +78,17 @@ def series(t, **columns) -> TimeSeries:
     return TimeSeries(t, values, list(columns))
 
 
+def unforced_run(model, t_end: float, n: int):
+    """(the grid, the run of ``model`` with no inputs over n points from 0 to ``t_end``),
+    asserted to succeed."""
+    from mcl import simulate
+
+    t = np.linspace(0.0, t_end, n)
+    res = simulate(model, TimeSeries(t, np.zeros((n, 0)), []), t_out=t)
+    assert res.ok, res.reason
+    return t, res
+
+
 def rel_err(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))

@@ -4,9 +4,8 @@ differentiated variable with the constraints dropped drifts off them."""
 import numpy as np
 from scipy.special import ellipk
 
-from helpers import msl_path, needs_msl
-from mcl import compile_model, simulate
-from mcl.data import TimeSeries
+from helpers import msl_path, needs_msl, unforced_run
+from mcl import compile_model
 
 PENDULUM = """
 model Pendulum "a point mass on a rod, in Cartesian coordinates (index 3), its horizontal
@@ -33,19 +32,12 @@ end Pendulum;
 """
 
 
-def _run(model, t_end, n=2001):
-    t = np.linspace(0.0, t_end, n)
-    res = simulate(model, TimeSeries(t, np.zeros((n, 0)), []), t_out=t)
-    assert res.ok, res.reason
-    return res
-
-
 @needs_msl()
 def test_a_cartesian_pendulum_keeps_two_states_on_its_rod(tmp_path):
     (tmp_path / "Pendulum.mo").write_text(PENDULUM)
     model = compile_model([tmp_path / "Pendulum.mo"], "Pendulum", libraries=[msl_path()])
     assert len(model.ode.x_names) == 2 and "x" in model.ode.x_names and model.ode.index == 3
-    res = _run(model, 20.0)
+    _, res = unforced_run(model, 20.0, 2001)
     radius, energy = res.outputs[:, 0], res.outputs[:, 1]
     assert np.max(np.abs(radius - 0.8)) < 1e-9      # (1.4e-4 with the constraint dropped)
     assert np.ptp(energy) < 1e-4 * 2 * 9.81 * 0.8     # (4e-4 with the constraint dropped)
@@ -69,7 +61,7 @@ def test_an_msl_four_bar_integrates_its_declared_joint_alone():
     chose the start and the mechanism started at rest."""
     model = compile_model([], "Modelica.Mechanics.MultiBody.Examples.Loops.Fourbar1", libraries=[msl_path()])
     assert len(model.ode.x_names) == 2
-    res = _run(model, 5.0, 501)
+    _, res = unforced_run(model, 5.0, 501)
     w = _probe(model, res, "j1.w")
     assert abs(w[0] - np.radians(300)) < 1e-9
     assert np.all(np.isfinite(_probe(model, res, "j2.s")))
@@ -90,5 +82,5 @@ def test_states_the_declarations_leave_open_are_not_chosen_at_the_start(tmp_path
     (tmp_path / "Pendulum.mo").write_text(PENDULUM.replace(", stateSelect = StateSelect.prefer", ""))
     model = compile_model([tmp_path / "Pendulum.mo"], "Pendulum", libraries=[msl_path()])
     assert len(model.ode.x_names) > 2
-    res = _run(model, 5.0, 501)
+    _, res = unforced_run(model, 5.0, 501)
     assert np.max(np.abs(res.outputs[:, 0] - 0.8)) < 1e-3

@@ -4,11 +4,10 @@ Pantelides' algorithm cannot see them; mcl finds them numerically and index redu
 differentiates them. Without that the island's potentials come from a singular solve."""
 import numpy as np
 
-from helpers import msl_path, needs_msl
-from mcl import compile_model, simulate
+from helpers import msl_path, needs_msl, unforced_run
+from mcl import compile_model
 from mcl.compile.dae import eliminate_aliases
 from mcl.compile.hidden import revealed
-from mcl.data import TimeSeries
 
 SERIES = """
 model Series "two chokes in series through a floating pair of resistors"
@@ -58,18 +57,11 @@ end {name};
 WATCHED = ["link.v", "choke.inductor[1].i", "choke.inductor[2].i", "choke.inductor[3].i"]
 
 
-def _run(model, t_end, n=201):
-    t = np.linspace(0.0, t_end, n)
-    res = simulate(model, TimeSeries(t, np.zeros((n, 0)), []), t_out=t)
-    assert res.ok, res.reason
-    return t, res
-
-
 def test_chokes_in_series_through_a_floating_pair_follow_the_series_circuit(tmp_path):
     (tmp_path / "Series.mo").write_text(SERIES)
     model = compile_model([tmp_path / "Series.mo"], "Series")
     assert model.ode.index == 2          # the hidden i1 = i2, differentiated
-    t, res = _run(model, 1.0, 101)
+    t, res = unforced_run(model, 1.0, 101)
     R = 2 * 3 / 5                        # i(t) of L1 + L2 in series with R1 || R2
     assert np.max(np.abs(res.output("i") - 10 / R * (1 - np.exp(-t * R / 0.4)))) < 1e-5
 
@@ -94,7 +86,7 @@ def test_a_floating_dc_link_behind_a_diode_bridge_runs_as_one_grounded_through_a
         dae = eliminate_aliases(model.dae)
         model = model.with_outputs(WATCHED)
         assert (revealed(dae) is dae) == (name == "Grounded")
-        runs[name] = _run(model, 0.06)[1]
+        runs[name] = unforced_run(model, 0.06, 201)[1]
     for var in WATCHED:
         a, b = (runs[k].output(var) for k in ("Floating", "Grounded"))
         assert np.max(np.abs(a - b)) < 0.002 * np.max(np.abs(b)), var

@@ -5,9 +5,8 @@ nearest them: a Schmitt trigger's amplifier at its unstable middle, and the osci
 starts."""
 import numpy as np
 
-from helpers import msl_path, needs_msl
-from mcl import compile_model, simulate
-from mcl.data import TimeSeries
+from helpers import msl_path, needs_msl, unforced_run
+from mcl import compile_model
 
 BISTABLE = """
 model Bistable "y^3 - 3 y = 0.1 x has three solutions; the simplified y = 2 leads to the largest"
@@ -54,20 +53,13 @@ end Triangle;
 """
 
 
-def _run(model, t_end, n):
-    t = np.linspace(0.0, t_end, n)
-    res = simulate(model, TimeSeries(t, np.zeros((n, 0)), []), t_out=t)
-    assert res.ok, res.reason
-    return t, res
-
-
 def test_a_loop_with_three_solutions_starts_where_its_simplified_law_leads(tmp_path):
     starts = {}
     for case, law in (("plain", "y^3 - 3*y - 0.1*x"),
                       ("homotopy", "homotopy(actual = y^3 - 3*y - 0.1*x, simplified = y - 2)")):
         (tmp_path / "Bistable.mo").write_text(BISTABLE.format(law=law))
         model = compile_model([tmp_path / "Bistable.mo"], "Bistable")
-        t, res = _run(model, 1.0, 11)
+        t, res = unforced_run(model, 1.0, 11)
         y, x = res.output("yo"), np.exp(-t)
         assert np.max(np.abs(y**3 - 3 * y - 0.1 * x)) < 1e-6      # the actual law holds throughout
         starts[case] = y[0]
@@ -82,7 +74,7 @@ def test_a_triangle_generator_starts_at_its_triggers_declared_limit(tmp_path):
     start at the upper limit (homotopyType) starts it; it then swings +-A at f."""
     (tmp_path / "Triangle.mo").write_text(GENERATOR)
     model = compile_model([tmp_path / "Triangle.mo"], "Triangle", libraries=[msl_path()])
-    t, res = _run(model, 0.2, 4001)
+    t, res = unforced_run(model, 0.2, 4001)
     v = res.output("triangle")
     assert -8.1 < v.min() < -7.9 and 7.9 < v.max() < 8.1
     assert v[np.searchsorted(t, 0.005)] < -0.9        # first down: the trigger starts high

@@ -29,10 +29,10 @@ RANK = {"Never": -2, "Avoid": -1, "Default": 0, "Prefer": 1, "Always": 2}
 
 def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values: np.ndarray,
            modes: ca.SX = ca.SX(0, 1)):
-    """The index-1 semi-explicit DAE (keys x, z, ode, alg, p, t) of ``impl`` by dummy
-    derivatives, its map back to ``impl``'s variables and its index; None where no selection
-    of dummies makes it so (a differentiated block singular at the start values and at a
-    random point). ``names`` and ``start``: of impl's x_impl then z; ``rank``: stateSelect by
+    """(the index-1 semi-explicit DAE of ``impl`` by dummy derivatives, keys x, z, ode, alg, p,
+    t; its map back to ``impl``'s variables); None where no selection of dummies makes it so
+    (a differentiated block singular at the start values and at a random point) or where the
+    model does not decide it (see :func:`_tied`, :func:`_switching`). ``names`` and ``start``: of impl's x_impl then z; ``rank``: stateSelect by
     name; ``p_values``: of impl's p; ``modes``: the parameters that hold discrete values."""
     graph, var, eqs = reduced(impl)
     nx, nz = impl["x_impl"].numel(), impl["z"].numel()
@@ -171,7 +171,8 @@ def _tied(M: np.ndarray, kept: list[int], rank: list) -> list:
     if np.min(np.abs(np.diag(lu))) < 1e-10 * np.max(np.abs(np.diag(lu)), initial=1.0):
         return []                                    # (singular there: no swap to judge)
     A = scipy.linalg.lu_solve((lu, piv), M[:, rest], check_finite=False)   # each left out in the kept
-    same = np.array([[rank[d] == rank[c] for c in rest] for d in kept])
+    rank = np.asarray(rank)
+    same = rank[kept][:, None] == rank[rest][None, :]
     return [(kept[i], rest[j]) for i, j in np.argwhere(same & (np.abs(A) > 1e-8))]
 
 
