@@ -58,6 +58,8 @@ ZOOM_POINTS = 32         # points of one call that narrows a crossing on the sta
 CHECK_CHUNK = 256
 PROBE_STEPS = 2000        # solver steps of one hop of a probe after a failure (a failing hop stops soon)
 FOLLOW_POINTS = 32        # points of a call where the loops' solutions are checked to follow on
+FOLLOW_FIRST = 8          # points of a run's first call where there are loops (see _Plan.advance)
+FOLLOW_GROWTH = 1.5       # ... and how many times more after a call that followed to its end
 FOLLOW_TOL = 1e-3         # a loop's solution off the one followed point to point by more (relative): another root
 #: a call of the solver may use this share of the wall time still left
 CALL_SHARE = 0.4
@@ -441,9 +443,10 @@ class _Plan:
     def call_for(self, t0: float, sub, steps: int):
         """(integrator, the parameters it takes after the model's) over the grid points ``sub``
         from ``t0``: a hop's where they are equally spaced from ``t0`` in a model with events
-        (each event a call from its own instant: a new integrator each, otherwise)."""
+        or loops (each event a call from its own instant, a loop's calls as long as its
+        guesses lead: a new integrator each, otherwise)."""
         times = self.t_int[sub]
-        if self.hybrid is not None and _even(t0, times):
+        if (self.hybrid is not None or self.ng) and _even(t0, times):
             return self.hop_integrator(steps, len(sub), False), [t0, times[-1] - t0]
         return self.integrator(t0, times, steps), []
 
@@ -496,6 +499,13 @@ class _Plan:
                                else budget.call_size(1, 1.0))
             if failed is not None and steps <= failed:
                 raise budget.stop(bound, t0)
+            if self.followed_points is not None:
+                # a call is thrown away from where its loops' guesses led it to another solution,
+                # and past there the solver meets jumps (a four-bar linkage whose calls each ran
+                # to the end of the run and kept one point: 400 steps a point): as many points
+                # as the last call followed, more after one that followed to its end (a power
+                # of 2: an integrator is built for each size, 1 s each on an engine's loops)
+                n = min(n, _pow2(self.followed_points))
             sub = idx[pos:pos + n]
             if self.hybrid is not None and len(sub) > 1 and not _even(t0, self.t_int[sub]) and _even(
                     self.t_int[sub[0]], self.t_int[sub[1:]]):
@@ -519,6 +529,10 @@ class _Plan:
                 raise _Stop(f"non-finite state at t = {self.t_int[bad]:g}")
             self.within_bound(xf[: self.nx], self.t_int[sub])
             kept = self.followed(xf, sub, p)
+            if kept < len(sub):
+                self.followed_points = kept
+            elif self.followed_points is not None and len(sub) >= _pow2(self.followed_points):
+                self.followed_points = math.ceil(self.followed_points * FOLLOW_GROWTH)
             if self.ng:
                 self.guesses[:, sub[:kept]] = p[-self.ng:, None]
             x, t0, pos = xf[:, kept - 1], self.t_int[sub[kept - 1]], pos + kept
@@ -625,6 +639,7 @@ class _Plan:
         npu = len(p)
         p = np.concatenate([np.asarray(p, float), ode.guess0]) if self.ng else p
         self.method, self.gave_up = "bdf", False
+        self.followed_points = FOLLOW_FIRST if self.ng else None      # (see :meth:`advance`)
         budget = _Budget(opts, clock)
         self.opts_max_steps = opts.max_steps
         self.bound = math.inf if opts.state_bound is None else float(opts.state_bound)
@@ -882,6 +897,8 @@ class _Hybrid:
         seen, first = set(), None
         for _ in range(MAX_EVENT_ITERATIONS):
             x0 = np.array(init_d(u, p, t0, x[nx - self.nd:nx])).ravel()
+            if not np.all(np.isfinite(x0)):
+                raise _Stop(self._no_start(plan, x, p, t0))
             new = x.copy()
             new[:nx - self.nd] = x0
             first = new.copy() if first is None else first
@@ -899,6 +916,18 @@ class _Hybrid:
             seen.add(d)
             x = new
         raise _Stop("initialisation did not settle: discrete and continuous initial values keep changing")
+
+    def _no_start(self, plan, x, p, t0) -> str:
+        """Why the run cannot start: the discrete values the initial event iteration set in ``x``
+        (those it changed from their start values named) leave the initial equations no solution
+        from the start values (a robot's bearings locked at rest)."""
+        nx, names = plan.nx, self.ode.x_names
+        start = np.array(plan.ode.init(plan.u_at(t0), p, t0)).ravel()
+        moved = [f"{names[i]} = {x[i]:g}" for i in range(nx - self.nd, nx)
+                 if x[i] != start[i] and not names[i].startswith("$")]
+        return ("initialisation failed: the initial equations have no solution from the start values with "
+                f"the discrete values the initial event iteration set at t = {t0:g}"
+                + (f" ({', '.join(moved[:4])}{' ...' if len(moved) > 4 else ''})" if moved else ""))
 
     # -- integration with events ---------------------------------------------------------------
     def g(self, plan, x, p, t):
@@ -1182,7 +1211,16 @@ class _Hybrid:
         tol = max(1e-12 * max(1.0, abs(tb)), ZOOM_TOL * (tb - ta))
         while True:
             end = hi if even else _past_estimate(lo, hi, g_lo, g_hi, max(tol, 1e-3 * (hi - lo) ** 2 / first))
-            X = plan.hop(x_lo, p, lo, end, budget, points=ZOOM_POINTS, to_end=not even)
+            while True:
+                try:
+                    X = plan.hop(x_lo, p, lo, end, budget, points=ZOOM_POINTS, to_end=not even)
+                    break
+                except RuntimeError:
+                    # the solver gave up where a call from another start went past (a machine's
+                    # stator through a diode bridge, its zero sequence at 1e-5 A): a shorter call
+                    if end - lo <= tol:
+                        raise
+                    end = 0.5 * (lo + end)
             ts = lo + (end - lo) * hop_grid(ZOOM_POINTS, not even)
             G = self.values(plan, X[: plan.nx], ts, p)
             if s_lo is None:

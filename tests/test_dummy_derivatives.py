@@ -84,3 +84,46 @@ def test_states_the_declarations_leave_open_are_not_chosen_at_the_start(tmp_path
     assert len(model.ode.x_names) > 2
     _, res = unforced_run(model, 5.0, 501)
     assert np.max(np.abs(res.outputs[:, 0] - 0.8)) < 1e-3
+
+
+@needs_msl()
+def test_a_model_with_discrete_variables_selects_its_states_too(tmp_path):
+    """The pendulum with a counter of its swings (a when-equation on x, a discrete Integer):
+    its states are selected as without the counter, and the counter counts the swings the
+    period makes in the time run."""
+    counted = PENDULUM.replace("equation\n", """  discrete Integer swings(start = 0, fixed = true) "swings through the bottom to the right";
+equation
+  when x > 0 then
+    swings = pre(swings) + 1;
+  end when;
+""").replace("output Real energy", "output Real n = swings;\n  output Real energy")
+    (tmp_path / "Pendulum.mo").write_text(counted)
+    model = compile_model([tmp_path / "Pendulum.mo"], "Pendulum", libraries=[msl_path()])
+    kept = [n for n in model.ode.x_names if not n.startswith("$")]     # (not the relation held)
+    assert len(kept) == 3 and "x" in kept and "swings" in kept        # x, its speed, the counter
+    t, res = unforced_run(model, 20.0, 2001)
+    assert np.max(np.abs(res.outputs[:, 0] - 0.8)) < 1e-9
+    # released at x > 0 and swinging left first: x rises through 0 at 3/4 of each period
+    period = 4 * np.sqrt(0.8 / 9.81) * ellipk(np.sin(0.3) ** 2)
+    expected = np.floor(t / period - 0.75) + 1
+    counted = res.outputs[:, 1]
+    near = np.abs((t / period - 0.75) - np.round(t / period - 0.75)) < 1e-3     # (at a crossing)
+    assert np.array_equal(counted[~near], expected[~near])
+
+
+@needs_msl()
+def test_a_reinit_of_a_state_selection_would_make_algebraic_keeps_every_state(tmp_path):
+    """A stop that reinit()s the pendulum's y (declared a state nowhere, y is algebraic where
+    the states are selected): the model is built with every differentiated variable a state,
+    and the stop acts."""
+    stopped = PENDULUM.replace("equation\n", """equation
+  when x < 0 then
+    reinit(vy, 0);
+    reinit(y, -L);
+  end when;
+""")
+    (tmp_path / "Pendulum.mo").write_text(stopped)
+    model = compile_model([tmp_path / "Pendulum.mo"], "Pendulum", libraries=[msl_path()])
+    assert "y" in model.ode.x_names
+    _, res = unforced_run(model, 1.0, 101)
+    assert np.all(np.isfinite(res.outputs))

@@ -14,6 +14,7 @@ chosen as dummies, ``avoid`` and ``never`` the first.
 from __future__ import annotations
 
 import logging
+import warnings
 
 import casadi as ca
 import numpy as np
@@ -58,7 +59,7 @@ def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values
     dummies, ties = set(), []
     while H:
         rows = ca.vertcat(*[eqs[e] for e in H])
-        if _switching(rows, modes):
+        if _switching(rows, modes, impl["p"], p_values):
             # (chosen in the mode the model starts in, the states may not determine the
             # others in another: a machine braked by a switch)
             log.debug("dummy derivatives: a differentiated equation switches with the model's modes")
@@ -101,10 +102,12 @@ def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values
     return semi, to_orig
 
 
-def _switching(rows: ca.SX, modes: ca.SX) -> bool:
-    """Do ``rows`` read a discrete value or hold a branch (if-then-else)?"""
+def _switching(rows: ca.SX, modes: ca.SX, p: ca.SX, p_values: np.ndarray) -> bool:
+    """Do ``rows`` read a discrete value or hold a branch (if-then-else) on more than the
+    parameters ``p`` (a joint's axis normalised by cases of its direction is no branch)?"""
     if modes.numel() and ca.depends_on(rows, modes):
         return True
+    rows = ca.substitute(rows, p, ca.DM(p_values))
     f = ca.Function("rows", ca.symvar(rows), [rows])
     return any(f.instruction_id(i) == ca.OP_IF_ELSE_ZERO for i in range(f.n_instructions()))
 
@@ -167,7 +170,9 @@ def _tied(M: np.ndarray, kept: list[int], rank: list) -> list:
     rest = [k for k in range(M.shape[1]) if k not in chosen]
     if not rest or not np.all(np.isfinite(M)):
         return []
-    lu, piv = scipy.linalg.lu_factor(M[:, kept], check_finite=False)
+    with warnings.catch_warnings():          # (singular: judged below)
+        warnings.simplefilter("ignore", scipy.linalg.LinAlgWarning)
+        lu, piv = scipy.linalg.lu_factor(M[:, kept], check_finite=False)
     if np.min(np.abs(np.diag(lu))) < 1e-10 * np.max(np.abs(np.diag(lu)), initial=1.0):
         return []                                    # (singular there: no swap to judge)
     A = scipy.linalg.lu_solve((lu, piv), M[:, rest], check_finite=False)   # each left out in the kept

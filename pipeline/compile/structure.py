@@ -1230,6 +1230,21 @@ def _newton_functions(newton, args, names, sx_fun, probe_at, U, P, G, H):
     return loops, expanded(given)
 
 
+def _demoted_read(dae: Dae, kept: list[str]) -> bool:
+    """Whether an original state that state selection made algebraic (not in ``kept``) is
+    reinit() or read through pre(): the event handling holds the original states that are
+    states (then every differentiated variable is kept a state instead)."""
+    kept = set(kept)
+    gone = [k for k, n in enumerate(dae.x_names) if n not in kept]
+    if not gone:
+        return False
+    reads = ca.vertcat(dae.residual, dae.init_residual, dae.d_update, dae.x_reinit, dae.relations,
+                       dae.asserts, *dae.exprs.values())
+    nx = len(dae.x_names)
+    return any((dae.x_reinit.numel() == nx and not ca.is_equal(dae.x_reinit[k], dae.x[k]))
+               or (dae.x_pre.numel() == nx and ca.depends_on(reads, dae.x_pre[k])) for k in gone)
+
+
 def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
     """A hybrid model's ODE: the discrete variables (and pre(), the flags) are parameters of the
     continuous model while it is causalised; its functions then take them from the end of the
@@ -1256,9 +1271,9 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
         exprs=exprs,     # (the values at the start: initial() true)
         d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1), z_pre=ca.SX(0, 1),
         flags=ca.SX(0, 1), d_update=ca.SX(0, 1), x_reinit=ca.SX(0, 1), asserts=ca.SX(0, 1))
-    # (no dummy derivatives where there are discrete variables: chosen in the mode a model
-    # starts in, the states failed in another, a machine braked through a switch, SMPM_Braking)
-    inner = _build(aug, name, homotopic, select=not nd)
+    inner = _build(aug, name, homotopic)
+    if _demoted_read(dae, inner.x_names):
+        inner = _build(aug, name, homotopic, select=False)
     nx = len(inner.x_names)
     pos = {n: j for j, n in enumerate(inner.x_names)}
     # reinit() and pre(x) of an original state: its place among the semi-explicit states
