@@ -484,6 +484,18 @@ class _Plan:
         self.within_bound(xf[: self.nx], ta + (tb - ta) * hop_grid(points, to_end))
         return xf.ravel() if points == 1 else xf
 
+    def hop_halved(self, x, p, ta, tb, budget: _Budget, least: float, **kw):
+        """(end, states) of :meth:`hop` from ``ta`` towards ``tb``, the end halved towards ``ta``
+        while the solver gives up, until it is within ``least`` of ``ta`` (then RuntimeError)."""
+        while True:
+            budget.check(ta)
+            try:
+                return tb, self.hop(x, p, ta, tb, budget, **kw)
+            except RuntimeError:
+                if tb - ta <= least:
+                    raise
+                tb = 0.5 * (ta + tb)
+
     def advance(self, x, t0, idx, p, budget: _Budget, traj, one_call: bool = False) -> int:
         """Integrate from ``x`` at ``t0`` over the grid points ``idx``, filling ``traj``; each
         call sized by the budget. A call that runs out of its reduced steps ends the run.
@@ -1093,14 +1105,10 @@ class _Hybrid:
         for j, k in enumerate(rest):
             tb = t_int[k]
             while True:
-                budget.check(ta)
                 try:
-                    xb = plan.hop(xa, p, ta, tb, budget, steps=PROBE_STEPS)
+                    tb, xb = plan.hop_halved(xa, p, ta, tb, budget, 1e-12 * max(1.0, abs(ta)), steps=PROBE_STEPS)
                 except RuntimeError:
-                    if tb - ta <= 1e-12 * max(1.0, abs(tb)):
-                        return None
-                    tb = 0.5 * (ta + tb)
-                    continue
+                    return None
                 g_b = self.g(plan, xb, p, tb)
                 flips = np.flatnonzero(np.sign(g_b) != np.sign(g_a))
                 if flips.size:
@@ -1211,16 +1219,9 @@ class _Hybrid:
         tol = max(1e-12 * max(1.0, abs(tb)), ZOOM_TOL * (tb - ta))
         while True:
             end = hi if even else _past_estimate(lo, hi, g_lo, g_hi, max(tol, 1e-3 * (hi - lo) ** 2 / first))
-            while True:
-                try:
-                    X = plan.hop(x_lo, p, lo, end, budget, points=ZOOM_POINTS, to_end=not even)
-                    break
-                except RuntimeError:
-                    # the solver gave up where a call from another start went past (a machine's
-                    # stator through a diode bridge, its zero sequence at 1e-5 A): a shorter call
-                    if end - lo <= tol:
-                        raise
-                    end = 0.5 * (lo + end)
+            # (the solver may give up where a call from another start went past: a machine's
+            # stator through a diode bridge, its zero sequence at 1e-5 A)
+            end, X = plan.hop_halved(x_lo, p, lo, end, budget, tol, points=ZOOM_POINTS, to_end=not even)
             ts = lo + (end - lo) * hop_grid(ZOOM_POINTS, not even)
             G = self.values(plan, X[: plan.nx], ts, p)
             if s_lo is None:

@@ -1238,11 +1238,13 @@ def _demoted_read(dae: Dae, kept: list[str]) -> bool:
     gone = [k for k, n in enumerate(dae.x_names) if n not in kept]
     if not gone:
         return False
-    reads = ca.vertcat(dae.residual, dae.init_residual, dae.d_update, dae.x_reinit, dae.relations,
-                       dae.asserts, *dae.exprs.values())
     nx = len(dae.x_names)
+    # (the symbols read, once: an engine leaves 1 400 of its states, each a walk of the model)
+    read = {v.element_hash() for v in ca.symvar(ca.vertcat(
+        dae.residual, dae.init_residual, dae.d_update, dae.x_reinit, dae.relations, dae.asserts,
+        *dae.exprs.values()))} if dae.x_pre.numel() == nx else set()
     return any((dae.x_reinit.numel() == nx and not ca.is_equal(dae.x_reinit[k], dae.x[k]))
-               or (dae.x_pre.numel() == nx and ca.depends_on(reads, dae.x_pre[k])) for k in gone)
+               or dae.x_pre[k].element_hash() in read for k in gone)
 
 
 def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
