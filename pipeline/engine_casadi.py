@@ -142,6 +142,12 @@ class _OverBudget(_Stop):
     """The run used up its work budget (solver steps): another method may need fewer."""
 
 
+class _Diverged(_Stop):
+    """The states grew past the bound or became non-finite: a hybrid run first looks for a
+    crossing the call ran past with its relations held (:meth:`_Hybrid.probe`: an end stop's
+    force, its contact held past the parting, pushed a mass off to 3 km/s)."""
+
+
 class _SolverFailed(_Stop):
     """The solver gave up (an error, or too much work where time was not short): a hybrid run
     first looks for a crossing it ran into (:meth:`_Hybrid.probe`)."""
@@ -491,7 +497,7 @@ class _Plan:
             budget.check(ta)
             try:
                 return tb, self.hop(x, p, ta, tb, budget, **kw)
-            except RuntimeError:
+            except (RuntimeError, _Diverged):     # (held relations past a crossing: shorter)
                 if tb - ta <= least:
                     raise
                 tb = 0.5 * (ta + tb)
@@ -538,7 +544,7 @@ class _Plan:
             traj[:, sub] = xf
             if not np.all(np.isfinite(xf)):
                 bad = sub[np.argmax(~np.all(np.isfinite(xf), axis=0))]
-                raise _Stop(f"non-finite state at t = {self.t_int[bad]:g}")
+                raise _Diverged(f"non-finite state at t = {self.t_int[bad]:g}")
             self.within_bound(xf[: self.nx], self.t_int[sub])
             kept = self.followed(xf, sub, p)
             if kept < len(sub):
@@ -580,7 +586,7 @@ class _Plan:
         """Stop the run where a state (columns of ``x`` at ``times``) passed the bound."""
         over = np.max(np.abs(x), axis=0) > self.bound
         if np.any(over):
-            raise _Stop(f"the solution diverged: a state passed |x| = {self.bound:g} "
+            raise _Diverged(f"the solution diverged: a state passed |x| = {self.bound:g} "
                         f"by t = {times[int(np.argmax(over))]:g}")
 
     def step_cost(self, x, u, p, t) -> float:
@@ -983,7 +989,7 @@ class _Hybrid:
             if ahead != 0:
                 try:
                     rest = rest[:plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched)]
-                except _SolverFailed:
+                except (_SolverFailed, _Diverged):
                     crossing = self.probe(plan, x0, t0, rest, p, budget, traj) if self.zero is not None else None
                     if crossing is None or self.count >= MAX_EVENTS:
                         raise
@@ -1107,7 +1113,7 @@ class _Hybrid:
             while True:
                 try:
                     tb, xb = plan.hop_halved(xa, p, ta, tb, budget, 1e-12 * max(1.0, abs(ta)), steps=PROBE_STEPS)
-                except RuntimeError:
+                except (RuntimeError, _Diverged):
                     return None
                 g_b = self.g(plan, xb, p, tb)
                 flips = np.flatnonzero(np.sign(g_b) != np.sign(g_a))

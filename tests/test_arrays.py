@@ -1,7 +1,6 @@
 """Arrays keep their shape through the rumoca front end: matrices in equations and functions
 (transpose, products, 2-D subscripts, arrays filled element by element), checked against numpy;
 and a MultiBody pendulum (3x3 orientation matrices in every frame) against its own ODE."""
-import os
 from pathlib import Path
 
 import numpy as np

@@ -199,3 +199,24 @@ def test_a_calibration_starts_from_the_first_start_not_far_behind_the_best():
     assert _first_good([merged, last, found], lambda s: rss[s["k"]]) is merged      # 2.3x: kept
     rss = {1: 335.0, 2: 0.30, 3: 0.15}
     assert _first_good([merged, last, found], lambda s: rss[s["k"]]) is last        # 2000x: passed over
+
+
+def test_parameters_the_data_determine_only_as_a_product_and_a_sum_are_not_all_freed():
+    """A servo drive seen through its current and load speed: the outputs depend on the motor
+    constant k and gear ratio n only through k n and on the inertias through J = Jm n^2 + JL.
+    With sensitivities of finite accuracy the third of (k, n, JL) is not exactly a combination
+    of the others, but its standard error is most of its value: it is left out, as is Jm."""
+    from mcl.discovery.calibrate import _determined
+
+    rng = np.random.default_rng(3)
+    t = np.linspace(0, 10, 2000)
+    k, n, Jm, JL = 0.5, 5.0, 0.01, 0.6
+    # outputs f(k n, Jm n^2 + JL): the sensitivities by the chain rule, with a relative error
+    # of 1e-3 each (an integrator's), and a residual of noise
+    g1, g2 = np.sin(t) * np.exp(-0.1 * t), np.cos(2 * t) / (1 + t)
+    J = np.column_stack([n * g1, k * g1 + 2 * Jm * n * g2, g2, n**2 * g2])
+    J *= 1 + 1e-3 * rng.standard_normal(J.shape)
+    r = 0.05 * rng.standard_normal(len(t))
+    params = {"k": k, "n": n, "JL": JL, "Jm": Jm}
+    chosen, left = _determined(r, J, [], ["k", "n", "JL", "Jm"], params, strict=True)
+    assert len(chosen) == 2 and "k" in chosen and {"JL", "Jm"} & set(left), (chosen, left)

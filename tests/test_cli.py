@@ -187,7 +187,7 @@ def test_help_on_every_subcommand_with_examples():
         proc = subprocess.run([sys.executable, "-m", "mcl", cmd, "--help"],
                               capture_output=True, text=True, timeout=60)
         assert proc.returncode == 0 and "usage: mcl" in proc.stdout
-        assert f"examples:\n  mcl {cmd}" in proc.stdout or f"examples:\n  MCL_" in proc.stdout, proc.stdout
+        assert f"examples:\n  mcl {cmd}" in proc.stdout or "examples:\n  MCL_" in proc.stdout, proc.stdout
 
 
 HEAVY = ("numpy", "casadi", "scipy", "pandas", "matplotlib", "rumoca")

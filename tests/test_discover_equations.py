@@ -7,7 +7,6 @@ oscillator (its spring hardens, k x + k3 x^3) and two tanks joined at the bottom
 between them goes with the square root of the level difference).
 """
 import numpy as np
-import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import discovered, multisine, needs_msl, random_parts, write_uy

@@ -1,6 +1,5 @@
 """State events: a relation on the states switches the equations; the crossing is located and
 the solver restarted there. Exact solutions derived by hand."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -1076,3 +1075,63 @@ def test_an_event_that_gives_a_non_finite_value_names_the_variable(tmp_path):
     res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
     assert not res.ok
     assert "non-finite values at t = 0.693" in res.reason and "(d)" in res.reason
+
+
+
+STOP = """
+model EndStop "a shaken mass on a spring meets a stop at s0 now and then; in contact the stop
+  pushes back as an MSL ElastoGap does, by the depth's magnitude: held in contact past the
+  parting, it pushes the mass off ever faster"
+  parameter Real m = 0.5, k = 200, c = 1e4, s0 = 0.06;
+  Real s(start = 0, fixed = true);
+  Real v(start = 0, fixed = true);
+  Boolean contact;
+equation
+  contact = s > s0;
+  der(s) = v;
+  m*der(v) = 40*sin(2*3.14159*2*time) - k*s + (if contact then -c*abs(s - s0) else 0);
+end EndStop;
+"""
+
+
+def test_a_call_that_diverges_past_a_crossing_is_probed_for_it(tmp_path):
+    """A call that runs past the parting with the contact held drives the states past the
+    run's bound (1000x their size): the crossing is looked for before the run is called
+    diverged (a discovery's candidates next to an end stop failed at their start). The bound
+    changes nothing in a run that never diverges."""
+    (tmp_path / "EndStop.mo").write_text(STOP)
+    model = compile_model([tmp_path / "EndStop.mo"], "EndStop")
+    t = np.linspace(0, 3, 301)
+    free = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert free.ok, free.reason
+    top = np.max(np.abs(free.states))
+    bounded = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []),
+                                      options=SimulationOptions(state_bound=1e3 * top))
+    assert bounded.ok, bounded.reason
+    exact = _end_stop_by_scipy(t)
+    for run in (free, bounded):      # (within the engine's error about the stiff contacts)
+        assert np.max(np.abs(run.states[:, :2] - exact)) < 2e-3 * top
+
+
+def _end_stop_by_scipy(t):
+    """EndStop's (s, v) at ``t``, integrated to 1e-12 from contact change to contact change."""
+    from scipy.integrate import solve_ivp
+
+    def rhs(tt, x, contact):
+        s, v = x
+        return [v, (40 * np.sin(2 * 3.14159 * 2 * tt) - 200 * s - (1e4 * abs(s - 0.06) if contact else 0)) / 0.5]
+
+    def touch(tt, x, contact):
+        return x[0] - 0.06
+
+    touch.terminal = True
+    out, t0, x, contact = np.zeros((len(t), 2)), 0.0, [0.0, 0.0], False
+    while True:
+        touch.direction = -1 if contact else 1
+        sol = solve_ivp(rhs, (t0, t[-1]), x, args=(contact,), events=touch, rtol=1e-12, atol=1e-14,
+                        dense_output=True)
+        inside = (t >= t0) & (t <= sol.t[-1])
+        out[inside] = sol.sol(t[inside]).T
+        if sol.status != 1:
+            return out
+        t0, x, contact = sol.t[-1], sol.y_events[0][0], not contact

@@ -168,7 +168,7 @@ equation
   connect(full.ports[1], pipe.port_a);
   connect(pipe.port_b, low.ports[1]);
 end Levels;
-""", "Levels", t := np.linspace(0.0, 300.0, 7))
+""", "Levels", np.linspace(0.0, 300.0, 7))
     rho = 995.586
     total = state("full.m") + state("low.m")
     np.testing.assert_allclose(total, rho * 2.5, rtol=1e-6)

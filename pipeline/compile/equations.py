@@ -55,7 +55,6 @@ def with_equations(structure: Structure, dae, own: set[str] = frozenset()) -> St
     rows = ca.vertsplit(dae.residual) if dae.residual.numel() else []
     if not rows:
         return structure
-    names = [*dae.x_names, *(f"der({n})" for n in dae.x_names), *dae.z_names, *dae.u_names]
     sp = ca.jacobian_sparsity(dae.residual, ca.vertcat(dae.x, dae.dx, dae.z, dae.u))
     reads: list[list[int]] = [[] for _ in rows]
     for r, c in zip(*sp.get_triplet()):

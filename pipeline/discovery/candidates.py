@@ -24,6 +24,7 @@ from ..stats import criterion as criterion_of, rms
 from .fitters import residual
 from .inject import NominalForm, compiled, mode_of, nominal_of, own_nominal, with_law
 from .screen import law_signals
+from .words import said
 
 #: family indices of the shape stage (after any family list)
 NEURAL_INDEX, SHAPE_INDEX = 100, 101
@@ -306,7 +307,7 @@ def _law_result(ctx: Context, law: Law, model, res, w, active) -> dict:
            "nominal_form": law.nominal.coefficients if law.nominal else None,
            "nominal_exact": bool(law.nominal.exact or own_nominal(comp, template)) if law.nominal else None,
            "w0": law.w0.tolist(), "w": np.asarray(w).tolist(), "active": np.asarray(active).tolist(),
-           "equation": template.equation(np.asarray(w) * np.asarray(active)),
+           "equation": said(template, np.asarray(w) * np.asarray(active), comp),
            "terms": [str(m) for m in getattr(template, "terms", [])]}
     if res.ok:
         env = law_signals(model, res.states, res.time, ctx.train, [comp])[comp.name].env()

@@ -17,14 +17,13 @@ from pathlib import Path
 import numpy as np
 
 from ..data import read_csv
-from ..errors import MclError
 from ..progress import log
 from ..stats import criterion as criterion_of, rms
 from ..templates import unscaled
 from .families import shape_words
 from .fitters import residual
 from .modelica import write_extended
-from .words import in_words, words
+from .words import in_words, said, words
 
 def class_name_for(component: str, template) -> str:
     return re.sub(r"\W", "_", f"{component}_{template.name}")
@@ -36,10 +35,7 @@ def _as_good(alt: dict, comp) -> dict:
 
     out = {k: alt[k] for k in ("equation", "family", "score_difference")}
     if alt.get("template") is not None and alt.get("w") is not None:
-        try:
-            out["equation"] = in_words(registry().template(alt["template"]), np.asarray(alt["w"]), comp)
-        except MclError:              # (its words are the template's)
-            pass
+        out["equation"] = said(registry().template(alt["template"]), np.asarray(alt["w"]), comp)
     return out
 
 

@@ -206,7 +206,8 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         if sim.ok:
             S = sim.sensitivities[:, problem.idx, :].reshape(-1, len(free))
             H_inv = gram_inverse(S.T @ S)
-            est = w[free] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
+            with np.errstate(over="ignore"):       # (a huge coefficient's estimate is inf: removed last)
+                est = w[free] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
         elif last:
             # a law near the edge of what simulates (a capacitance term crossing zero at the
             # end of the range) may fail on the finer grid of the sensitivities: the removals

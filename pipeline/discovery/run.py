@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..data import TimeSeries
-from ..errors import ConfigError
+from ..errors import ConfigError, DataError
 from ..executor import TaskFailed
 from ..progress import log
 from ..runfile import CALIBRATION_SPAN
@@ -48,6 +48,8 @@ from .verdict import EQUAL, decide, failures, role_items, weigh_unevaluated
 CALIBRATED_LAWS = 3
 #: at most this many causes are searched for
 MAX_CAUSES = 3
+#: 0 degC in K: a temperature measured this far below the model's throughout was logged in degC
+ZERO_CELSIUS = 273.15
 
 
 def _outputs_of(model, result, outputs) -> np.ndarray | None:
@@ -344,6 +346,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         _check_component(problems, "unknown", nominal, spec.unknown, spec.model_name)
         problems.raise_if_any()
     outputs = [o for o in nominal.output_names if o in train.names]
+    _say_unmeasured(nominal.output_names, outputs, validate)
     log.info("[1/5] nominal model %s: simulating the training data", spec.model_name)
     sim0 = simulate(nominal, train)
     if not sim0.ok:
@@ -351,6 +354,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     y_meas = train.select(outputs).values
     y0 = _outputs_of(nominal, sim0, outputs)
     resid = y_meas - y0
+    _celsius_for_kelvin(resid, outputs, nominal.info.get("units", {}), train.source)
     noise = noise_levels(y_meas, train.time, outputs, spec.noise)
     sigma = overall(noise)
     train_rms0 = rms(resid)
@@ -427,6 +431,34 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     rundir.finish()
     log.info("wrote %s/report.html and report.json", spec.output)
     return report
+
+
+def _celsius_for_kelvin(resid: np.ndarray, outputs: list[str], units: dict, source: str) -> None:
+    """A DataError where a temperature the model gives in K is measured about 273.15 K below it
+    all along: logged in degC. (Taken for a misfit, the offset was blamed on conductances that
+    became capacitances of 1e13 J/K.)"""
+    for k, name in enumerate(outputs):
+        r = resid[:, k][np.isfinite(resid[:, k])]
+        if units.get(name) != "K" or not r.size:
+            continue
+        offset = float(np.median(r))
+        if abs(offset + ZERO_CELSIUS) < 0.1 * ZERO_CELSIUS and np.percentile(np.abs(r - offset), 90) < 0.1 * ZERO_CELSIUS:
+            raise DataError(f"column {name} is {-offset:.0f} K below the model's {name} (in K) throughout: "
+                            "degC? give temperatures in K", where=source)
+
+
+def _say_unmeasured(declared: list[str], measured: list[str], validate: TimeSeries | None) -> None:
+    """Say which of the model's outputs the training data do not measure (they are not
+    compared), and warn where the validation data measure one of them: it is not used."""
+    missing = [o for o in declared if o not in measured]
+    if not missing:
+        return
+    log.info("      compared: %s; not measured in the training data: %s", ", ".join(measured), ", ".join(missing))
+    unused = [o for o in missing if validate is not None and o in validate.names]
+    if unused:
+        log.warning("the validation data's column%s %s %s not used: the training data do not measure %s",
+                    "s" if len(unused) > 1 else "", ", ".join(unused), "are" if len(unused) > 1 else "is",
+                    "them" if len(unused) > 1 else "it")
 
 
 def refitted(names: list[str], active) -> list[str]:
@@ -523,10 +555,13 @@ def _summarise_rounds(report: dict, rounds: list[dict]) -> None:
         report["candidates"] += [{**c, "round": r["round"]} for c in r["candidates"] if c.get("score") is None]
         report["screening"] += [{**s, "round": r["round"]} for s in r["screening"]]
     if rounds:
-        report["nominal_score"] = rounds[0]["nominal_score"]
+        # (the search for the first cause on the plant: the chain's round, searched after it,
+        # stands before it in the list)
+        first = next((r for r in rounds if not r["chain"]), rounds[0])
+        report["nominal_score"] = first["nominal_score"]
         report["roles"] = {k: v for r in reversed(rounds) for k, v in r["roles"].items()}   # (the first's first)
         if not report["causes"]:
-            report["no_cause"] = rounds[0]["no_cause"]
+            report["no_cause"] = first["no_cause"]
 
 
 def settings(spec) -> dict:

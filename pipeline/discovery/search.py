@@ -26,7 +26,7 @@ from ..stats import criterion as criterion_of, gram_inverse
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
 from .families import distillations, families, hysteresis_families, inverse_families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
-from .screen import law_signals, linear_response, predicted_rss
+from .screen import law_signals, linear_response
 from .verdict import EQUAL
 
 #: pairs of laws are screened when the best single law is predicted to leave more than this

@@ -72,7 +72,8 @@ def equivalents(best: dict, ranked: list[dict], structure) -> list[dict]:
         for p in structure.parallel(best["component"]):
             seen.add(p)
             out.append({"component": p, "class": structure.components[p].cls,
-                        "reason": f"parallel to {best['component']}: the data cannot separate them"})
+                        "reason": f"parallel to {best['component']}: the law found could be {p}'s as well; "
+                                  "the data cannot separate them"})
     for c in ranked:
         if "parts" in c or c["component"] in seen or c["score"] - best["score"] > EQUAL:
             continue

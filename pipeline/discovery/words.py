@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import MclError
+
 #: potential variable -> (across, its derivative, flow, orientation b - a)
 DOMAINS = {
     "v": ("v", "der(v)", "i", False),
@@ -105,6 +107,15 @@ def in_words(template, w, comp, digits: int = 4) -> str:
     w = np.asarray(w, float).copy()
     w[:len(signs)] *= signs * signs[0]
     return _renamed(_equation(template, w, wd.across, wd.flow, digits, wd), wd)
+
+
+def said(template, w, comp) -> str:
+    """:func:`in_words`, or the template's own words where the law cannot be put in the
+    component's (a third party's template)."""
+    try:
+        return in_words(template, w, comp)
+    except MclError:
+        return template.equation(w)
 
 
 def _equation(template, w, across: str, flow: str, digits: int, wd: Words) -> str:
