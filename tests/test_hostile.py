@@ -669,3 +669,34 @@ def test_truths_says_how_to_use_it(tmp_path):
     (tmp_path / "train.csv").write_text("mine")
     proc = subprocess.run(script + ["shunt-sinh", str(tmp_path)], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and (tmp_path / "train.csv").read_text() == "mine"
+
+
+def test_temperatures_logged_in_celsius_for_a_model_in_kelvin_are_one_clear_error():
+    """Taken for a misfit, a thermocouple's 273 K offset was blamed on three conductances (one a
+    capacitance of 1e13 J/K); a temperature the model gives in K, measured 273 K below it
+    throughout, is a data error naming the file and the column. A real misfit is not."""
+    import numpy as np
+
+    from mcl.discovery.run import _celsius_for_kelvin
+
+    rng = np.random.default_rng(0)
+    sim = 293.15 + 15 * np.sin(np.linspace(0, 6, 400))
+    celsius = sim - 273.15 + 2 * np.cos(np.linspace(0, 3, 400)) + 0.1 * rng.standard_normal(400)
+    with pytest.raises(DataError, match=r"train\.csv: column T2 is 27\d K below the model's T2.*degC"):
+        _celsius_for_kelvin(np.column_stack([celsius - sim]), ["T2"], {"T2": "K"}, "train.csv")
+    _celsius_for_kelvin(np.column_stack([celsius - sim]), ["T2"], {"T2": "degC"}, "train.csv")
+    _celsius_for_kelvin(np.column_stack([sim + 5 - sim]), ["T2"], {"T2": "K"}, "train.csv")
+
+
+def test_a_model_output_the_training_data_do_not_measure_is_named(caplog):
+    """An output with no column in the training data is not compared: the run says so, and
+    warns where the validation data measure it (before, both went unsaid)."""
+    import logging
+
+    from mcl.discovery.run import _say_unmeasured
+
+    validate = TimeSeries([0.0, 1.0], [[1.0, 2.0], [1.0, 2.0]], ["i", "w"])
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        _say_unmeasured(["i", "w"], ["i"], validate)
+    assert "not measured in the training data: w" in caplog.text
+    assert any(r.levelno == logging.WARNING and "column w is not used" in r.getMessage() for r in caplog.records)
