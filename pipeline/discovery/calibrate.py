@@ -26,6 +26,10 @@ from .fitters import FIT_OPTIONS, residual
 #: was freed beside the motor constant and the gear ratio, which together with it the data
 #: determine only as a product and a sum, and all three ended at +-110 %)
 DETERMINED = 0.5
+#: ... and an initial state when below this share: a nuisance the fit needs, whose standard
+#: error, measured at the start of the fit, counts the misfit the fit then removes (the tanks'
+#: second level at 0.83 of its value: left out, the refit ended at 1.39 V against 0.35)
+DETERMINED_STATE = 1.0
 #: simulations of the calibration's fit
 REFIT_BUDGET = 60
 #: the calibration's fit stops once its last few simulations gained less than this share of the
@@ -155,7 +159,8 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     if free == "auto":     # flags and parameters no equation reads any more (a law replaced it): not candidates
         keep = [k for k in range(len(candidates)) if np.any(J[:, len(laws) + k] != 0.0)]
         candidates, J = [candidates[k] for k in keep], J[:, list(range(len(laws))) + [len(laws) + k for k in keep]]
-    determined, undetermined = _determined(r, J, laws, candidates, params, strict=free == "auto")
+    determined, undetermined = _determined(r, J, laws, candidates, params, strict=free == "auto",
+                                           states=set(getattr(model, "initial_parameters", ())))
     log.info("      calibration: %s refitted with the laws%s", ", ".join(determined) or "nothing",
              f"; not determined by the data: {', '.join(undetermined)}" if undetermined else "")
     names = laws + determined
@@ -259,10 +264,11 @@ def _refit(model, data: TimeSeries, params: dict, names: list[str], budget: int 
     return {**params, **dict(zip(names, map(float, res.w)))}
 
 
-def _determined(r, J, laws, candidates, params, strict: bool) -> tuple[list[str], list[str]]:
+def _determined(r, J, laws, candidates, params, strict: bool, states=frozenset()) -> tuple[list[str], list[str]]:
     """Which of ``candidates`` the data determine together with the laws: added in order of how
     much the outputs depend on them, each kept while its relative standard error stays below
-    :data:`DETERMINED` (with ``strict``; asked-for ones only need a finite one) and its column is
+    :data:`DETERMINED` (:data:`DETERMINED_STATE` for the initial ``states``) (with ``strict``;
+    asked-for ones only need a finite one) and its column is
     not a combination of the others'. A parameter at 0 (an offset, a rest length, an initial
     state) is measured against the value one Gauss-Newton step gives it: determined when the
     data move it clearly away from 0."""
@@ -278,7 +284,8 @@ def _determined(r, J, laws, candidates, params, strict: bool) -> tuple[list[str]
         if value == 0.0:
             value = abs(float(np.linalg.lstsq(J[:, cols], r, rcond=None)[0][-1]))
         rel = se[-1] / max(value, 1e-300)
-        if np.isfinite(rel) and _independent(J[:, cols]) and (rel < DETERMINED or not strict):
+        limit = DETERMINED_STATE if candidates[k] in states else DETERMINED
+        if np.isfinite(rel) and _independent(J[:, cols]) and (rel < limit or not strict):
             chosen.append(k)
         else:
             left.append(k)
