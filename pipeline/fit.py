@@ -576,7 +576,7 @@ class LevenbergMarquardt(Fitter):
         w, ok = self._start(problem, w, q, budget=self.restore, fixed=[] if self.axis is None else [self.axis])
         current = self._step_data(problem, w) if ok else None
         if current is None:
-            why = next((ev.reason for ev in problem.recorder.evaluations if ev.reason), None)
+            why = next((ev.reason for ev in problem.recorder.evaluations[start:] if ev.reason), None)
             raise FitError("no start point of the fit simulates (tried around the given one)"
                            + (f"; at the given one: {why}" if why else ""))
         if self.progress:

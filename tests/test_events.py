@@ -1077,7 +1077,6 @@ def test_an_event_that_gives_a_non_finite_value_names_the_variable(tmp_path):
     assert "non-finite values at t = 0.693" in res.reason and "(d)" in res.reason
 
 
-
 STOP = """
 model EndStop "a shaken mass on a spring meets a stop at s0 now and then; in contact the stop
   pushes back as an MSL ElastoGap does, by the depth's magnitude: held in contact past the
@@ -1097,8 +1096,8 @@ end EndStop;
 def test_a_call_that_diverges_past_a_crossing_is_probed_for_it(tmp_path):
     """A call that runs past the parting with the contact held drives the states past the
     run's bound (1000x their size): the crossing is looked for before the run is called
-    diverged (a discovery's candidates next to an end stop failed at their start). The bound
-    changes nothing in a run that never diverges."""
+    diverged (a discovery's candidates next to an end stop failed at their start). Bounded or
+    not, the run follows the exact solution."""
     (tmp_path / "EndStop.mo").write_text(STOP)
     model = compile_model([tmp_path / "EndStop.mo"], "EndStop")
     t = np.linspace(0, 3, 301)

@@ -159,8 +159,10 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     if free == "auto":     # flags and parameters no equation reads any more (a law replaced it): not candidates
         keep = [k for k in range(len(candidates)) if np.any(J[:, len(laws) + k] != 0.0)]
         candidates, J = [candidates[k] for k in keep], J[:, list(range(len(laws))) + [len(laws) + k for k in keep]]
+    # (the parameters only the initial equations read: a sparsity sweep of the model's functions)
+    initial_states = list(getattr(model, "initial_parameters", ()))
     determined, undetermined = _determined(r, J, laws, candidates, params, strict=free == "auto",
-                                           states=set(getattr(model, "initial_parameters", ())))
+                                           states=set(initial_states))
     log.info("      calibration: %s refitted with the laws%s", ", ".join(determined) or "nothing",
              f"; not determined by the data: {', '.join(undetermined)}" if undetermined else "")
     names = laws + determined
@@ -175,7 +177,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     # (the second fit starts next to its optimum: a third of the first's simulations). A start
     # calibrated on fewer samples had its initial state fitted so: the first fit is skipped
     # (on the Wiener-Hammerstein it gained 0.2 % of the RSS in 11 simulations of 32 768 samples)
-    initial = set(getattr(model, "initial_parameters", ())) & set(determined)
+    initial = set(initial_states) & set(determined)
     calibrated = begin is not params
     first = (_refit(model, train, begin, [n for n in names if n not in initial]) if initial and not calibrated
              else begin)
@@ -193,7 +195,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     if validate is not None:
         # (at most a quarter of the record: the rest is judged on what was not fitted to it)
         head = validate.head(min(own_start or len(train.time), max(len(validate.time) // 4, 1)))
-        states = [n for n in getattr(model, "initial_parameters", ()) if n not in held and np.isfinite(params[n])
+        states = [n for n in initial_states if n not in held and np.isfinite(params[n])
                   and (free == "auto" or n in free)]
         own, seen = _own_start(model, head, new, states) if initial else (new, [])
         sv = simulate(model, validate, own)
