@@ -311,3 +311,49 @@ def _sx_functions(f):
             if x.is_call():
                 found += _sx_functions(x.which_function())
     return found
+
+
+SPLIT_CALL = """
+package SplitCall
+  function f "y1 reads a only, y2 b only: large enough to be kept as a call"
+    input Real a;
+    input Real b;
+    output Real y1;
+    output Real y2;
+  algorithm
+    y1 := 0;
+    for i in 1:60 loop
+      y1 := y1 + sin(a*i)/i^2;
+    end for;
+    y2 := b^2;
+  end f;
+
+  model M "u1 from the call's first output, u2 from u1, w from the call's second output"
+    Real x(start = 1, fixed = true);
+    Real u1;
+    Real u2;
+    Real w;
+  equation
+    der(x) = -u1 - 0.1*w;
+    (u1, w) = f(x, u2);
+    u2 = 2*u1 + x;
+  end M;
+end SplitCall;
+"""
+
+
+def test_a_kept_call_naming_an_unknown_its_output_does_not_read_compiles(tmp_path, monkeypatch):
+    """A kept call node (and its derivative) names all of its function's inputs: u1's block named
+    u2, solved only after it, and the block's function was refused with u2 free (a Fluid pump
+    system's FMU). The twin runs as the inlined model."""
+    from mcl import compile_model
+
+    monkeypatch.setenv("MCL_CACHE_DIR", str(tmp_path / "cache"))
+    (tmp_path / "SplitCall.mo").write_text(SPLIT_CALL)
+    inlined = compile_model([tmp_path / "SplitCall.mo"], "SplitCall.M").with_outputs(["w"])
+    kept = compile_model([tmp_path / "SplitCall.mo"], "SplitCall.M", options={"calls": "kept"}).with_outputs(["w"])
+    assert kept.info["calls"] == "kept"
+    t = np.linspace(0, 5, 101)
+    u = series(t)
+    a, b = simulate(inlined, u), simulate(kept, u)
+    assert a.ok and b.ok and np.ptp(a.outputs) > 0.1 and rel_err(b.outputs, a.outputs) < 1e-6

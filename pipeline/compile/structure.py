@@ -295,6 +295,24 @@ def _blocks(sp: ca.Sparsity, nz: int):
     return blocks
 
 
+def _has_calls(g: ca.SX, z: ca.SX, args: list[ca.SX]) -> bool:
+    """Whether ``g`` holds call nodes (the functions a model's FMU keeps as calls)."""
+    f = ca.Function("g", [z, *args], [g])
+    return any(f.instruction_id(k) == ca.OP_CALL for k in range(f.n_instructions()))
+
+
+def _unread_set(gs: list, rows, z_at: dict, read: set, z_guess: np.ndarray) -> None:
+    """The unknowns that rows ``rows`` of ``gs`` name but do not depend on, set to their guesses:
+    a call node names all of its function's inputs, and so does its derivative, though an
+    output depends on some only (a pump's block named an unknown of a later block through a
+    medium's function; its solution was then not a function of what the block reads). Their
+    value changes nothing; a block's function must not take them."""
+    for r in rows:
+        named = [s for s in ca.symvar(gs[r]) if z_at.get(s.element_hash(), -1) not in read | {-1}]
+        if named:
+            gs[r] = ca.substitute([gs[r]], named, [ca.SX(float(z_guess[z_at[s.element_hash()]])) for s in named])[0]
+
+
 def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes: ca.SX | None = None,
               guess: ca.SX | None = None, nominal: list[np.ndarray] | None = None, homotopic=None):
     """Solve 0 = g(z, args) for z block by block; returns (Function args -> z, #nonlinear blocks,
@@ -337,9 +355,12 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     stepped = steps_read(g, z)        # per row, the unknowns it reads through a step
     mode_names = {str(m) for m in ca.vertsplit(modes)} if modes is not None else set()
     mode_at = [n for n, a in enumerate(ca.vertsplit(ca.vertcat(*args))) if str(a) in mode_names]
+    z_at = {s.element_hash(): c for c, s in enumerate(zs)} if _has_calls(g, z, args) else None
     for k, (rows, cols) in enumerate(blocks):
-        gk, zk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[zs[c] for c in cols])
         prev = sorted(set().union(*[reads.get(r, set()) for r in rows]) - set(cols))
+        if z_at is not None:
+            _unread_set(gs, rows, z_at, set(cols) | set(prev), z_guess)
+        gk, zk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[zs[c] for c in cols])
         zprev = ca.vertcat(*[zs[c] for c in prev]) if prev else ca.SX(0, 1)
         prev_mx = ca.vertcat(*[solved[c] for c in prev]) if prev else ca.MX(0, 1)
         prev_free = ca.vertcat(*[free[c] for c in prev]) if prev else ca.MX(0, 1)
