@@ -220,3 +220,13 @@ def test_parameters_the_data_determine_only_as_a_product_and_a_sum_are_not_all_f
     params = {"k": k, "n": n, "JL": JL, "Jm": Jm}
     chosen, left = _determined(r, J, [], ["k", "n", "JL", "Jm"], params, strict=True)
     assert len(chosen) == 2 and "k" in chosen and {"JL", "Jm"} & set(left), (chosen, left)
+
+
+def test_parameters_that_trade_off_with_the_laws_at_the_optimum_are_reported_loose():
+    """A standard error above half the value at the optimum marks a nominal parameter (not a law
+    parameter; an initial state only past its own threshold) as one of many equally good values."""
+    from mcl.discovery.calibrate import DETERMINED_STATE, _loose
+
+    params = {"w": 1.0, "kp": 2.0, "ks": 3.0, "h0": 0.2, "off": 0.0}
+    se = np.array([5.0, 0.5, 2.0, 0.9 * DETERMINED_STATE * 0.2, 1.0])
+    assert _loose(["w", "kp", "ks", "h0", "off"], ["w"], params, se, {"h0"}) == ["ks"]
