@@ -58,3 +58,36 @@ def _named(text: str, component: str, port: str) -> bool:
     index = r"(?:\s*\[[^\]]*\])?"
     return bool(re.search(rf"(?<![\w.]){component}{index}\s*\.\s*{port}\b", text)
                 or re.search(rf"(?<![\w.]){component}{index}\s*\([^;]*?\b{port}\s*=", text))
+
+
+#: types a declaration may name that are no class of a library
+_BUILTIN = {"Real", "Integer", "Boolean", "String"}
+
+
+def unfound_class(model: str, instance: str, docs: dict[Path, tuple[str, set]], search) -> tuple[str, str] | None:
+    """(``file:line`` of the declaration, its class as written) where ``model`` declares
+    ``instance`` of a class that neither the user's files nor the libraries on the path hold
+    (a misspelt ``Basic.Resistr R1``: rumoca names the first ``connect`` that reaches into it
+    instead); else None."""
+    from .library import available
+
+    lib = LibraryClasses.with_user(available(search), docs)
+    info = lib.find(model)
+    if info is None:
+        return None
+    scope = model.rsplit(".", 1)[0] if "." in model else model
+    for _, type_name, name, _ in info.declarations:
+        if name != instance or type_name in _BUILTIN:
+            continue
+        if lib.resolve(type_name, info.name, info) or lib.resolve(type_name, scope):
+            return None
+        files = [p for p in docs if p.name != "package.mo"] + [f for p in docs if p.name == "package.mo"
+                                                               for f in sorted(p.parent.rglob("*.mo"))]
+        declared = re.compile(rf"^(.*\b{re.escape(type_name)}\s+{re.escape(instance)}\b)", re.M)
+        for f in files:
+            text = masked(f.read_text(encoding="utf-8", errors="replace"))
+            m = declared.search(text)
+            if m:
+                return f"{f}:{text.count(chr(10), 0, m.start()) + 1}", type_name
+        return None
+    return None

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import homotopy, overlays, tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
-from .balance import unconnected_inputs
+from .balance import unconnected_inputs, unfound_class
 from .bindings import restated
 from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
@@ -765,7 +765,16 @@ def _find(files: list[Path], pattern: str) -> str | None:
 
 def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> ModelicaError:
     """``err`` of a model with fewer equations than unknowns with the inputs of its components
-    that nothing connects (:mod:`.balance`): the usual cause, which rumoca's counts do not name."""
+    that nothing connects (:mod:`.balance`): the usual cause, which rumoca's counts do not name;
+    an unresolved reference into a component whose class is not found, at its declaration."""
+    ref = re.search(r"unresolved component reference: '(\w+)[.\[']", str(exc))
+    if ref:
+        try:
+            found = unfound_class(model, ref[1], prep.docs, prep.search)
+        except Exception:      # noqa: BLE001 - a hint only: rumoca's message stands
+            found = None
+        if found:
+            return type(err)(f"cannot compile {model}: class {found[1]} of {ref[1]} is not found", where=found[0])
     counts = re.search(r"unbalanced model: (\d+) equations, (\d+) unknowns", str(exc))
     if counts is None or int(counts[1]) >= int(counts[2]):
         return err
