@@ -12,7 +12,7 @@ import pytest
 
 import mcl.api
 import mcl.services
-from helpers import LIB
+from helpers import LIB, msl_path, needs_msl
 from mcl import compile_model, hookimpl
 from mcl.cli import main
 from mcl.data import TimeSeries
@@ -700,3 +700,72 @@ def test_a_model_output_the_training_data_do_not_measure_is_named(caplog):
         _say_unmeasured(["i", "w"], ["i"], validate)
     assert "not measured in the training data: w" in caplog.text
     assert any(r.levelno == logging.WARNING and "column w is not used" in r.getMessage() for r in caplog.records)
+
+
+def test_an_input_held_constant_and_a_head_that_sees_little_of_the_record_are_warned_of(caplog):
+    """A constant input shows the system at one operating point; a search on the first samples of
+    a record sampled far faster than the system moves sees a sliver of it. Both are said."""
+    import logging
+
+    from mcl.discovery.run import _say_constant, _say_head
+
+    t = np.linspace(0.0, 100.0, 200_001)
+    train = TimeSeries(t, np.column_stack([np.full(t.size, 1.5), np.sin(t)]), ["u", "w"])
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        _say_constant(["u", "w"], train)
+        _say_head(train.head(8192), train)
+        _say_head(train.head(50_000), train)      # (a quarter: no warning)
+    warned = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warned) == 2, warned
+    assert "input u is constant" in warned[0] and "w" not in warned[0].split("(")[0]
+    assert "first 4.1 s of the training record's 100 s" in warned[1] and "every 25th" in warned[1]
+
+
+@needs_msl()
+def test_a_misspelt_class_is_named_at_its_declaration(tmp_path):
+    """rumoca names the first connect that reaches into the instance of a class it cannot find;
+    the error names the declaration and the class as written."""
+    from mcl import compile_model
+    from mcl.errors import ModelicaError
+
+    (tmp_path / "Net.mo").write_text("""model Net
+  import Modelica.Electrical.Analog.Basic;
+  Basic.Ground gnd;
+  Basic.Resistr R1(R = 10);
+  Basic.Capacitor C1(C = 1e-3);
+equation
+  connect(R1.p, C1.p);
+  connect(R1.n, gnd.p);
+  connect(C1.n, gnd.p);
+end Net;
+""")
+    with pytest.raises(ModelicaError) as err:
+        compile_model([tmp_path / "Net.mo"], "Net", libraries=[msl_path()])
+    assert f"{tmp_path / 'Net.mo'}:4" in str(err.value) and "class Basic.Resistr of R1 is not found" in str(err.value)
+
+
+def test_each_outputs_rms_is_given_beside_its_noise(caplog):
+    """The pooled RMS mixes units where the outputs have different ones (Pa beside m3/s): each
+    output's RMS before and after the laws is given beside its noise, in the log and the report."""
+    import logging
+    from types import SimpleNamespace
+
+    from mcl.discovery.report import _summary_rows
+    from mcl.discovery.run import _per_output
+
+    t = np.linspace(0.0, 1.0, 101)
+    p, q = 1e5 + 1e3 * np.sin(6 * t), 1e-4 * np.cos(6 * t)
+    y = np.column_stack([p, q])
+    nominal, learned = y + [[300.0, 5e-5]], y + [[3.0, 4e-5]]     # the pressure fixed, the flow not
+    validate = TimeSeries(t, y, ["p", "q"])
+    noise = {"p": SimpleNamespace(sigma=2.0), "q": SimpleNamespace(sigma=1e-6)}
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        each = _per_output(["p", "q"], noise, y, nominal, learned, validate, [nominal, learned])
+    assert each["p"]["validation_before"] == pytest.approx(300.0) and each["p"]["validation_after"] == pytest.approx(3.0)
+    assert each["q"]["train_after"] == pytest.approx(4e-5) and each["q"]["noise"] == 1e-6
+    assert "p 300 -> 3 (2); q 5e-05 -> 4e-05 (1e-06)" in caplog.text
+    report = {"misfit": {"significant": True, "noise_estimate": 1.0}, "causes": [],
+              "gain": {"train_rms_before": 212.0, "train_rms_after": 2.1, "validation_rms_before": 212.0,
+                       "validation_rms_after": 2.1, "per_output": each}}
+    page = _summary_rows(report)
+    assert "Each output" in page and "1.25x smaller" in page      # the flow: 5e-5 -> 4e-5

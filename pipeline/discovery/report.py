@@ -267,6 +267,13 @@ def _summary_rows(report) -> str:
     own = (report.get("calibration") or {}).get("validation_initial_state")
     note = (f"<p>The calibrated model's validation run starts from its own initial state "
             f"({html.escape(', '.join(own))}), fitted on the head of that record.</p>") if own else ""
+    each = g.get("per_output") or {}
+    if len(each) > 1:      # (the pooled RMS mixes the outputs' units)
+        which = "validation" if all("validation_after" in r for r in each.values()) else "train"
+        note += "<h3>Each output</h3>" + _table(
+            ["output", "noise", f"{which} RMS, nominal", "with the learned laws", "improvement"],
+            [[html.escape(o), _g(r["noise"]), _g(r[f"{which}_before"]), _g(r.get(f"{which}_after")),
+              _factor(r[f"{which}_before"], r.get(f"{which}_after"))] for o, r in each.items()])
     return f"<table>{body}</table><h2>Before and after</h2>{_table(header, gain_rows)}{note}"
 
 
@@ -287,6 +294,9 @@ def _uncertainty_rows(report) -> str:
                 for n, v in cal.get("values", {}).items()]
         out.append("<h3>Calibration (nominal parameters refitted with the laws)</h3>" + _table(
             ["parameter", "before", "after", "standard error"], rows))
+        if cal.get("loose"):
+            out.append(f"<p>Fitted, but trading off with the laws (standard error above half the value: "
+                       f"one of many equally good sets): {html.escape(', '.join(cal['loose']))}</p>")
         if cal.get("not_determined"):
             out.append(f"<p>Not determined by the data (left at their values): "
                        f"{html.escape(', '.join(cal['not_determined']))}</p>")

@@ -244,8 +244,9 @@ class Causes:
         for v, law in sorted(scored, key=lambda x: x[0]):
             log.debug("      calibrated %s %+.3g: %s", law["component"], v - value,
                       law.get("equation") or spec_name(law["template"]))
-        log.info("      with the calibration (free: %s), %s's law: %s", self.spec.free if isinstance(self.spec.free, str)
-                 else ", ".join(self.spec.free), best["component"], chosen.get("equation") or spec_name(chosen["template"]))
+        log.info("      the calibration (free: %s) chooses %s's law: %s (as found; calibrated values in the report)",
+                 self.spec.free if isinstance(self.spec.free, str) else ", ".join(self.spec.free), best["component"],
+                 chosen.get("equation") or spec_name(chosen["template"]))
         same = lambda a, b: (a.get("family"), a.get("equation")) == (b.get("family"), b.get("equation"))
         # the laws the calibrated data do not choose between, named with the one chosen
         others = alternatives(chosen, scored, value)
@@ -347,6 +348,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         problems.raise_if_any()
     outputs = [o for o in nominal.output_names if o in train.names]
     _say_unmeasured(nominal.output_names, outputs, validate)
+    _say_constant(nominal.input_names, train)
     log.info("[1/5] nominal model %s: simulating the training data", spec.model_name)
     sim0 = simulate(nominal, train)
     if not sim0.ok:
@@ -386,6 +388,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         searched = train.head(spec.max_samples)
         log.info("      the search fits the first %d of %d training samples (fitting.max_samples); the gain is "
                  "measured on all", spec.max_samples, len(train.time))
+        _say_head(searched, train)
         base0 = Base(nominal, simulate(nominal, searched))
     causes = Causes(spec, searched, validate, outputs, part, rundir, reg, noise)
     found, base = causes.find(base0, val0) if significant else ([], base0)
@@ -419,6 +422,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         cal = report.get("calibration") or {}
         if cal.get("train_rms") is not None:      # the law alone (above) and with the calibration
             report["gain"].update(train_rms_calibrated=cal["train_rms"], validation_rms_calibrated=cal.get("validation_rms"))
+        report["gain"]["per_output"] = _per_output(outputs, noise, y_meas, y0, extended_y, validate, val_y)
     if report["gain"] is None:
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
                           "validation_rms_before": val0, "validation_rms_after": val0}
@@ -459,6 +463,58 @@ def _say_unmeasured(declared: list[str], measured: list[str], validate: TimeSeri
         log.warning("the validation data's column%s %s %s not used: the training data do not measure %s",
                     "s" if len(unused) > 1 else "", ", ".join(unused), "are" if len(unused) > 1 else "is",
                     "them" if len(unused) > 1 else "it")
+
+
+def _per_output(outputs, noise, y_meas, y0, y_ext, validate, val_y) -> dict:
+    """Each output's RMS before and after the laws, on the training and validation data, beside
+    its noise: the pooled RMS mixes units where the outputs have different ones (a pressure in Pa
+    beside a flow in m3/s hid a flow and two temperatures left at 9-15x their noise). Said in
+    the log where there are several outputs."""
+    v_meas = validate.select(outputs).values if validate is not None and val_y is not None else None
+    out = {}
+    for k, o in enumerate(outputs):
+        row = {"noise": noise[o].sigma, "train_before": rms(y_meas[:, k] - y0[:, k])}
+        if y_ext is not None:
+            row["train_after"] = rms(y_meas[:, k] - y_ext[:, k])
+        for key, y in zip(("validation_before", "validation_after"), val_y or ()):
+            if v_meas is not None and y is not None:
+                row[key] = rms(v_meas[:, k] - y[:, k])
+        out[o] = row
+    if len(outputs) > 1:
+        which = "validation" if all("validation_after" in r for r in out.values()) else "train"
+        log.info("      per output, %s RMS before -> after the laws (noise): %s", which, "; ".join(
+            f"{o} {r[which + '_before']:.3g} -> {r.get(which + '_after', float('nan')):.3g} ({r['noise']:.3g})"
+            for o, r in out.items()))
+    return out
+
+
+def _say_constant(inputs: list[str], train: TimeSeries) -> None:
+    """Warn of inputs the training data hold constant: they show the system at one operating
+    point (a constant drive named a sensor's law for a shunt's that never moved)."""
+    for name in inputs:
+        if name in train.names:
+            u = train.select([name]).values[:, 0]
+            u = u[np.isfinite(u)]
+            if u.size > 1 and np.ptp(u) <= 1e-12 * max(float(np.max(np.abs(u))), 1e-300):
+                log.warning("the input %s is constant in the training data (%g): they show the system at one "
+                            "operating point, and a law learned from them may not hold at another", name, u[0])
+
+
+#: the share of the training record's time below which the search's head is said to be short
+SHORT_HEAD = 0.05
+
+
+def _say_head(head: TimeSeries, whole: TimeSeries) -> None:
+    """Warn where the search's head spans little of the record's time: a record sampled far
+    faster than the system moves (a million samples at 10 kHz: the head saw 0.8 s, before the
+    fault ever showed)."""
+    span = float(whole.time[-1] - whole.time[0])
+    seen = float(head.time[-1] - head.time[0])
+    if span > 0 and seen < SHORT_HEAD * span:
+        every = int(np.ceil(len(whole.time) / len(head.time)))
+        log.warning("the search sees the first %.3g s of the training record's %.3g s; if the data are sampled "
+                    "far faster than the system moves, resample them (every %dth sample, say) or raise "
+                    "fitting.max_samples", seen, span, every)
 
 
 def refitted(names: list[str], active) -> list[str]:
