@@ -67,7 +67,7 @@ def test_electrical_discovery_names_the_component_and_learns_the_law(tmp_path, c
     assert np.max(np.abs(fs - truth)) <= 0.05 * np.max(np.abs(truth))
     g = report["gain"]
     assert g["validation_rms_after"] <= 0.2 * g["validation_rms_before"]
-    (mine,) = g["per_output"].values()       # each output's own, beside its noise
+    (mine,) = report["gain_per_output"].values()       # each output's own, beside its noise
     assert mine["validation_before"] == pytest.approx(g["validation_rms_before"], rel=1e-9)
     assert mine["train_before"] == pytest.approx(g["train_rms_before"], rel=1e-9)
     assert mine["validation_after"] <= 0.2 * mine["validation_before"] and mine["noise"] > 0

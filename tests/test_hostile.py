@@ -766,6 +766,6 @@ def test_each_outputs_rms_is_given_beside_its_noise(caplog):
     assert "p 300 -> 3 (2); q 5e-05 -> 4e-05 (1e-06)" in caplog.text
     report = {"misfit": {"significant": True, "noise_estimate": 1.0}, "causes": [],
               "gain": {"train_rms_before": 212.0, "train_rms_after": 2.1, "validation_rms_before": 212.0,
-                       "validation_rms_after": 2.1, "per_output": each}}
+                       "validation_rms_after": 2.1}, "gain_per_output": each}
     page = _summary_rows(report)
     assert "Each output" in page and "1.25x smaller" in page      # the flow: 5e-5 -> 4e-5

@@ -267,7 +267,7 @@ def _summary_rows(report) -> str:
     own = (report.get("calibration") or {}).get("validation_initial_state")
     note = (f"<p>The calibrated model's validation run starts from its own initial state "
             f"({html.escape(', '.join(own))}), fitted on the head of that record.</p>") if own else ""
-    each = g.get("per_output") or {}
+    each = report.get("gain_per_output") or {}
     if len(each) > 1:      # (the pooled RMS mixes the outputs' units)
         which = "validation" if all("validation_after" in r for r in each.values()) else "train"
         note += "<h3>Each output</h3>" + _table(

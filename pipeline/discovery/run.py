@@ -422,7 +422,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         cal = report.get("calibration") or {}
         if cal.get("train_rms") is not None:      # the law alone (above) and with the calibration
             report["gain"].update(train_rms_calibrated=cal["train_rms"], validation_rms_calibrated=cal.get("validation_rms"))
-        report["gain"]["per_output"] = _per_output(outputs, noise, y_meas, y0, extended_y, validate, val_y)
+        report["gain_per_output"] = _per_output(outputs, noise, y_meas, y0, extended_y, validate, val_y)
     if report["gain"] is None:
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
                           "validation_rms_before": val0, "validation_rms_after": val0}
