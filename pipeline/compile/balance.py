@@ -1,5 +1,6 @@
-"""Why a model has fewer equations than unknowns, in the engineer's words: the inputs of its
-components that nothing connects or sets.
+"""Why a model does not compile, in the engineer's words, where rumoca's message names a symptom:
+for fewer equations than unknowns, the inputs of its components that nothing connects or sets;
+for an unresolved reference into a component, the component's class that is not found.
 
 rumoca reports the counts alone ("38 equations for 39 unknowns"); the usual cause is a block
 input left unconnected (an equation per input is missing). The model's own text is read for
@@ -27,9 +28,7 @@ def unconnected_inputs(model: str, docs: dict[Path, tuple[str, set]], search) ->
     info = lib.find(model)
     if info is None:
         return []
-    files = [p for p in docs if p.name != "package.mo"] + [f for p in docs if p.name == "package.mo"
-                                                           for f in sorted(p.parent.rglob("*.mo"))]
-    text = "\n".join(masked(f.read_text(encoding="utf-8", errors="replace")) for f in files)
+    text = "\n".join(masked(f.read_text(encoding="utf-8", errors="replace")) for f in _user_files(docs))
     scope = model.rsplit(".", 1)[0] if "." in model else model
     out = []
     for prefixes, type_name, name, conditional in info.declarations:
@@ -51,6 +50,12 @@ def _inputs(lib: LibraryClasses, cls) -> list[str]:
         if "input" in prefixes or short.split()[:1] == ["input"]:
             found.append(port)
     return found
+
+
+def _user_files(docs: dict[Path, tuple[str, set]]) -> list[Path]:
+    """The files of the user's documents: each file given, and every file of a package directory."""
+    return [p for p in docs if p.name != "package.mo"] + [f for p in docs if p.name == "package.mo"
+                                                         for f in sorted(p.parent.rglob("*.mo"))]
 
 
 def _named(text: str, component: str, port: str) -> bool:
@@ -81,10 +86,8 @@ def unfound_class(model: str, instance: str, docs: dict[Path, tuple[str, set]], 
             continue
         if lib.resolve(type_name, info.name, info) or lib.resolve(type_name, scope):
             return None
-        files = [p for p in docs if p.name != "package.mo"] + [f for p in docs if p.name == "package.mo"
-                                                               for f in sorted(p.parent.rglob("*.mo"))]
         declared = re.compile(rf"^(.*\b{re.escape(type_name)}\s+{re.escape(instance)}\b)", re.M)
-        for f in files:
+        for f in _user_files(docs):
             text = masked(f.read_text(encoding="utf-8", errors="replace"))
             m = declared.search(text)
             if m:

@@ -307,8 +307,9 @@ def _unread_set(gs: list, rows, z_at: dict, read: set, z_guess: np.ndarray) -> N
     output depends on some only (a pump's block named an unknown of a later block through a
     medium's function; its solution was then not a function of what the block reads). Their
     value changes nothing; a block's function must not take them."""
+    skip = read | {-1}          # (-1: a symbol that is no unknown)
     for r in rows:
-        named = [s for s in ca.symvar(gs[r]) if z_at.get(s.element_hash(), -1) not in read | {-1}]
+        named = [s for s in ca.symvar(gs[r]) if z_at.get(s.element_hash(), -1) not in skip]
         if named:
             gs[r] = ca.substitute([gs[r]], named, [ca.SX(float(z_guess[z_at[s.element_hash()]])) for s in named])[0]
 

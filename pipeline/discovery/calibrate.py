@@ -223,13 +223,17 @@ def _std_errors(model, data: TimeSeries, params: dict, names: list[str]) -> np.n
     return np.sqrt(np.maximum(np.diag(covariance(r, J)), 0.0))
 
 
+def _limit(name: str, states) -> float:
+    """The share of its value a parameter's standard error must stay below to count as determined."""
+    return DETERMINED_STATE if name in states else DETERMINED
+
+
 def _loose(names: list[str], laws: list[str], params: dict, se: np.ndarray, states) -> list[str]:
     """The nominal parameters among ``names`` whose standard error at the optimum is not below
     :data:`DETERMINED` of their value (:data:`DETERMINED_STATE` for initial ``states``)."""
     out = []
     for n, s in zip(names, se):
-        limit = DETERMINED_STATE if n in states else DETERMINED
-        if n not in laws and np.isfinite(s) and params[n] != 0.0 and s > limit * abs(params[n]):
+        if n not in laws and np.isfinite(s) and params[n] != 0.0 and s > _limit(n, states) * abs(params[n]):
             out.append(n)
     return out
 
@@ -312,8 +316,7 @@ def _determined(r, J, laws, candidates, params, strict: bool, states=frozenset()
         if value == 0.0:
             value = abs(float(np.linalg.lstsq(J[:, cols], r, rcond=None)[0][-1]))
         rel = se[-1] / max(value, 1e-300)
-        limit = DETERMINED_STATE if candidates[k] in states else DETERMINED
-        if np.isfinite(rel) and _independent(J[:, cols]) and (rel < limit or not strict):
+        if np.isfinite(rel) and _independent(J[:, cols]) and (rel < _limit(candidates[k], states) or not strict):
             chosen.append(k)
         else:
             left.append(k)

@@ -229,6 +229,12 @@ def _table(header, rows) -> str:
     return f"<table><tr>{head}</tr>{body}</table>"
 
 
+def judged_on(each: dict) -> str:
+    """The record each output's gain is shown on: the validation data where every output has a
+    validation RMS after the laws, else the training data."""
+    return "validation" if all("validation_after" in r for r in each.values()) else "train"
+
+
 def _summary_rows(report) -> str:
     m, g = report["misfit"], report["gain"]
     causes = report.get("causes") or ([report["cause"]] if report.get("cause") else [])
@@ -269,7 +275,7 @@ def _summary_rows(report) -> str:
             f"({html.escape(', '.join(own))}), fitted on the head of that record.</p>") if own else ""
     each = report.get("gain_per_output") or {}
     if len(each) > 1:      # (the pooled RMS mixes the outputs' units)
-        which = "validation" if all("validation_after" in r for r in each.values()) else "train"
+        which = judged_on(each)
         note += "<h3>Each output</h3>" + _table(
             ["output", "noise", f"{which} RMS, nominal", "with the learned laws", "improvement"],
             [[html.escape(o), _g(r["noise"]), _g(r[f"{which}_before"]), _g(r.get(f"{which}_after")),

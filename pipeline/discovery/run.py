@@ -481,7 +481,9 @@ def _per_output(outputs, noise, y_meas, y0, y_ext, validate, val_y) -> dict:
                 row[key] = rms(v_meas[:, k] - y[:, k])
         out[o] = row
     if len(outputs) > 1:
-        which = "validation" if all("validation_after" in r for r in out.values()) else "train"
+        from .report import judged_on
+
+        which = judged_on(out)
         log.info("      per output, %s RMS before -> after the laws (noise): %s", which, "; ".join(
             f"{o} {r[which + '_before']:.3g} -> {r.get(which + '_after', float('nan')):.3g} ({r['noise']:.3g})"
             for o, r in out.items()))
