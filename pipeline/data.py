@@ -27,6 +27,9 @@ class TimeSeries:
     values: np.ndarray
     names: list[str]
     source: str = "<memory>"
+    #: each output's weight in a fit's residual (:meth:`weighted`): outputs in different units
+    #: or with different noise counted in units of their noise; None: all 1
+    weights: dict | None = None
 
     def __post_init__(self):
         self.time = np.asarray(self.time, dtype=float).ravel()
@@ -48,11 +51,20 @@ class TimeSeries:
             raise DataError(f"missing column(s) {', '.join(missing)}; {held}: "
                             f"{', '.join(self.names) or 'only time'}", where=self.source)
         idx = [self.names.index(n) for n in names]
-        return TimeSeries(self.time, self.values[:, idx], list(names), self.source)
+        return TimeSeries(self.time, self.values[:, idx], list(names), self.source, self.weights)
 
     def head(self, n: int) -> "TimeSeries":
         """The first ``n`` samples (where a model's initial state holds)."""
-        return TimeSeries(self.time[:n], self.values[:n], list(self.names), self.source)
+        return TimeSeries(self.time[:n], self.values[:n], list(self.names), self.source, self.weights)
+
+    def weighted(self, weights: dict | None) -> "TimeSeries":
+        """The same samples, their residuals weighted by ``weights`` (by output name) in fits."""
+        return TimeSeries(self.time, self.values, list(self.names), self.source, weights or None)
+
+    def weight_of(self, names) -> np.ndarray:
+        """The weights of the outputs ``names`` (1 where none is set)."""
+        w = self.weights or {}
+        return np.array([float(w.get(n, 1.0)) for n in names])
 
     def to_frame(self):
         """A pandas DataFrame indexed by ``time``, one column per signal."""
@@ -105,7 +117,7 @@ class TimeSeries:
             if ok.sum() < 2:
                 raise DataError(f"input column '{name}' is measured at fewer than two times", where=self.source)
             vals[:, k] = np.interp(self.time, self.time[ok], vals[ok, k])
-        return TimeSeries(self.time, vals, list(self.names), self.source)
+        return TimeSeries(self.time, vals, list(self.names), self.source, self.weights)
 
 
 def as_timeseries(data, what: str = "data", time: str | None = None) -> TimeSeries:

@@ -131,6 +131,7 @@ class FitProblem:
         self.inputs = data.select(model.input_names) if model.input_names else data
         self.y_meas = data.select(self.outputs).values
         self.measured = np.isfinite(self.y_meas)      # blank cells: not measured, not fitted
+        self.weights = data.weight_of(self.outputs)   # (outputs in other units: in units of their noise)
         self.time = data.time
         self.idx = [model.output_names.index(o) for o in self.outputs]
         self.fixed = dict(fixed or {})
@@ -138,7 +139,7 @@ class FitProblem:
         if normalise not in ("start", "data", None):
             raise ConfigError(f"normalise: 'start', 'data' or None, not {normalise!r}")
         self.normalise = normalise
-        self._scale = float(np.mean(self.y_meas**2)) if normalise == "data" else (
+        self._scale = float(np.nanmean((self.y_meas * self.weights)**2)) if normalise == "data" else (
             None if normalise == "start" else 1.0)
         self.engine = engine or CasadiEngine()
         self.recorder = recorder or Recorder()
@@ -219,7 +220,7 @@ class FitProblem:
         r, cost = self.residual_and_cost(res)
         grad = None
         if res.ok and gradient:
-            S = res.sensitivities[:, self.idx, :]                # (N, ny, nw)
+            S = self.output_sensitivities(res)                 # (N, ny, nw)
             grad = (-2.0 * np.einsum("ki,kij->j", r, S) / len(r)).tolist()
         return self.recorder.add(Evaluation(0, w.tolist(), cost, bool(res.ok), res.reason,
                                             time.perf_counter() - t0, grad, tag))
@@ -228,9 +229,13 @@ class FitProblem:
         """Output residuals y_m - y (N, ny) and J of eq. (3) of a simulation; (None, None) if failed."""
         if not res.ok:
             return None, None
-        r = np.where(self.measured, self.y_meas - res.outputs[:, self.idx], 0.0)
+        r = np.where(self.measured, (self.y_meas - res.outputs[:, self.idx]) * self.weights, 0.0)
         with np.errstate(over="ignore"):
             return r, float(np.mean(np.sum(r**2, axis=1)))
+
+    def output_sensitivities(self, res) -> np.ndarray:
+        """d y / d w of the fitted outputs (N, ny, nw), weighted as their residuals are."""
+        return res.sensitivities[:, self.idx, :] * self.weights[None, :, None]
 
     def residuals(self, w):
         """Output residuals y_m - y(w) (N, ny) or None when the simulation fails."""
@@ -660,7 +665,7 @@ class LevenbergMarquardt(Fitter):
         """(residual vector, its Jacobian d r / d w, J) at w, or None when w fails."""
         res = problem.simulate(w, gradient=True)
         r, ev_cost = problem.residual_and_cost(res)
-        S = res.sensitivities[:, problem.idx, :] if res.ok else None
+        S = problem.output_sensitivities(res) if res.ok else None
         ok, reason = bool(res.ok), res.reason
         if ok and not np.all(np.isfinite(S)):      # (a run that grows without bound in its sensitivities)
             ok, reason = False, "its sensitivities are not finite"

@@ -742,6 +742,30 @@ end Net;
     with pytest.raises(ModelicaError) as err:
         compile_model([tmp_path / "Net.mo"], "Net", libraries=[msl_path()])
     assert f"{tmp_path / 'Net.mo'}:4" in str(err.value) and "class Basic.Resistr of R1 is not found" in str(err.value)
+    assert "not on the library path" not in str(err.value)
+
+
+def test_a_model_on_the_msl_with_no_library_path_says_so(tmp_path, monkeypatch):
+    """A newcomer's first run without MODELICAPATH: the error names the declaration and says the
+    library the model imports is not on the path (not only that a class is not found)."""
+    from mcl import compile_model
+    from mcl.errors import ModelicaError
+
+    monkeypatch.setenv("MODELICAPATH", "")
+    (tmp_path / "Net.mo").write_text("""model Net
+  import Modelica.Electrical.Analog.Basic;
+  Basic.Ground gnd;
+  Basic.Resistor R1(R = 10);
+equation
+  connect(R1.p, gnd.p);
+  connect(R1.n, gnd.p);
+end Net;
+""")
+    with pytest.raises(ModelicaError) as err:
+        compile_model([tmp_path / "Net.mo"], "Net")
+    text = str(err.value)
+    assert f"{tmp_path / 'Net.mo'}:" in text and "library Modelica is not on the library path" in text, text
+    assert "MODELICAPATH" in text
 
 
 def test_each_outputs_rms_is_given_beside_its_noise(caplog):

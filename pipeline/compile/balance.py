@@ -58,6 +58,18 @@ def _user_files(docs: dict[Path, tuple[str, set]]) -> list[Path]:
                                                          for f in sorted(p.parent.rglob("*.mo"))]
 
 
+def _absent_library(text: str, lib) -> str:
+    """A hint where ``text`` imports from or names a library that is not on the library path
+    (the MSL with no MODELICAPATH set), else ''."""
+    roots = set(re.findall(r"\bimport\s+(?:\w+\s*=\s*)?([A-Za-z_]\w*)\s*\.", text))
+    roots |= set(re.findall(r"(?<![\w.])(Modelica)\s*\.", text))
+    missing = sorted(r for r in roots if r not in lib.libraries)
+    if not missing:
+        return ""
+    return (f" (library {', '.join(missing)} is not on the library path: set MODELICAPATH or the run "
+            "file's model.libraries)")
+
+
 def _named(text: str, component: str, port: str) -> bool:
     """Whether ``text`` names ``component.port`` (an index anywhere), or sets it as a modifier."""
     index = r"(?:\s*\[[^\]]*\])?"
@@ -69,8 +81,9 @@ def _named(text: str, component: str, port: str) -> bool:
 _BUILTIN = {"Real", "Integer", "Boolean", "String"}
 
 
-def unfound_class(model: str, instance: str, docs: dict[Path, tuple[str, set]], search) -> tuple[str, str] | None:
-    """(``file:line`` of the declaration, its class as written) where ``model`` declares
+def unfound_class(model: str, instance: str, docs: dict[Path, tuple[str, set]], search) -> tuple[str, str, str] | None:
+    """(``file:line`` of the declaration, its class as written, a hint where a library the file
+    uses is not on the path) where ``model`` declares
     ``instance`` of a class that neither the user's files nor the libraries on the path hold
     (a misspelt ``Basic.Resistr R1``: rumoca names the first ``connect`` that reaches into it
     instead); else None."""
@@ -91,6 +104,6 @@ def unfound_class(model: str, instance: str, docs: dict[Path, tuple[str, set]], 
             text = masked(f.read_text(encoding="utf-8", errors="replace"))
             m = declared.search(text)
             if m:
-                return f"{f}:{text.count(chr(10), 0, m.start()) + 1}", type_name
+                return f"{f}:{text.count(chr(10), 0, m.start()) + 1}", type_name, _absent_library(text, lib)
         return None
     return None

@@ -774,7 +774,7 @@ def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> Model
         except Exception:      # noqa: BLE001 - a hint only: rumoca's message stands
             found = None
         if found:
-            return type(err)(f"cannot compile {model}: class {found[1]} of {ref[1]} is not found", where=found[0])
+            return type(err)(f"cannot compile {model}: class {found[1]} of {ref[1]} is not found{found[2]}", where=found[0])
     counts = re.search(r"unbalanced model: (\d+) equations, (\d+) unknowns", str(exc))
     if counts is None or int(counts[1]) >= int(counts[2]):
         return err

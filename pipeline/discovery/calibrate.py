@@ -51,8 +51,8 @@ def jacobian(model, data: TimeSeries, params: dict, names: list[str]):
     res = problem.simulate([params[n] for n in names], gradient=True)
     if not res.ok:
         return None, None
-    r = (data.select(problem.outputs).values - res.outputs[:, problem.idx])
-    S = res.sensitivities[:, problem.idx, :]
+    r = (problem.y_meas - res.outputs[:, problem.idx]) * problem.weights
+    S = problem.output_sensitivities(res)
     ok = np.isfinite(r)
     return r[ok], S[ok]
 
@@ -198,7 +198,10 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
            "laws": {n: new[n] for n in laws}}      # the laws' parameters refitted with them
     whole = judged_on if judged_on is not None else train
     sim = simulate(model, whole, new)
-    out["train_rms"] = rms(residual(whole, model, sim, outputs)) if sim.ok else None
+    # (reported in the data's units; the calibrations of several laws are compared on the
+    # residual weighted as it was fitted)
+    out["train_rms"] = rms(residual(whole.weighted(None), model, sim, outputs)) if sim.ok else None
+    out["_fit_rms"] = rms(residual(whole, model, sim, outputs)) if sim.ok else None
     if validate is not None:
         # (at most a quarter of the record: the rest is judged on what was not fitted to it)
         head = validate.head(min(own_start or len(train.time), max(len(validate.time) // 4, 1)))
@@ -208,7 +211,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
         sv = simulate(model, validate, own)
         if not sv.ok and seen:         # a start fitted on the head that fails later: the training's
             sv, seen = simulate(model, validate, new), []
-        out["validation_rms"] = rms(residual(validate, model, sv, outputs)) if sv.ok else None
+        out["validation_rms"] = rms(residual(validate.weighted(None), model, sv, outputs)) if sv.ok else None
         if seen:
             out["validation_initial_state"] = seen
     out["params"], out["run"] = new, sim

@@ -36,7 +36,8 @@ def residual(data: TimeSeries, model, result, outputs=None) -> np.ndarray:
     """Measured minus simulated outputs (N, n_outputs), NaN where a value was not measured;
     ``outputs`` default to every model output the data measures."""
     outputs = [o for o in model.output_names if o in data.names] if outputs is None else outputs
-    return data.select(outputs).values - result.outputs[:, [model.output_names.index(o) for o in outputs]]
+    measured = data.select(outputs).values
+    return (measured - result.outputs[:, [model.output_names.index(o) for o in outputs]]) * data.weight_of(outputs)
 
 
 
@@ -204,7 +205,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         sims += 1
         free = np.flatnonzero(active & ~held)
         if sim.ok:
-            S = sim.sensitivities[:, problem.idx, :].reshape(-1, len(free))
+            S = problem.output_sensitivities(sim).reshape(-1, len(free))
             H_inv = gram_inverse(S.T @ S)
             with np.errstate(over="ignore"):       # (a huge coefficient's estimate is inf: removed last)
                 est = w[free] ** 2 / np.maximum(np.diag(H_inv), 1e-300)      # increase of RSS
@@ -295,7 +296,7 @@ def horizons(data: TimeSeries, first: float = 1 / 8, min_samples: int = 100) -> 
     while frac < 1:
         k = int(n * frac)
         if k >= min_samples:
-            out.append(TimeSeries(data.time[:k], data.values[:k], data.names, data.source))
+            out.append(data.head(k))
         frac *= 2
     return [*out, data]
 

@@ -241,6 +241,8 @@ def _summary_rows(report) -> str:
     noise = "; ".join(f"{o}: {_g(n['sigma'])} ({n['method']})" for o, n in (m.get("noise") or {}).items())
     rows = [("misfit", m.get("significance") or ("significant" if m["significant"] else "not significant")),
             ("noise", noise or _g(m["noise_estimate"])),
+            *([("fitted", "each output in units of its noise (their levels differ); candidates' RMS so weighted")]
+              if m.get("weights") else []),
             ("where", ", ".join(f"{a:.3g}-{b:.3g} s" for a, b in sorted(m.get("where", []))) or "-")]
     if not causes:
         rows.append(("cause", f"no convincing cause ({report.get('no_cause', 'none found')})"))

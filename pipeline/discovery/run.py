@@ -44,6 +44,8 @@ from .inject import NominalForm, compiled, mode_of, rate_variables, with_law
 from .search import at_noise, search
 from .verdict import EQUAL, decide, failures, role_items, weigh_unevaluated
 
+#: outputs whose noise levels differ by more than this factor are weighted by them in the fits
+WEIGHED_WHEN = 3.0
 #: with ``free:``, this many of the winning component's laws are compared after calibration
 CALIBRATED_LAWS = 3
 #: at most this many causes are searched for
@@ -101,18 +103,21 @@ class Causes:
         self.y = train.select(outputs).values
         self.rounds: list[dict] = []
 
-    def misfit(self, base: Base) -> tuple[np.ndarray, float | None]:
-        """The training residual of ``base`` and its validation RMS (its run kept on ``base``)."""
+    def misfit(self, base: Base) -> tuple[np.ndarray, float | None, float | None]:
+        """The training residual of ``base`` and its validation RMS, in the data's units and
+        weighted as the fits weigh it (its run kept on ``base``)."""
         from ..services import simulate
 
         resid = self.y - _outputs_of(base.model, base.result, self.outputs)
-        val = None
+        val = weighted = None
         if self.validate is not None:
             if base.validation is None:
                 base.validation = simulate(base.model, self.validate)
             sv = base.validation
-            val = rms(residual(self.validate, base.model, sv, self.outputs)) if sv.ok else None
-        return resid, val
+            if sv.ok:
+                r = residual(self.validate, base.model, sv, self.outputs)
+                val, weighted = rms(r / self.validate.weight_of(self.outputs)), rms(r)
+        return resid, val, weighted
 
     def round(self, base: Base, val_base) -> list[dict]:
         """One search and its verdict on ``base``: the winning law(s), each with what it was
@@ -154,7 +159,7 @@ class Causes:
         label = f"round{number}" + ("chain" if chain else "")
         rpart = self.part / label
         (rpart / "candidates").mkdir(parents=True, exist_ok=True)
-        resid = self.y - _outputs_of(base.model, base.result, self.outputs)
+        resid = (self.y - _outputs_of(base.model, base.result, self.outputs)) * self.train.weight_of(self.outputs)
         rss = float(np.nansum(resid**2))
         found = search(self.spec, base, self.train, self.validate, rpart, self.rundir, self.reg, self.sigma, resid,
                        chain, beat)
@@ -193,9 +198,9 @@ class Causes:
         return self._verdict()
 
     def after(self, base: Base) -> dict:
-        resid, val = self.misfit(base)
+        resid, val, weighted = self.misfit(base)
         left = significance(resid, self.noise, self.outputs, self.train.time, self.n_params)
-        return {"train_rms": rms(resid), "validation_rms": val, "significance": left.reason,
+        return {"train_rms": rms(resid), "validation_rms": val, "_validation_fit": weighted, "significance": left.reason,
                 "misfit_left": "significant" if left.significant else "at the noise level"}
 
     def calibrated_choice(self, nominal: Base, found: list[dict], bests: list[dict], val0) -> list[dict]:
@@ -281,7 +286,7 @@ class Causes:
             after = self.after(base)
             for b in bests:
                 b["_after"] = after
-            val = after["validation_rms"]
+            val = after["_validation_fit"]
             if after["misfit_left"] == "at the noise level":
                 break
         return found, base
@@ -318,7 +323,7 @@ def _calibrated(ctx: Calibration, k: int) -> dict | None:
     with quiet():
         cal = calibrate(ext.model, ctx.train, None, ext.model.parameters, names, ctx.free, ctx.outputs, held)
     fitted = names + list(cal.get("freed", ()))
-    return {"train_rms": cal.get("train_rms"), "k": len(fitted),
+    return {"train_rms": cal.get("_fit_rms"), "k": len(fitted),
             "params": {n: cal["params"][n] for n in fitted} if "params" in cal else {}}
 
 
@@ -359,6 +364,8 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     _celsius_for_kelvin(resid, outputs, nominal.info.get("units", {}), train.source)
     noise = noise_levels(y_meas, train.time, outputs, spec.noise)
     sigma = overall(noise)
+    weights = output_weights(noise, y_meas, outputs)
+    train, validate = train.weighted(weights), validate and validate.weighted(weights)
     train_rms0 = rms(resid)
     verdict = significance(resid, noise, outputs, train.time)
     significant = verdict.significant
@@ -368,7 +375,8 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
                          "whiteness_p": verdict.whiteness_p,
                          "noise": {o: {"sigma": n.sigma, "method": n.method, "reliable": n.reliable}
                                    for o, n in noise.items()},
-                         "per_output_rms": {o: rms(resid[:, k]) for k, o in enumerate(outputs)}},
+                         "per_output_rms": {o: rms(resid[:, k]) for k, o in enumerate(outputs)},
+                         "weights": weights},
               "cause": None, "causes": [], "candidates": [], "gain": None,
               "units": {n: u for n, u in nominal.info.get("units", {}).items() if n in outputs},
               "components": len(nominal.structure.components), "software": software_versions(),
@@ -377,11 +385,14 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     log.info("      %s", verdict.reason)
     from .report import misfit_in_time
 
-    report["misfit"]["where"] = misfit_in_time(train.time, resid, sigma) if significant else []
-    val0, val_y = None, None
+    # (each output against its own noise: weighted)
+    report["misfit"]["where"] = misfit_in_time(train.time, resid * train.weight_of(outputs), sigma) if significant else []
+    val0, val0_fit, val_y = None, None, None
     if validate is not None:
         sv = simulate(nominal, validate)
-        val0 = rms(residual(validate, nominal, sv, outputs)) if sv.ok else None
+        if sv.ok:
+            val0_fit = rms(residual(validate, nominal, sv, outputs))
+            val0 = rms(residual(validate.weighted(None), nominal, sv, outputs))
         val_y = [_outputs_of(nominal, sv, outputs), None]
     searched, base0 = train, Base(nominal, sim0)
     if significant and len(train.time) > spec.max_samples:
@@ -391,7 +402,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         _say_head(searched, train)
         base0 = Base(nominal, simulate(nominal, searched))
     causes = Causes(spec, searched, validate, outputs, part, rundir, reg, noise)
-    found, base = causes.find(base0, val0) if significant else ([], base0)
+    found, base = causes.find(base0, val0_fit) if significant else ([], base0)
     rounds = causes.rounds
     report["failed"] = [f for r in rounds for f in failures(r["screening"], r["candidates"])]
     for f in report["failed"]:
@@ -592,6 +603,31 @@ def internal(spec, model) -> list[str]:
 def overall(noise: dict) -> float:
     """One noise level for all outputs (root mean square of each output's)."""
     return float(np.sqrt(np.mean([n.sigma ** 2 for n in noise.values()])))
+
+
+def output_weights(noise: dict, y_meas: np.ndarray, outputs: list[str]) -> dict | None:
+    """Each output's weight in the fits where the outputs' noise levels differ by more than
+    :data:`WEIGHED_WHEN` (other units: a pressure in Pa beside a temperature in K): the overall
+    noise over the output's own, so that every output's noise weighs as the overall noise does
+    (the noise floor and the criteria read it) and a law is fitted to all outputs, not to the
+    one with the largest numbers (the pressures of a cooling loop pooled with its temperatures
+    had a pressure sensor's law named for a radiator pipe's). None where they are alike. A
+    noise level is taken as at least 1e-4 of its output's spread (a noiseless output would
+    outweigh all others)."""
+    if len(outputs) < 2:
+        return None
+    sigma = overall(noise)
+    own = []
+    for k, o in enumerate(outputs):
+        spread = np.nanstd(y_meas[:, k]) if np.isfinite(y_meas[:, k]).any() else 0.0
+        s = max(noise[o].sigma, 1e-4 * spread)
+        own.append(s if s > 0 else sigma)
+    w = sigma / np.array(own)
+    if not np.all(np.isfinite(w)) or w.max() <= WEIGHED_WHEN * w.min():
+        return None
+    log.info("      the outputs' noise levels differ (%s): each is fitted in units of its noise",
+             ", ".join(f"{o} {noise[o].sigma:.3g}" for o in outputs))
+    return {o: float(v) for o, v in zip(outputs, w)}
 
 
 def significance(resid, noise: dict, outputs, t, n_params: int = 0):

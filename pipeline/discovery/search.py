@@ -138,12 +138,13 @@ class Screening:
         # one deviation parameter per component; every law at it shares that parameter's response
         j_of = {c.name: n for c, n in zip(comps, j_names)}
         resp = linear_response(model, [j_of[k[0]] for k in phis], train, nominal, at_data, phis) if phis else None
-        o_idx = [model.output_names.index(o) for o in model.output_names if o in train.names]
-        self.r = resid.ravel()
+        measured = [o for o in model.output_names if o in train.names]
+        o_idx = [model.output_names.index(o) for o in measured]
+        self.r = resid.ravel()      # (weighted as the fits weigh it: train.weights)
         ok = np.isfinite(self.r)
         self.columns: dict = {}
         if resp is not None:
-            S = resp.S[:, o_idx, :].reshape(-1, len(resp.columns))[ok]
+            S = (resp.S[:, o_idx, :] * train.weight_of(measured)[None, :, None]).reshape(-1, len(resp.columns))[ok]
             self.G, self.g = S.T @ S, S.T @ self.r[ok]     # every prediction from these
             for j, (key, _) in enumerate(resp.columns):
                 self.columns.setdefault(key, []).append(j)
