@@ -230,3 +230,13 @@ def test_parameters_that_trade_off_with_the_laws_at_the_optimum_are_reported_loo
     params = {"w": 1.0, "kp": 2.0, "ks": 3.0, "h0": 0.2, "off": 0.0}
     se = np.array([5.0, 0.5, 2.0, 0.9 * DETERMINED_STATE * 0.2, 1.0])
     assert _loose(["w", "kp", "ks", "h0", "off"], ["w"], params, se, {"h0"}) == ["ks"]
+
+
+def test_a_physical_parameter_the_fit_drives_through_zero_is_held():
+    """A nominal parameter whose sign the calibration flips is held at its value (a law's
+    coefficient or an initial state may cross zero; a parameter written as 0 has no sign)."""
+    from mcl.discovery.calibrate import _flipped
+
+    before = {"w": 1.0, "R2": 1e7, "R1": 1e8, "h0": 0.2, "off": 0.0}
+    after = {"w": -2.0, "R2": -1.4e8, "R1": 1.2e8, "h0": -0.1, "off": -0.3}
+    assert _flipped(list(before), ["w"], before, after, {"h0"}) == ["R2"]

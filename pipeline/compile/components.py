@@ -49,6 +49,18 @@ def two_of_a_kind(connectors) -> bool:
             and a[0].flow == a[1].flow)
 
 
+def law_pair(connectors: list[Connector]) -> tuple[list[Connector], list[Connector]]:
+    """(the connectors a law is of, the heat ports beside them): a component with two
+    connectors of one kind and heat ports (a resistor or a pipe that gives its losses to a heat
+    port, ``useHeatPort = true``) takes a law between the two; its heat port stays with its own
+    equations. Any other component: (its connectors, [])."""
+    heat = [c for c in connectors if c.potential == ("T",) and c.flow == ("Q_flow",)]
+    pair = [c for c in connectors if c not in heat]
+    if len(connectors) > 2 and heat and two_of_a_kind(pair):
+        return pair, heat
+    return list(connectors), []
+
+
 @dataclass
 class Component:
     """A component instance (``R1``, ``sec[2].C``) of the compiled model."""
@@ -64,6 +76,7 @@ class Component:
     #                          or "equation": the user's own y = g(x) (compile/equations.py)
     chain: bool = False      # a signal block or a sensor that reads a model input or gives a model output
     rows: list = field(default_factory=list)   # a term's balances: their rows in the compiled DAE
+    ports: list[Connector] = field(default_factory=list)   # heat ports beside the pair a law is of
 
     @property
     def signal(self) -> bool:
@@ -193,10 +206,11 @@ class Structure:
     def from_dict(cls, d: dict) -> "Structure":
         comps = {}
         for n, c in d["components"].items():
-            conns = [Connector(k["name"], k["cls"], tuple(k["potential"]), tuple(k["flow"])) for k in c["connectors"]]
+            conns, ports = ([Connector(k["name"], k["cls"], tuple(k["potential"]), tuple(k["flow"])) for k in c.get(key, [])]
+                            for key in ("connectors", "ports"))
             comps[n] = Component(c["name"], c["cls"], conns, list(c["parameters"]), list(c["inputs"]),
                                  c.get("declaration", ""), c.get("kind", "physical"), c.get("chain", False),
-                                 list(c.get("rows", [])))
+                                 list(c.get("rows", [])), ports)
         return cls(d["model"], comps, [list(n) for n in d["nets"]])
 
     def draw(self, path) -> Path:
@@ -238,6 +252,8 @@ class Structure:
         candidates = {c.name for c in self.candidates()}
         for c in self.components.values():
             ports = ", ".join(f"{p.name}:{p.cls.split('.')[-1]}" for p in c.connectors)
+            if c.ports:        # (beside the pair its law is of)
+                ports += " (also " + ", ".join(p.name for p in c.ports) + ")"
             mark = " [candidate]" if c.name in candidates else ""
             lines.append(f"  {c.name:16s} {c.cls:44s} {ports}{mark}")
         lines.append("nets:")
@@ -309,7 +325,8 @@ def structure_of(flat: dict, model: str, classes: dict[str, str] | None = None) 
         own = _own(variables, name)
         signals = [n for n, v in own if _kind(v.get("causality")) in ("Input", "Output")
                    and (n in read or re.sub(r"\[[^]]*\]$", "", n) in read)]
-        comps[name] = Component(name, classes.get(name, ""), conns, _parameters(own), signals)
+        conns, ports = law_pair(conns)
+        comps[name] = Component(name, classes.get(name, ""), conns, _parameters(own), signals, ports=ports)
     outer = _joined_to_model(flat)
     for name, y in _sensors(variables, flat.get("variable_type_names", {}) or {}, comps, outer).items():
         comps[name] = dataclasses.replace(comps[name], inputs=[y], kind="sensor", chain=True)

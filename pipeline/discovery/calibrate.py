@@ -19,7 +19,7 @@ from ..data import TimeSeries
 from ..progress import log
 from ..runfile import unknown_free
 from ..stats import gram_inverse, rms
-from .fitters import FIT_OPTIONS, residual
+from .fitters import FIT_OPTIONS, WHOLE_RUN, residual
 
 #: a parameter is determined by the data when its standard error is below this share of its
 #: value: two standard errors from 0. (At 1.0 a servo drive's load inertia, 0.83 of its value,
@@ -182,6 +182,16 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     first = (_refit(model, train, begin, [n for n in names if n not in initial]) if initial and not calibrated
              else begin)
     new = _refit(model, train, first, names, REFIT_BUDGET // 3 if initial else REFIT_BUDGET)
+    # a physical parameter the fit drove through zero (a hydraulic resistance of 1e7 Pa s/m3
+    # calibrated to -1.4e8 beside a learned pipe law) stands in for the law, not for the
+    # system: held at the model's value, the rest refitted from there
+    flipped = _flipped(names, laws, params, new, set(initial_states))
+    if flipped:
+        log.info("      calibration: %s changed sign in the fit: held at the model's value%s",
+                 ", ".join(f"{n} ({params[n]:.3g} -> {new[n]:.3g})" for n in flipped), "s" * (len(flipped) > 1))
+        names = [n for n in names if n not in flipped]
+        determined = [n for n in determined if n not in flipped]
+        new = _refit(model, train, {**new, **{n: params[n] for n in flipped}}, names, REFIT_BUDGET // 3)
     se = _std_errors(model, train, new, names)
     # judged before the fit they looked determined; at the optimum some may trade off with the
     # laws (the tanks written as equations: the pump's gain, the sensor's and an initial level,
@@ -192,12 +202,12 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     if loose:
         log.info("      calibration: %s trade off with the laws at the optimum (standard error above %g of "
                  "the value): one of many equally good sets", ", ".join(loose), DETERMINED)
-    out = {"freed": determined, "not_determined": undetermined, "loose": loose,
+    out = {"freed": determined, "not_determined": undetermined, "loose": loose, "sign_changed": flipped,
            "values": {n: {"before": params[n], "after": new[n], "std_error": float(se[k])} for k, n in enumerate(names)
                       if n in determined},
            "laws": {n: new[n] for n in laws}}      # the laws' parameters refitted with them
     whole = judged_on if judged_on is not None else train
-    sim = simulate(model, whole, new)
+    sim = simulate(model, whole, new, options=WHOLE_RUN)
     # (reported in the data's units; the calibrations of several laws are compared on the
     # residual weighted as it was fitted)
     out["train_rms"] = rms(residual(whole.weighted(None), model, sim, outputs)) if sim.ok else None
@@ -208,9 +218,9 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
         states = [n for n in initial_states if n not in held and np.isfinite(params[n])
                   and (free == "auto" or n in free)]
         own, seen = _own_start(model, head, new, states) if initial else (new, [])
-        sv = simulate(model, validate, own)
+        sv = simulate(model, validate, own, options=WHOLE_RUN)
         if not sv.ok and seen:         # a start fitted on the head that fails later: the training's
-            sv, seen = simulate(model, validate, new), []
+            sv, seen = simulate(model, validate, new, options=WHOLE_RUN), []
         out["validation_rms"] = rms(residual(validate.weighted(None), model, sv, outputs)) if sv.ok else None
         if seen:
             out["validation_initial_state"] = seen
@@ -239,6 +249,13 @@ def _loose(names: list[str], laws: list[str], params: dict, se: np.ndarray, stat
         if n not in laws and np.isfinite(s) and params[n] != 0.0 and s > _limit(n, states) * abs(params[n]):
             out.append(n)
     return out
+
+
+def _flipped(names: list[str], laws: list[str], before: dict, after: dict, states) -> list[str]:
+    """The nominal parameters among ``names`` (not the laws', not the initial ``states``, which
+    may cross zero) whose value changed sign from ``before`` to ``after``."""
+    return [n for n in names if n not in laws and n not in states and before[n] != 0.0
+            and np.sign(after[n]) == -np.sign(before[n])]
 
 
 def _first_good(starts: list[dict], rss) -> dict:

@@ -21,7 +21,7 @@ from ..progress import log
 from ..stats import criterion as criterion_of, rms
 from ..templates import unscaled
 from .families import shape_words
-from .fitters import residual
+from .fitters import WHOLE_RUN, residual
 from .modelica import write_extended
 from .words import in_words, said, words
 
@@ -181,8 +181,8 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
 
     model = base.model
     pick = lambda r: r.outputs[:, [model.output_names.index(o) for o in outputs]] if r.ok else None
-    y_train = pick(simulate(model, train))
-    y_val = pick(base.validation or simulate(model, validate)) if validate is not None else None
+    y_train = pick(simulate(model, train, options=WHOLE_RUN))
+    y_val = pick(base.validation or simulate(model, validate, options=WHOLE_RUN)) if validate is not None else None
     ext_dir = part / "extended"
     log.info("[4/5] extended model: Modelica, compiled again, and an FMU")
     sources, name, package, notes = write_extended(causes, base, spec, ext_dir, _data_words(spec, train), calibrated)
@@ -194,11 +194,11 @@ def extend(causes: list[dict], base, spec, part: Path, train, validate, outputs,
         # the FMU's default experiment is the training data's span and sampling
         fmu = build_fmu(ext, ext_dir / f"{spec.model_name.split('.')[-1]}.fmu", experiment=train)
         files["fmu"] = str(fmu.relative_to(part))
-        check = simulate(ext.with_outputs(train.names), train)
+        check = simulate(ext.with_outputs(train.names), train, options=WHOLE_RUN)
         if not check.ok:      # a stiff learned law: the tolerance its fit simulated it at (as with_causes)
             from .fitters import FIT_OPTIONS
 
-            check = simulate(ext.with_outputs(train.names), train, options=FIT_OPTIONS)
+            check = simulate(ext.with_outputs(train.names), train, options={**FIT_OPTIONS, **WHOLE_RUN})
         if check.ok and y_ref is not None:
             y_check = check.outputs[:, [ext.with_outputs(train.names).output_names.index(o) for o in outputs]]
             files["recompiled_difference"] = float(np.max(np.abs(y_check - y_ref)))
@@ -255,7 +255,7 @@ def _second(spec, cause: dict, base) -> dict:
     target = sec.get("component", cause["component"])
     comp = nominal.structure.components[target]
     template = registry().template(cause["template"])
-    before = simulate(nominal, data)
+    before = simulate(nominal, data, options=WHOLE_RUN)
     outs = [o for o in nominal.output_names if o in data.names]
     out = {"model": sec["model"]["name"], "component": target,
            "rms_before": rms(residual(data, nominal, before, outs)) if before.ok else None, "rms_after": None}

@@ -21,12 +21,17 @@ import numpy as np
 
 from ..data import TimeSeries
 from ..errors import MclError
+from ..simulation import RUN_TIME_LIMIT
 from ..stats import criterion as criterion_of, gram_inverse, rss as rss_of
 
 #: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
 #: and measured inputs (linear between samples) make CVODES stop at every kink; 10x looser
 #: tolerances take 3x fewer steps. Scores are computed again at the default tolerances.
 FIT_OPTIONS = {"rtol": 1e-5, "atol": 1e-7}
+#: a run of a whole record by a model known to simulate it (the nominal model, the model with the
+#: laws found): the time a run the user asks for may take, not a candidate's 60 s (a model of
+#: hundreds of components, or a loaded machine, needs more for one run)
+WHOLE_RUN = {"time_limit": RUN_TIME_LIMIT}
 #: a fit stops when a step lowers the cost (or is predicted to) by less than this fraction: a
 #: change in RSS of 1e-5 moves a criterion by n 1e-5, far below the differences that rank candidates
 FIT_TOL = 1e-5

@@ -209,6 +209,12 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
     if comp.sensor and template.explicit == "i" and hasattr(template, "terms"):
         return _sensor_class(cause, comp, template, lib, libraries, sources, scope, units or {}, data)
     interface = interface_of(comp, lib) if template.explicit == "i" and hasattr(template, "terms") else None
+    if comp.ports:
+        if template.explicit != "i" or not hasattr(template, "terms") or hasattr(template, "hidden_modelica"):
+            raise ValueError(f"{comp.name} has {', '.join(p.name for p in comp.ports)} beside "
+                             f"{' and '.join(c.name for c in comp.connectors)}: a law of this form is not written "
+                             "into its class (the law is in the report)")
+        return _wrapper_class(cause, comp, template, lib, libraries, sources, scope, units or {}, data)
     if interface is None:
         return _template_class(cause, comp, template, libraries, sources, scope)
     from .words import parity, words
@@ -240,6 +246,55 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
             f'{html.escape(cause["law"]["equation"])}"\n  extends {interface};\n' + "\n".join(params)
             + f"\nequation\n  {law}\n" + "".join(f"  {e}\n" for e in TRANSPORT_EQUATIONS.get(interface, []))
             + f"{annotation}\nend {cause['learned_class']};\n")
+
+
+#: the nominal component inside the learned class of a component with a heat port
+WRAPPED = "nominal"
+
+
+def _wrapper_class(cause: dict, comp, template, lib, libraries, sources, scope: str, units: dict, data: str) -> str:
+    """The learned class of a component with a heat port beside its pair (a resistor, a pipe
+    with ``useHeatPort = true``): the nominal component inside (:data:`WRAPPED`, which the
+    model's modifiers go to), its own equations and heat port kept, and beside it a flow of the
+    learned law less the nominal one (what the discovery simulated: the extra flow carries what
+    the connectors' further pairs carry, as :func:`mcl.discovery.inject._carried` has it)."""
+    classes = connector_classes(comp, libraries, sources, scope)
+    ports = [c.name for c in [*comp.connectors, *comp.ports]]
+    if any(n not in classes for n in ports):
+        raise ValueError(f"the connector classes of {comp.name} ({comp.cls or 'class unknown'}) are not found")
+    nominal = lib.resolve(comp.cls, scope) if scope else None
+    nominal = nominal.name if nominal is not None else comp.cls
+    a, b = comp.connectors
+    va, vb = f"{WRAPPED}.{a.name}.{a.potential[0]}", f"{WRAPPED}.{b.name}.{b.potential[0]}"
+    names = {"v": f"({va} - {vb})", "dv": f"der({va} - {vb})", "va": va, "vb": vb}
+    (xa, xb), (fa, _) = comp.across(), comp.flow()
+    u = {"y": units.get(fa), "v": units.get(xa), "i": units.get(fa), "va": units.get(xa), "vb": units.get(xb)}
+    params, rhs = _terms(template, np.asarray(cause["w"], float), names, u)
+    name, short = cause["learned_class"], comp.cls.split(".")[-1]
+    decls = [f"  {classes[n]} {n};" for n in ports]
+    decls += [f'  {nominal} {WRAPPED} "the nominal {short}: its own equations, its heat included";',
+              f'  {name}_deviation deviation "the learned law\'s flow less the nominal one\'s, beside it";']
+    equations = [f"  connect({n}, {WRAPPED}.{n});" for n in ports]
+    equations += [f"  connect({c.name}, deviation.{c.name});" for c in comp.connectors]
+    equations.append(f"  deviation.f = {' + '.join(rhs) or '0'} - {WRAPPED}.{a.name}.{a.flow[0]};")
+    icon = icon_of(comp.cls, lib)
+    return (f'model {name} "{short} {comp.name} as learned by mcl: {html.escape(cause["law"]["equation"])}"\n'
+            + "\n".join(decls + params) + "\nequation\n" + "\n".join(equations)
+            + f"\n  annotation({icon + ', ' if icon else ''}Documentation(info=\"{_documentation(cause, data)}\"));"
+            f"\nend {name};\n" + _flow_between(f"{name}_deviation", comp, classes))
+
+
+def _flow_between(name: str, comp, classes: dict) -> str:
+    """A class that sets the flow ``f`` from its connector a to b (the pair of ``comp``), with
+    the further pairs the connectors carry taken along from the side the flow comes from."""
+    a, b = comp.connectors
+    eqs = [f"  0 = {a.name}.{a.flow[0]} + {b.name}.{b.flow[0]};", f"  {a.name}.{a.flow[0]} = f;"]
+    for x, g in zip(a.potential[1:], a.flow[1:]):
+        eqs += [f"  0 = {a.name}.{g} + {b.name}.{g};",
+                f"  {a.name}.{g} = semiLinear(f, {a.name}.{x}, {b.name}.{x});"]
+    return (f'model {name} "a flow set from outside, between the connectors of {comp.cls.split(".")[-1]}"\n'
+            f"  {classes[a.name]} {a.name};\n  {classes[b.name]} {b.name};\n"
+            f'  input Real f "the flow into {a.name}";\nequation\n' + "\n".join(eqs) + f"\nend {name};\n")
 
 
 def _terms(template, w, names: dict, u: dict) -> tuple[list[str], list[str]]:
@@ -520,7 +575,8 @@ def local_component(comp, inst: str):
 def redeclared(text: str, model_short: str, component: str, new_class: str, keep=("v", "i")) -> str | None:
     """``text`` with the declaration of ``component`` inside class ``model_short`` changed to
     ``new_class``: of its modification only what modifies the learned class's own variables
-    ``keep`` stays (a start value, fixed = true; the nominal class's parameters go), its
+    ``keep`` stays (a start value, fixed = true; the nominal class's parameters go), or where
+    ``keep`` is a name, all of it goes to that component inside the learned class; its
     comment and annotation stay. None when that declaration is not in the class."""
     head, body_end = _class_span(text, model_short)
     if not head:
@@ -540,9 +596,12 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
                 depth += {"(": 1, ")": -1}.get(rest[k], 0)
                 if depth == 0:
                     break
-            kept = [a for a in top_level_parts(rest[k0 + 1:k])
-                    if re.match(rf"\s*(?:each\s+|final\s+|redeclare\s+|package\s+)*({'|'.join(keep)})\b", a)]
-            rest = (f"({', '.join(a.strip() for a in kept)})" if kept else "") + rest[k + 1:]
+            if isinstance(keep, str):      # all of it, to the component inside (:func:`_wrapper_class`)
+                rest = f"({keep}{rest[k0:k + 1]})" + rest[k + 1:]
+            else:
+                kept = [a for a in top_level_parts(rest[k0 + 1:k])
+                        if re.match(rf"\s*(?:each\s+|final\s+|redeclare\s+|package\s+)*({'|'.join(keep)})\b", a)]
+                rest = (f"({', '.join(a.strip() for a in kept)})" if kept else "") + rest[k + 1:]
         return text[:m.start(4)] + new_class + m.group(5) + component + rest + text[stop:]
     return None
 
@@ -586,7 +645,8 @@ def write_extended(causes: list[dict], base, spec, directory: Path, data: str = 
             notes.append(str(exc))
             continue
         if "." not in comp.name or own:
-            swaps.append((comp, f"{LEARNED_PACKAGE}.{cause['learned_class']}", _kept(classes[-1], spec)))
+            swaps.append((comp, f"{LEARNED_PACKAGE}.{cause['learned_class']}",
+                          WRAPPED if comp.ports else _kept(classes[-1], spec)))
     short = spec.model_name.split(".")[-1]
     sources, model_name, extra = [], spec.model_name, ""
     if spec.sources:

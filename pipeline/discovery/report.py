@@ -305,6 +305,9 @@ def _uncertainty_rows(report) -> str:
         if cal.get("loose"):
             out.append(f"<p>Fitted, but trading off with the laws (standard error above half the value: "
                        f"one of many equally good sets): {html.escape(', '.join(cal['loose']))}</p>")
+        if cal.get("sign_changed"):
+            out.append(f"<p>Driven through zero by the fit, so held at the model's values (standing in "
+                       f"for the law, not for the system): {html.escape(', '.join(cal['sign_changed']))}</p>")
         if cal.get("not_determined"):
             out.append(f"<p>Not determined by the data (left at their values): "
                        f"{html.escape(', '.join(cal['not_determined']))}</p>")

@@ -39,9 +39,9 @@ from ..runfile import CALIBRATION_SPAN
 from ..stats import misfit_significance, noise_levels, rms
 from .candidates import Base
 from .families import spec_name
-from .fitters import residual
+from .fitters import WHOLE_RUN, residual
 from .inject import NominalForm, compiled, mode_of, rate_variables, with_law
-from .search import at_noise, search
+from .search import at_noise, limits, search
 from .verdict import EQUAL, decide, failures, role_items, weigh_unevaluated
 
 #: outputs whose noise levels differ by more than this factor are weighted by them in the fits
@@ -75,11 +75,13 @@ def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
         dae, best["_names"] = with_law(dae, comp, template, np.asarray(best["w"]) * np.asarray(best["active"]),
                                        nominal, rates, active=best["active"])
     model = compiled(dae, base.model.name, outputs=train.names, info=base.model.info, structure=base.structure)
-    result = simulate(model, train)
+    # (a candidate's time, not a whole run's: a law that makes the model crawl is not a cause)
+    took = {k: v for k, v in limits(base, 0).items() if k == "time_limit"}
+    result = simulate(model, train, options=took)
     if not result.ok:     # a stiff learned law: the tolerance its fit simulated it at
         from .fitters import FIT_OPTIONS
 
-        result = simulate(model, train, options=FIT_OPTIONS)
+        result = simulate(model, train, options={**FIT_OPTIONS, **took})
     if not result.ok:
         raise ConfigError(f"the model with the learned laws of {', '.join(b['component'] for b in bests)} does not "
                           f"simulate the training data: {result.reason}")
@@ -112,7 +114,7 @@ class Causes:
         val = weighted = None
         if self.validate is not None:
             if base.validation is None:
-                base.validation = simulate(base.model, self.validate)
+                base.validation = simulate(base.model, self.validate, options=WHOLE_RUN)
             sv = base.validation
             if sv.ok:
                 r = residual(self.validate, base.model, sv, self.outputs)
@@ -355,7 +357,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     _say_unmeasured(nominal.output_names, outputs, validate)
     _say_constant(nominal.input_names, train)
     log.info("[1/5] nominal model %s: simulating the training data", spec.model_name)
-    sim0 = simulate(nominal, train)
+    sim0 = simulate(nominal, train, options=WHOLE_RUN)
     if not sim0.ok:
         raise ConfigError(f"the nominal model does not simulate the training data: {sim0.reason}")
     y_meas = train.select(outputs).values
@@ -389,7 +391,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     report["misfit"]["where"] = misfit_in_time(train.time, resid * train.weight_of(outputs), sigma) if significant else []
     val0, val0_fit, val_y = None, None, None
     if validate is not None:
-        sv = simulate(nominal, validate)
+        sv = simulate(nominal, validate, options=WHOLE_RUN)
         if sv.ok:
             val0_fit = rms(residual(validate, nominal, sv, outputs))
             val0 = rms(residual(validate.weighted(None), nominal, sv, outputs))
@@ -400,7 +402,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         log.info("      the search fits the first %d of %d training samples (fitting.max_samples); the gain is "
                  "measured on all", spec.max_samples, len(train.time))
         _say_head(searched, train)
-        base0 = Base(nominal, simulate(nominal, searched))
+        base0 = Base(nominal, simulate(nominal, searched, options=WHOLE_RUN))
     causes = Causes(spec, searched, validate, outputs, part, rundir, reg, noise)
     found, base = causes.find(base0, val0_fit) if significant else ([], base0)
     rounds = causes.rounds

@@ -22,6 +22,7 @@ from ..errors import ConfigError
 from ..executor import TaskFailed
 from ..progress import log
 from ..sensitivity import fine_grid
+from ..simulation import SimulationOptions
 from ..stats import criterion as criterion_of, gram_inverse
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
 from .families import distillations, families, hysteresis_families, inverse_families, potential_families, role_of
@@ -38,6 +39,9 @@ PAIR_WHEN, PAIR_GAIN = 2.0, 0.5
 WORK = 50
 #: and its states may reach this many times the largest |state| of the nominal run
 SPREAD = 1e3
+#: a candidate's run may take this many times the nominal run's seconds (where that is more
+#: than SimulationOptions' 60 s)
+TIME_FACTOR = 20
 #: family indices of the hysteresis laws, the laws in both potentials and the inverse law
 #: (:func:`potential_items`)
 HYSTERESIS_INDEX, POTENTIALS_INDEX, INVERSE_INDEX = 85, 90, 95
@@ -484,6 +488,9 @@ def limits(base: Base, steps: int) -> dict:
     solver steps, and states SPREAD times beyond the largest of the nominal run's (a law that
     blows up: such runs took 7x the steps of the others before they ended)."""
     out = {"max_work": WORK * steps} if steps else {}
+    seconds = getattr(base.result, "seconds", 0.0) or 0.0
+    if seconds * TIME_FACTOR > SimulationOptions.time_limit:     # (a large model's nominal run takes long)
+        out["time_limit"] = seconds * TIME_FACTOR
     states = getattr(base.result, "states", None)
     top = float(np.max(np.abs(states))) if states is not None and np.size(states) else 0.0
     if np.isfinite(top) and top > 0:
