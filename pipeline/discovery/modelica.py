@@ -208,13 +208,13 @@ def learned_class(cause: dict, comp, libraries=(), sources=(), units: dict | Non
     lib = _library(libraries, sources)
     if comp.sensor and template.explicit == "i" and hasattr(template, "terms"):
         return _sensor_class(cause, comp, template, lib, libraries, sources, scope, units or {}, data)
-    interface = interface_of(comp, lib) if template.explicit == "i" and hasattr(template, "terms") else None
     if comp.ports:
         if template.explicit != "i" or not hasattr(template, "terms") or hasattr(template, "hidden_modelica"):
             raise ValueError(f"{comp.name} has {', '.join(p.name for p in comp.ports)} beside "
                              f"{' and '.join(c.name for c in comp.connectors)}: a law of this form is not written "
                              "into its class (the law is in the report)")
         return _wrapper_class(cause, comp, template, lib, libraries, sources, scope, units or {}, data)
+    interface = interface_of(comp, lib) if template.explicit == "i" and hasattr(template, "terms") else None
     if interface is None:
         return _template_class(cause, comp, template, libraries, sources, scope)
     from .words import parity, words

@@ -367,7 +367,8 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     noise = noise_levels(y_meas, train.time, outputs, spec.noise)
     sigma = overall(noise)
     weights = output_weights(noise, y_meas, outputs)
-    train, validate = train.weighted(weights), validate and validate.weighted(weights)
+    train = train.weighted(weights)
+    validate = validate.weighted(weights) if validate is not None else None
     train_rms0 = rms(resid)
     verdict = significance(resid, noise, outputs, train.time)
     significant = verdict.significant
@@ -612,8 +613,8 @@ def output_weights(noise: dict, y_meas: np.ndarray, outputs: list[str]) -> dict 
     :data:`WEIGHED_WHEN` (other units: a pressure in Pa beside a temperature in K): the overall
     noise over the output's own, so that every output's noise weighs as the overall noise does
     (the noise floor and the criteria read it) and a law is fitted to all outputs, not to the
-    one with the largest numbers (the pressures of a cooling loop pooled with its temperatures
-    had a pressure sensor's law named for a radiator pipe's). None where they are alike. A
+    one with the largest numbers (a fault only a current in A showed, beside a voltage in V,
+    was not found: tests/test_mixed_units.py). None where they are alike. A
     noise level is taken as at least 1e-4 of its output's spread (a noiseless output would
     outweigh all others)."""
     if len(outputs) < 2:
