@@ -5,12 +5,13 @@ extra flow beside it.
 
 A heating element on a plate held at a fixed temperature is fed through a lead; a capacitor
 buffers the node. The element conducts more than Ohm's law says at higher voltage (a cubic
-term). The data come from the circuit's ODE written by hand and solved by SciPy.
+term). The data come from the circuit's ODE written by hand and solved by SciPy: the same
+circuit as test_discover's RC, its load a heating element.
 """
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from helpers import discovered, needs_msl
+from test_discover import rc_data       # the element conducts i = 0.5 v + cubic v^3 there as here
 from mcl.compile.components import Connector, law_pair
 
 HEATER = """
@@ -46,18 +47,6 @@ end Heater;
 """
 
 
-def heater_data(path, seed: int, cubic: float) -> None:
-    """The element conducts i = 0.5 v + cubic v^3 (the nominal model says v / 2)."""
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0, 20, 401)
-    w, ph = rng.uniform(0.3, 2.5, 4), rng.uniform(0, 6, 4)
-    u = lambda s: sum(np.sin(wk * s + pk) for wk, pk in zip(w, ph))      # noqa: E731
-    rhs = lambda s, e: [((u(s) - e[0]) / 1.0 - 0.5 * e[0] - cubic * e[0] ** 3) / 0.5]  # noqa: E731
-    y = solve_ivp(rhs, (0, 20), [0.0], t_eval=t, rtol=1e-10, atol=1e-12).y[0]
-    y = y + rng.normal(0, 0.01 * np.std(y), len(y))
-    path.write_text("time,u,y\n" + "\n".join(f"{a:.10g},{b:.10g},{c:.10g}" for a, b, c in zip(t, u(t), y)) + "\n")
-
-
 def test_a_heat_port_beside_two_pins_leaves_the_pins_to_the_law():
     pin = lambda n: Connector(n, "Pin", ("v",), ("i",))                 # noqa: E731
     heat = Connector("heatPort", "HeatPort_a", ("T",), ("Q_flow",))
@@ -71,8 +60,8 @@ def test_a_heat_port_beside_two_pins_leaves_the_pins_to_the_law():
 
 @needs_msl()
 def test_a_resistor_with_its_heat_port_on_is_named_and_its_law_learned(tmp_path):
-    heater_data(tmp_path / "train.csv", 1, 0.3)
-    heater_data(tmp_path / "validate.csv", 2, 0.3)
+    rc_data(tmp_path / "train.csv", 1, 0.3)
+    rc_data(tmp_path / "validate.csv", 2, 0.3)
     report = discovered(tmp_path, "Heater.mo", "Heater", HEATER)
     assert report["misfit"]["significant"]
     cause = report["cause"]

@@ -56,7 +56,7 @@ def law_pair(connectors: list[Connector]) -> tuple[list[Connector], list[Connect
     equations. Any other component: (its connectors, [])."""
     heat = [c for c in connectors if c.potential == ("T",) and c.flow == ("Q_flow",)]
     pair = [c for c in connectors if c not in heat]
-    if len(connectors) > 2 and heat and two_of_a_kind(pair):
+    if heat and two_of_a_kind(pair):
         return pair, heat
     return list(connectors), []
 

@@ -18,8 +18,8 @@ import numpy as np
 from ..data import TimeSeries
 from ..progress import log
 from ..runfile import unknown_free
-from ..stats import gram_inverse, rms
-from .fitters import FIT_OPTIONS, WHOLE_RUN, residual
+from ..stats import gram_inverse
+from .fitters import FIT_OPTIONS, WHOLE_RUN, residual, rms_both
 
 #: a parameter is determined by the data when its standard error is below this share of its
 #: value: two standard errors from 0. (At 1.0 a servo drive's load inertia, 0.83 of its value,
@@ -51,7 +51,7 @@ def jacobian(model, data: TimeSeries, params: dict, names: list[str]):
     res = problem.simulate([params[n] for n in names], gradient=True)
     if not res.ok:
         return None, None
-    r = (problem.y_meas - res.outputs[:, problem.idx]) * problem.weights
+    r = residual(data, model, res, problem.outputs)
     S = problem.output_sensitivities(res)
     ok = np.isfinite(r)
     return r[ok], S[ok]
@@ -212,8 +212,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     sim = simulate(model, whole, new, options=WHOLE_RUN)
     # (reported in the data's units; the calibrations of several laws are compared on the
     # residual weighted as it was fitted)
-    out["train_rms"] = rms(residual(whole.weighted(None), model, sim, outputs)) if sim.ok else None
-    out["_fit_rms"] = rms(residual(whole, model, sim, outputs)) if sim.ok else None
+    out["train_rms"], out["_fit_rms"] = rms_both(whole, model, sim, outputs)
     if validate is not None:
         # (at most a quarter of the record: the rest is judged on what was not fitted to it)
         head = validate.head(min(own_start or len(train.time), max(len(validate.time) // 4, 1)))
@@ -223,7 +222,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
         sv = simulate(model, validate, own, options=WHOLE_RUN)
         if not sv.ok and seen:         # a start fitted on the head that fails later: the training's
             sv, seen = simulate(model, validate, new, options=WHOLE_RUN), []
-        out["validation_rms"] = rms(residual(validate.weighted(None), model, sv, outputs)) if sv.ok else None
+        out["validation_rms"] = rms_both(validate, model, sv, outputs)[0]
         if seen:
             out["validation_initial_state"] = seen
     out["params"], out["run"] = new, sim

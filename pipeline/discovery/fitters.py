@@ -22,7 +22,7 @@ import numpy as np
 from ..data import TimeSeries
 from ..errors import MclError
 from ..simulation import RUN_TIME_LIMIT
-from ..stats import criterion as criterion_of, gram_inverse, rss as rss_of
+from ..stats import criterion as criterion_of, gram_inverse, rms, rss as rss_of
 
 #: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
 #: and measured inputs (linear between samples) make CVODES stop at every kink; 10x looser
@@ -43,6 +43,15 @@ def residual(data: TimeSeries, model, result, outputs=None) -> np.ndarray:
     outputs = [o for o in model.output_names if o in data.names] if outputs is None else outputs
     measured = data.select(outputs).values
     return (measured - result.outputs[:, [model.output_names.index(o) for o in outputs]]) * data.weight_of(outputs)
+
+
+def rms_both(data: TimeSeries, model, result, outputs) -> tuple[float | None, float | None]:
+    """The RMS of a run's residual in the data's units (reported) and weighted as the fits
+    weigh it (``data.weights``: compared); (None, None) for a failed run."""
+    if not result.ok:
+        return None, None
+    r = residual(data, model, result, outputs)
+    return rms(r / data.weight_of(outputs)), rms(r)
 
 
 

@@ -39,9 +39,9 @@ from ..runfile import CALIBRATION_SPAN
 from ..stats import misfit_significance, noise_levels, rms
 from .candidates import Base
 from .families import spec_name
-from .fitters import WHOLE_RUN, residual
+from .fitters import WHOLE_RUN, rms_both
 from .inject import NominalForm, compiled, mode_of, rate_variables, with_law
-from .search import at_noise, limits, search
+from .search import at_noise, search, time_limit
 from .verdict import EQUAL, decide, failures, role_items, weigh_unevaluated
 
 #: outputs whose noise levels differ by more than this factor are weighted by them in the fits
@@ -76,7 +76,7 @@ def with_causes(base: Base, bests: list[dict], train: TimeSeries) -> Base:
                                        nominal, rates, active=best["active"])
     model = compiled(dae, base.model.name, outputs=train.names, info=base.model.info, structure=base.structure)
     # (a candidate's time, not a whole run's: a law that makes the model crawl is not a cause)
-    took = {k: v for k, v in limits(base, 0).items() if k == "time_limit"}
+    took = time_limit(base)
     result = simulate(model, train, options=took)
     if not result.ok:     # a stiff learned law: the tolerance its fit simulated it at
         from .fitters import FIT_OPTIONS
@@ -115,10 +115,7 @@ class Causes:
         if self.validate is not None:
             if base.validation is None:
                 base.validation = simulate(base.model, self.validate, options=WHOLE_RUN)
-            sv = base.validation
-            if sv.ok:
-                r = residual(self.validate, base.model, sv, self.outputs)
-                val, weighted = rms(r / self.validate.weight_of(self.outputs)), rms(r)
+            val, weighted = rms_both(self.validate, base.model, base.validation, self.outputs)
         return resid, val, weighted
 
     def round(self, base: Base, val_base) -> list[dict]:
@@ -393,9 +390,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     val0, val0_fit, val_y = None, None, None
     if validate is not None:
         sv = simulate(nominal, validate, options=WHOLE_RUN)
-        if sv.ok:
-            val0_fit = rms(residual(validate, nominal, sv, outputs))
-            val0 = rms(residual(validate.weighted(None), nominal, sv, outputs))
+        val0, val0_fit = rms_both(validate, nominal, sv, outputs)
         val_y = [_outputs_of(nominal, sv, outputs), None]
     searched, base0 = train, Base(nominal, sim0)
     if significant and len(train.time) > spec.max_samples:

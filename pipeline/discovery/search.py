@@ -483,14 +483,18 @@ def simplest_first(todo: list, templates: dict) -> list:
     return [first, *(it for it in todo if it is not first)]
 
 
+def time_limit(base: Base) -> dict:
+    """A candidate's time limit where :data:`TIME_FACTOR` times the nominal run's seconds is
+    more than SimulationOptions' own (a large model's nominal run takes long), else none."""
+    seconds = getattr(base.result, "seconds", 0.0) or 0.0
+    return {"time_limit": seconds * TIME_FACTOR} if seconds * TIME_FACTOR > SimulationOptions.time_limit else {}
+
+
 def limits(base: Base, steps: int) -> dict:
     """Simulation options that stop a candidate's run early: WORK times the nominal run's
     solver steps, and states SPREAD times beyond the largest of the nominal run's (a law that
     blows up: such runs took 7x the steps of the others before they ended)."""
-    out = {"max_work": WORK * steps} if steps else {}
-    seconds = getattr(base.result, "seconds", 0.0) or 0.0
-    if seconds * TIME_FACTOR > SimulationOptions.time_limit:     # (a large model's nominal run takes long)
-        out["time_limit"] = seconds * TIME_FACTOR
+    out = {"max_work": WORK * steps, **time_limit(base)} if steps else time_limit(base)
     states = getattr(base.result, "states", None)
     top = float(np.max(np.abs(states))) if states is not None and np.size(states) else 0.0
     if np.isfinite(top) and top > 0:
