@@ -637,3 +637,54 @@ def test_a_fluid_example_whose_functions_stay_calls_is_an_fmu_that_runs_as_in_pr
     m = np.interp(t, theirs["time"], theirs["tank1.m"])
     assert np.ptp(ours.states[:, k]) > 100.0          # the tank empties
     np.testing.assert_allclose(m, ours.states[:, k], atol=1e-3 * np.ptp(ours.states[:, k]))
+
+
+OPEN_TANK = """
+model FilledTank "an open tank of IF97 water, filled and drained by a pump's flow"
+  import Modelica.Fluid.Vessels.OpenTank;
+  import Modelica.Fluid.Sources.MassFlowSource_T;
+  replaceable package Medium = Modelica.Media.Water.StandardWater;
+  inner Modelica.Fluid.System system(energyDynamics = Modelica.Fluid.Types.Dynamics.FixedInitial);
+  Modelica.Blocks.Interfaces.RealInput m_flow "pumped in (+) or out (-), kg/s";
+  OpenTank tank(redeclare package Medium = Medium, height = 2, crossArea = 2, level_start = 1,
+    nPorts = 1, portsData = {Modelica.Fluid.Vessels.BaseClasses.VesselPortsData(diameter = 0.05)});
+  MassFlowSource_T pump(redeclare package Medium = Medium, nPorts = 1, use_m_flow_in = true, T = 300);
+  output Real m = tank.m;
+  output Real level = tank.level;
+  output Real h = tank.medium.h;
+  output Real h_in = pump.medium.h;
+equation
+  connect(m_flow, pump.m_flow_in);
+  connect(pump.ports[1], tank.ports[1]);
+end FilledTank;
+"""
+
+
+def test_an_open_tank_of_if97_water_fills_and_drains_as_its_balances_say(msl_path, tmp_path):
+    """IF97's density reads the medium's phase, a discrete value the modes set; through the
+    model's loop solve its derivative was NaN, a NaN column in every Newton matrix, and the
+    run failed at its first step (as MSL's HeatingSystem, PumpingSystem and
+    MeasuringTemperature did). The run follows the balances integrated by hand: the mass is
+    the pumped flow's integral; the enthalpy mixes toward the warmer inflow and holds while
+    the tank drains."""
+    from scipy.integrate import solve_ivp
+
+    import mcl
+    from mcl.data import TimeSeries
+
+    (tmp_path / "FilledTank.mo").write_text(OPEN_TANK)
+    model = mcl.compile_model([tmp_path / "FilledTank.mo"], "FilledTank")
+    t = np.linspace(0.0, 2.0, 81)
+    flow = lambda s: 2.0 * np.sin(2 * np.pi * s)      # noqa: E731
+    res = mcl.simulate(model, TimeSeries(t, flow(t)[:, None], ["m_flow"]), t_out=t)
+    assert res.ok, res.reason
+    m, h, h_in = res.output("m"), res.output("h"), res.output("h_in")
+    pumped = np.concatenate([[0.0], np.cumsum(np.diff(t) * (flow(t)[1:] + flow(t)[:-1]) / 2)])
+    # (the input between samples is a straight line; the mass, 2 t, is integrated to 1e-6 of it)
+    assert np.max(np.abs(m - m[0] - pumped)) < 2e-2 * np.ptp(pumped)
+    ref = solve_ivp(lambda s, y: [max(flow(s), 0.0) * (h_in[0] - y[0]) / np.interp(s, t, m)],
+                    (0.0, 2.0), [h[0]], t_eval=t, rtol=1e-10, atol=1e-6, max_step=0.01)
+    assert h[-1] - h[0] > 10.0                               # (J/kg: it warms)
+    assert np.max(np.abs(h - ref.y[0])) < 1e-2 * (h[-1] - h[0])
+    level = res.output("level")
+    assert abs(level[0] - 1.0) < 1e-9 and np.all(np.abs(level - m / m[0]) < 1e-4)

@@ -1321,7 +1321,11 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
     def inner_p(D, D_pre, x_pre, flags, z_pre=None):     # the order of ``extra``
         return ca.vertcat(Pu, D, D_pre, x_pre, flags, ca.MX.zeros(nzp) if z_pre is None else z_pre, G)
 
-    PA = inner_p(D, D, orig(X), ca.MX.zeros(nf))
+    # (held: between events x' does not vary with the discrete values or pre(x); through a
+    # loop's Newton solve, which reads every parameter, their derivatives can be NaN, and one
+    # NaN column fails every Newton step of the integrator: a tank of IF97 water)
+    hold = _held if inner.nonlinear_blocks else (lambda v: v)
+    PA = inner_p(hold(D), hold(D), hold(orig(X)), ca.MX.zeros(nf))
     names = inner.probe_names
     where_is = {n: j for j, n in enumerate(names)}
     idx = {key: [where_is[n] for n in hidden[key]] for key in hidden}
@@ -1401,6 +1405,14 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
         loops=loops, given=given,
         solved=mk("solved", [inner.solved(X, U, PA, T)]) if ng else None, guess0=inner.guess0,
     )
+
+
+def _held(v: ca.MX) -> ca.MX:
+    """``v`` with a zero derivative."""
+    if not v.numel():
+        return v
+    s = ca.SX.sym("v", v.sparsity())
+    return ca.Function("held", [s], [s], {"is_diff_in": [False], "is_diff_out": [False]})(v)
 
 
 def composed_checks(out: ca.Function, alg_res: ca.Function, drift: ca.Function) -> ca.Function:
