@@ -661,10 +661,10 @@ end FilledTank;
 
 
 def test_an_open_tank_of_if97_water_fills_and_drains_as_its_balances_say(msl_path, tmp_path):
-    """IF97's density reads the medium's phase, a discrete value the modes set; through the
-    model's loop solve its derivative was NaN, a NaN column in every Newton matrix, and the
-    run failed at its first step (as MSL's HeatingSystem, PumpingSystem and
-    MeasuringTemperature did). The run follows the balances integrated by hand: the mass is
+    """IF97's density reads the medium's phase, a discrete value the modes set; the
+    right-hand side's derivatives with respect to the discrete values and pre(x), taken
+    through the model's loop solve, were NaN, a NaN in every Newton matrix, and the run failed
+    at its first step (as MSL's HeatingSystem, PumpingSystem and MeasuringTemperature did). The run follows the balances integrated by hand: the mass is
     the pumped flow's integral; the enthalpy mixes toward the warmer inflow and holds while
     the tank drains."""
     from scipy.integrate import solve_ivp
@@ -680,7 +680,8 @@ def test_an_open_tank_of_if97_water_fills_and_drains_as_its_balances_say(msl_pat
     assert res.ok, res.reason
     m, h, h_in = res.output("m"), res.output("h"), res.output("h_in")
     pumped = np.concatenate([[0.0], np.cumsum(np.diff(t) * (flow(t)[1:] + flow(t)[:-1]) / 2)])
-    # (the input between samples is a straight line; the mass, 2 t, is integrated to 1e-6 of it)
+    # (the input between samples is a straight line, as the trapezoids take it; the mass,
+    # 2 t, is integrated to the solver's relative tolerance of it: 2e-3 kg a step)
     assert np.max(np.abs(m - m[0] - pumped)) < 2e-2 * np.ptp(pumped)
     ref = solve_ivp(lambda s, y: [max(flow(s), 0.0) * (h_in[0] - y[0]) / np.interp(s, t, m)],
                     (0.0, 2.0), [h[0]], t_eval=t, rtol=1e-10, atol=1e-6, max_step=0.01)

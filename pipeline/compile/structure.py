@@ -1323,9 +1323,11 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
 
     # (held: between events x' does not vary with the discrete values or pre(x); through a
     # loop's Newton solve, which reads every parameter, their derivatives can be NaN, and one
-    # NaN column fails every Newton step of the integrator: a tank of IF97 water)
+    # NaN column fails every Newton step of the integrator: a tank of IF97 water. Without
+    # loops the functions are expanded to SX, which inlines the hold: none is made there)
     hold = _held if inner.nonlinear_blocks else (lambda v: v)
-    PA = inner_p(hold(D), hold(D), hold(orig(X)), ca.MX.zeros(nf))
+    DH = hold(D)
+    PA = inner_p(DH, DH, hold(orig(X)), ca.MX.zeros(nf))
     names = inner.probe_names
     where_is = {n: j for j, n in enumerate(names)}
     idx = {key: [where_is[n] for n in hidden[key]] for key in hidden}
