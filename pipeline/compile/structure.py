@@ -53,6 +53,8 @@ MODED_SYMBOLIC_MAX = 3
 NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
 #: an algebraic loop's residual accepted from Newton's method without the fallback
 LOOP_TOL = 1e-9
+#: a preferred variable's pin whose row (the states' columns scaled to 1) is below this moves no state
+WISH_FLOOR = 1e-12
 #: an initial system's residual above this after every fallback: no consistent start (NaN)
 INIT_TOL = 1e-6
 #: a loop's row is met to LOOP_TOL or to a thousand rounding errors of its terms' sum, the
@@ -452,7 +454,11 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             if tears.numel() <= SYMBOLIC_SOLVE_MAX and newton is not None:
                 zl = ca.SX.sym(f"zl{k}", tears.numel())
                 J = ca.jacobian(residual, tears)
-                step = tears - (ca.solve(J, residual) if tears.numel() > 1 else residual / J)
+                # (where J is singular, the least-squares step: a pipe between two closed
+                # valves fixes its pressure only to what its head allows, and the Newton step,
+                # infinite there, left a NaN in every Jacobian of ControlledTanks' run)
+                newton_step = ca.solve(J, residual) if tears.numel() > 1 else residual / J
+                step = tears - _or_nearest(newton_step, J, -residual, np.zeros(tears.numel()))
                 sol_newton = spread(ca.Function(f"newton{k}", [tears, zprev, *args], [step])(zl, prev_sx, *args),
                                     prev_sx, *args)
                 zl_syms.append(zl)
@@ -1323,9 +1329,12 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
 
     # (held: between events x' does not vary with the discrete values or pre(x); through a
     # loop's Newton solve, which reads every parameter, their derivatives can be NaN, and one
-    # NaN column fails every Newton step of the integrator: a tank of IF97 water. Without
-    # loops the functions are expanded to SX, which inlines the hold: none is made there)
-    hold = _held if inner.nonlinear_blocks else (lambda v: v)
+    # NaN column fails every Newton step of the integrator: a tank of IF97 water. Only where
+    # the solver differentiates through that solve: without loops the functions are expanded
+    # to SX, which inlines the hold; where the loops' Newton form gives the Jacobian, that
+    # Jacobian with held values disagreed with the right-hand side's differences, and
+    # DrumBoiler took 27 500 solver steps instead of 585)
+    hold = _held if inner.nonlinear_blocks and inner.loops is None else (lambda v: v)
     DH = hold(D)
     PA = inner_p(DH, DH, hold(orig(X)), ca.MX.zeros(nf))
     names = inner.probe_names
@@ -1811,8 +1820,11 @@ def _granted(J: np.ndarray, wishes: np.ndarray, fixed: list[int], n: int) -> lis
         v = w.astype(float)
         for _ in range(2):
             v = v - Q @ (Q.T @ v)
-        # (the columns are scaled to 1: a wish whose row is 1e-114 there moves no state)
-        if np.linalg.norm(v) > 1e-8 * max(np.linalg.norm(w), 1.0):
+        # (relative to the row itself, down to a floor: the columns are scaled to their
+        # largest entries, and a tank's level, m/(A d), was 7e-9 beside its temperature's
+        # U/(m c) at m = 0, and left its start at 0 where an absolute 1e-8 was asked for; a
+        # row of 1e-114 there moves no state)
+        if np.linalg.norm(v) > 1e-8 * max(np.linalg.norm(w), WISH_FLOOR):
             Q = np.hstack([Q, (v / np.linalg.norm(v))[:, None]])
             kept.append(k)
     return kept
