@@ -140,6 +140,13 @@ _BRENT = [("          while not found loop\n", "          for iter in 1:200 loop
           ("          // Initialize variables\n", "          u := u_min; // Initialize variables (mcl: u defined)\n", 2),
 ]
 
+# Modelica.Math.Nonlinear.solveOneNonlinearEquation (MoistAir's T_phX, and any medium
+# solving for its temperature): the same Brent search, the same rewrites at its indentation
+_SOLVE_ONE = [("    while not found loop\n", "    for iter in 1:200 loop if not found then // mcl: bounded\n"),
+              ("      end if;\n    end while;\n", "      end if;\n    end if; end for;\n"),
+              ("      error(\n", "      assert(false,\n"),
+              ("    // Initialize variables\n", "    u := u_min; // Initialize variables (mcl: u defined)\n")]
+
 # Modelica.Blocks.Continuous.Internal.Filter.base: rumoca cannot lower a branch on an array's
 # size that fills the array in a loop (ChebyshevI, odd orders: "missing function value
 # definition") or reads its element 1 where it has none (Bessel, even orders). ChebyshevI's two
@@ -249,9 +256,67 @@ _NOISE = [
     ("then automaticLocalSeed(getInstanceName()) else fixedLocalSeed;",
      "then Modelica.Utilities.Strings.hashString(getInstanceName()) else fixedLocalSeed;")]
 
+# Modelica.Media.Water.IF97_Utilities.BaseIF97.Transport.cond_dTp (every IF97 medium's
+# thermal conductivity): rumoca refuses a variable that some branches of an if-statement leave
+# unset ("reads `region`, which only some branches of the conditional" set: the industrial
+# method's branch sets none of the scientific method's). Bound at their declarations, each
+# then set again on every branch that reads it (or failing its assert), they change no value.
+_IF97_REGION = [(
+    """        Integer region(min=1, max=5) "IF97 region, valid values:1,2,3, and 5";
+""", """        Integer region(min=1, max=5) = 1 "IF97 region, valid values:1,2,3, and 5 (mcl: bound, for rumoca)";
+"""), (
+    """        Real delta "Dimensionless density";
+        Real tau "Dimensionless temperature";
+        Real deltam1 "Dimensionless density";
+        Real taum1 "Dimensionless temperature";
+        Real Lam0 "Part of thermal conductivity";
+        Real Lam1 "Part of thermal conductivity";
+        Real Lam2 "Part of thermal conductivity";
+        Real tfun "Auxiliary variable";
+        Real rhofun "Auxiliary variable";
+        Real dpitau "Auxiliary variable";
+        Real ddelpi "Auxiliary variable";
+        Real d2 "Auxiliary variable";
+        Modelica.Media.Common.GibbsDerivs g
+          "Dimensionless Gibbs function and derivatives w.r.t. pi and tau";
+        Modelica.Media.Common.HelmholtzDerivs f
+          "Dimensionless Helmholtz function and derivatives w.r.t. delta and tau";
+        Real Tc=T - 273.15 "Celsius temperature for region check";
+        Real Chi "Symmetrized compressibility";
+""", """        Real delta = 0 "Dimensionless density";
+        Real tau = 0 "Dimensionless temperature";
+        Real deltam1 = 0 "Dimensionless density";
+        Real taum1 = 0 "Dimensionless temperature";
+        Real Lam0 = 0 "Part of thermal conductivity";
+        Real Lam1 = 0 "Part of thermal conductivity";
+        Real Lam2 = 0 "Part of thermal conductivity";
+        Real tfun = 0 "Auxiliary variable";
+        Real rhofun = 0 "Auxiliary variable";
+        Real dpitau = 0 "Auxiliary variable";
+        Real ddelpi = 0 "Auxiliary variable";
+        Real d2 = 0 "Auxiliary variable";
+        Modelica.Media.Common.GibbsDerivs g = Basic.g1(p, T)
+          "Dimensionless Gibbs function and derivatives w.r.t. pi and tau";
+        Modelica.Media.Common.HelmholtzDerivs f
+          "Dimensionless Helmholtz function and derivatives w.r.t. delta and tau";
+        Real Tc=T - 273.15 "Celsius temperature for region check";
+        Real Chi = 0 "Symmetrized compressibility";
+""")]
+
+# Modelica.Media.Air.MoistAir: rumoca does not resolve a field of the package's constant
+# records (an unresolved `...MoistAir.dryair.R_s`). The two gas constants as constants of
+# their own, with the values those records hold (SingleGasesData.Air.R_s and H2O.R_s).
+_MOIST_AIR_R = [
+    ("dryair.R_s", "dryair_R_s", 13), ("steam.R_s", "steam_R_s", 13),
+    ("dryair.MM", "0.0289651159", 4), ("steam.MM", "0.01801528", 4),
+    ("  constant IdealGases.Common.DataRecord steam=IdealGases.Common.SingleGasesData.H2O;\n",
+     "  constant IdealGases.Common.DataRecord steam=IdealGases.Common.SingleGasesData.H2O;"
+     " constant Real dryair_R_s = 287.0512249529787; constant Real steam_R_s = 461.5233290850878; // mcl\n")]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
+    ("Modelica", ("Math", "Nonlinear.mo")): _SOLVE_ONE,
     ("Modelica", ("Math", "Random.mo")): [_IMPURE_INIT, *_STATE_SLICES],
     ("Modelica", ("Blocks", "Interfaces.mo")): _NOISE,
     ("Modelica", ("Blocks", "Continuous.mo")): [_FIND_INTERVAL, *_BRENT, *_FILTER_BASE],
@@ -261,6 +326,8 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Electrical", "Machines", "Examples", "ControlledDCDrives", "Utilities",
                   "PartialControlledDCPM.mo")): [_DRIVE_DATA],
     ("Modelica", ("Media", "package.mo")): [_SIMPLE_MEDIUM_X],
+    ("Modelica", ("Media", "Water", "IF97_Utilities.mo")): _IF97_REGION,
+    ("Modelica", ("Media", "Air", "MoistAir.mo")): _MOIST_AIR_R,
 }
 
 
