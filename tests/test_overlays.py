@@ -12,12 +12,19 @@ MSL = Path(__file__).resolve().parents[2] / "shared" / "msl"
 pytestmark = pytest.mark.skipif(not (MSL / "Modelica" / "package.mo").is_file(), reason=f"the MSL is not at {MSL}")
 
 
-def _run(tmp_path, monkeypatch, text: str, name: str, t):
+def _simulated(tmp_path, monkeypatch, text: str, name: str, t):
+    """(model, its run over ``t``) of the model ``name`` in ``text``, checked to succeed."""
     monkeypatch.setenv("MODELICAPATH", str(MSL))
     (tmp_path / f"{name}.mo").write_text(text)
     model = mcl.compile_model([tmp_path / f"{name}.mo"], name)
     res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
     assert res.ok, res.reason
+    return model, res
+
+
+def _run(tmp_path, monkeypatch, text: str, name: str, t):
+    """The run's states, by name."""
+    model, res = _simulated(tmp_path, monkeypatch, text, name, t)
     return lambda n: res.states[:, model.ode.x_names.index(n)]
 
 
@@ -225,21 +232,12 @@ def test_the_msl_cccv_charging_example_has_its_two_rc_elements(monkeypatch):
         assert np.abs(dv - (y["battery.r0.i"] * Rs - vk) / tau)[inside].max() < 1e-2 * np.abs(dv).max()
 
 
-def _outputs(tmp_path, monkeypatch, text: str, name: str, t):
-    monkeypatch.setenv("MODELICAPATH", str(MSL))
-    (tmp_path / f"{name}.mo").write_text(text)
-    model = mcl.compile_model([tmp_path / f"{name}.mo"], name)
-    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
-    assert res.ok, res.reason
-    return res.output
-
-
 def test_water_conducts_heat_as_iapws_gives(tmp_path, monkeypatch):
     """IF97 water's thermal conductivity sets its local variables on only some branches (the
     scientific method's), which rumoca refuses; the overlay binds them at their declarations.
     Liquid water at 25 degC and 1 bar conducts 0.6065 W/(m K) (IAPWS 2011, its table of
     reference values); the industrial formulation the MSL uses is within 0.5 % of it."""
-    out = _outputs(tmp_path, monkeypatch, """
+    out = _simulated(tmp_path, monkeypatch, """
 model Conduction
   package Medium = Modelica.Media.Water.StandardWater;
   Real x(start = 0, fixed = true);
@@ -247,7 +245,7 @@ model Conduction
 equation
   der(x) = 1;
 end Conduction;
-""", "Conduction", np.linspace(0.0, 1.0, 3))
+""", "Conduction", np.linspace(0.0, 1.0, 3))[1].output
     assert abs(out("lambda")[0] - 0.6065) < 0.005 * 0.6065
 
 
@@ -255,7 +253,7 @@ def test_moist_air_has_the_gas_constant_of_its_mixture(tmp_path, monkeypatch):
     """MoistAir reads the gas constants of its package's constant records (dry air's and
     steam's R_s), which rumoca does not resolve; the overlay names their values. Air with 1 %
     steam by mass: R = 0.99 x 287.05 + 0.01 x 461.52 J/(kg K) (R / M of each gas)."""
-    out = _outputs(tmp_path, monkeypatch, """
+    out = _simulated(tmp_path, monkeypatch, """
 model MoistGas
   package Medium = Modelica.Media.Air.MoistAir;
   Real x(start = 0, fixed = true);
@@ -263,6 +261,6 @@ model MoistGas
 equation
   der(x) = 1;
 end MoistGas;
-""", "MoistGas", np.linspace(0.0, 1.0, 3))
+""", "MoistGas", np.linspace(0.0, 1.0, 3))[1].output
     R = 8.314472        # J/(mol K), CODATA 2006, as the MSL's gas records were computed with
     assert abs(out("R")[0] - (0.99 * R / 0.0289651159 + 0.01 * R / 0.01801528)) < 1e-6 * 288.8

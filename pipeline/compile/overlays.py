@@ -8,6 +8,7 @@ a message naming a line of the file still names the right one.
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 from . import bindings, records, redeclares
@@ -141,11 +142,9 @@ _BRENT = [("          while not found loop\n", "          for iter in 1:200 loop
 ]
 
 # Modelica.Math.Nonlinear.solveOneNonlinearEquation (MoistAir's T_phX, and any medium
-# solving for its temperature): the same Brent search, the same rewrites at its indentation
-_SOLVE_ONE = [("    while not found loop\n", "    for iter in 1:200 loop if not found then // mcl: bounded\n"),
-              ("      end if;\n    end while;\n", "      end if;\n    end if; end for;\n"),
-              ("      error(\n", "      assert(false,\n"),
-              ("    // Initialize variables\n", "    u := u_min; // Initialize variables (mcl: u defined)\n")]
+# solving for its temperature): the same Brent search, indented 6 spaces less, and the same
+# rewrites of it (once each)
+_SOLVE_ONE = [(re.sub(r"(?m)^ {6}", "", old), re.sub(r"(?m)^ {6}", "", new)) for old, new, _ in _BRENT]
 
 # Modelica.Blocks.Continuous.Internal.Filter.base: rumoca cannot lower a branch on an array's
 # size that fills the array in a loop (ChebyshevI, odd orders: "missing function value
@@ -259,8 +258,9 @@ _NOISE = [
 # Modelica.Media.Water.IF97_Utilities.BaseIF97.Transport.cond_dTp (every IF97 medium's
 # thermal conductivity): rumoca refuses a variable that some branches of an if-statement leave
 # unset ("reads `region`, which only some branches of the conditional" set: the industrial
-# method's branch sets none of the scientific method's). Bound at their declarations, each
-# then set again on every branch that reads it (or failing its assert), they change no value.
+# method's branch sets none of the scientific method's). Bound at their declarations (the
+# record g too: unbound, rumoca reports a "missing function value definition"), each then set
+# again on every branch that reads it (or failing its assert), they change no value.
 _IF97_REGION = [(
     """        Integer region(min=1, max=5) "IF97 region, valid values:1,2,3, and 5";
 """, """        Integer region(min=1, max=5) = 1 "IF97 region, valid values:1,2,3, and 5 (mcl: bound, for rumoca)";
