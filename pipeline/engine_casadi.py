@@ -49,6 +49,11 @@ _INTEGRATORS = 64         # integrators kept per plan (built on demand: a few ms
 SENS_SCALE = 1e-6
 DETECTION_POINTS = 400    # at least this many points over the horizon where relations are checked
 MAX_EVENT_ITERATIONS = 100
+#: a time event's iteration reads time this far past the instant (relative, at least 1): a
+#: relation on time takes its value after the event there (``time > 1`` is true after the
+#: event at 1, but false at 1 itself, and a when-clause on it waited for the run's end); well
+#: above the rounding an instant is snapped within (see _snapped)
+AFTER_TIME_EVENT = 1024 * np.finfo(float).eps
 MAX_EVENTS = 100000
 EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
 ZOOM_TOL = 1e-7           # a crossing on the states located to this fraction of the interval it was seen in
@@ -748,9 +753,12 @@ class _Plan:
             result.terminated = ended[1]
             log.info("the model terminated the run at %s", ended[1])
         if self.ns:
-            # column k of traj holds vec(S(t_k)); the mapped function wants [S(t_1), ..., S(t_N)]
+            # column k of traj holds vec(S) at integration point k; the mapped function wants
+            # [S(t_1), ..., S(t_N)] at the output points (until stop 83 the first N integration
+            # points: with events or a relation watched, the grid holds more points than the
+            # output, and a thermostat's sensitivities were read at the wrong times)
             S = np.hstack([traj[self.nx:, k].reshape(self.nx, self.ns, order="F") / self.scale(p)
-                           for k in range(N)])
+                           for k in self.out_idx])
             extra = ([np.repeat(self.q[:, None], N, 1), np.repeat(self.qp[:, None], N, 1)]
                      if self.split is not None else [])
             dy = np.array(self.sens(X, S, self.u_out, P, t_out[None, :], *extra))
@@ -779,8 +787,8 @@ class _Hybrid:
     A relation that changes sign between two points is located on the solution by narrowing its
     interval (:meth:`zoom`: each call one integration, read at many points), one on time alone
     by a safeguarded secant (:meth:`bisect`: no integration), the state taken just past it, and the discrete variables iterated to a fixed point; a relation that switches and
-    switches back between two points is not seen. Sensitivities are carried through unchanged
-    across an event (their jump is left out: a Gauss-Newton step only needs them roughly).
+    switches back between two points is not seen. Sensitivities jump where a located crossing
+    moves with the parameters (:meth:`jumped`).
     """
 
     def __init__(self, ode, t_out):
@@ -798,6 +806,7 @@ class _Hybrid:
         self.reset()
         self.maps: dict = {}
         self._free = None
+        self._g_jac = None
 
     def reset(self):
         self.count = 0
@@ -1009,7 +1018,9 @@ class _Hybrid:
             self.count += 1
             t_star, x_star = self.locate(plan, xa, ta, tb, p, rels, g_a, budget)
             self.spaced(t_star)
+            before = x_star
             t_star, x_star = self.settle(plan, x_star, p, t_star, t_int[rest[j]], budget)
+            x_star = self.jumped(plan, before, x_star, p, t_star, rels)
             if t_star >= t_int[rest[j]]:          # located at the grid point itself
                 traj[:, rest[j]] = x_star
                 self.at_point(plan, rest[j], p, traj)
@@ -1039,6 +1050,57 @@ class _Hybrid:
                 except _Unsettled:
                     pass
             raise exc from None
+
+    def jumped(self, plan, before, after, p, t, rels):
+        """``after`` (the state past the event at ``t``) with its sensitivities moved as the event
+        moves: where the relation r crosses, g_r(x(tau), p, tau) = 0, so its time moves by
+        dtau/dp = -(g_x S + g_p) / (g_x f- + g_t), and past it the states' slopes are f+ instead
+        of f-: S+ = S- + (f- - f+) dtau/dp. Carried through unchanged, a thermostat's switching
+        times did not move in a fit's derivatives, and the fit of its room's wall stalled far
+        from the data. States a reinit() set keep theirs (their jump needs the reinit's own
+        derivative)."""
+        nx, ns = plan.nx, plan.ns
+        rels = np.flatnonzero(rels) if np.asarray(rels).dtype == bool else np.asarray(rels, int)
+        if not ns or self.zero is None or not len(rels):
+            return after
+        jac = self.g_jacobian()
+        if jac is None:
+            return after
+        u = plan.u_at(t)
+        gx, gp, gt = (np.array(v) for v in jac(before[:nx], u, p, t))
+        f_minus = np.array(self.ode.ode(before[:nx], u, p, t)).ravel()
+        f_plus = np.array(self.ode.ode(after[:nx], u, p, t)).ravel()
+        S = before[nx:nx * (ns + 1)].reshape(nx, ns, order="F")
+        speed = gx[rels] @ f_minus + gt[rels, 0]
+        # the relation that crossed here: the one nearest its crossing, in time along f-
+        g_now = self.g(plan, before, p, t)[rels]
+        r = int(np.argmin(np.abs(g_now) / np.maximum(np.abs(speed), 1e-300)))
+        if not np.isfinite(speed[r]) or abs(speed[r]) <= 1e-12 * (np.abs(gx[rels[r]]) @ np.abs(f_minus) + abs(gt[rels[r], 0])):
+            return after       # (grazing: the event's time is not a smooth function of p)
+        dtau = -(gx[rels[r]] @ S + gp[rels[r], plan.sel] * plan.scale(p)) / speed[r]
+        jump = np.outer(f_minus - f_plus, dtau)
+        kept = after[:nx] != before[:nx]
+        kept[nx - self.nd:] = False
+        jump[kept] = 0.0          # (set by a reinit)
+        if not np.all(np.isfinite(jump)):
+            return after
+        out = np.array(after, float)
+        out[nx:nx * (ns + 1)] = (after[nx:nx * (ns + 1)].reshape(nx, ns, order="F") + jump).ravel(order="F")
+        return out
+
+    def g_jacobian(self):
+        """The relations' derivatives in the states, the parameters and time (a Call), or None
+        where they cannot be taken."""
+        if self._g_jac is None:
+            f = self.zero
+            args = [ca.MX.sym(n, f.size1_in(k)) for k, n in enumerate(("x", "u", "p", "t"))]
+            g = f(*args)
+            try:
+                self._g_jac = Call(ca.Function("g_jac", args, [ca.jacobian(g, args[0]), ca.jacobian(g, args[2]),
+                                                               ca.jacobian(g, args[3])]))
+            except RuntimeError:
+                self._g_jac = False
+        return self._g_jac or None
 
     def spaced(self, t: float) -> None:
         """An event at ``t``: the span of the next calls from the events' spacing so far."""
@@ -1137,7 +1199,8 @@ class _Hybrid:
         if clocks:
             traj[:, k] = self.iterate(plan, traj[:, k], p, t, self.flags(clocks=clocks))
         if clocks or k in plan.time_event_at:
-            traj[:, k] = self.iterate(plan, traj[:, k], p, t, self.flags())
+            after = t + AFTER_TIME_EVENT * max(1.0, abs(t)) if k in plan.time_event_at else t
+            traj[:, k] = self.iterate(plan, traj[:, k], p, after, self.flags())
         if k == len(plan.t_int) - 1:
             traj[:, k] = self.iterate(plan, traj[:, k], p, t, self.flags(terminal=True))
 

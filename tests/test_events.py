@@ -1134,3 +1134,101 @@ def _end_stop_by_scipy(t):
         if sol.status != 1:
             return out
         t0, x, contact = sol.t[-1], sol.y_events[0][0], not contact
+
+
+SWITCH_OFF = """
+model SwitchOff "a lamp switched off once time is past 1 s; a count of the lamps on, read
+  through integer() of a sum of flows (as a StateGraph counts its active steps), and a flag
+  that holds while the count is positive"
+  Boolean on(start = true, fixed = true);
+  Real share;
+  Integer lit;
+  Boolean any;
+  output Real y = if on then 1 else 0;
+  output Real count = lit;
+  output Real anyLit = if any then 1 else 0;
+equation
+  when time > 1 then
+    on = false;
+  end when;
+  share = -(if on then 1.0 else 0.0);
+  lit = -integer(share);
+  any = lit > 0;
+end SwitchOff;
+"""
+
+
+def test_a_when_on_time_past_an_instant_fires_at_its_time_event_in_process_and_in_the_fmu(tmp_path):
+    """``time > 1`` is false at 1 itself and true just after: the time event at 1 fires the
+    when-clause (it waited for the run's end), and a relation between whole numbers reads its
+    value there without the band that keeps a continuous relation from chattering (lit > 0 at
+    lit = 0 stayed true)."""
+    from fmpy import simulate_fmu
+
+    from mcl.compile.fmu.export import build_fmu
+
+    (tmp_path / "SwitchOff.mo").write_text(SWITCH_OFF)
+    model = compile_model([tmp_path / "SwitchOff.mo"], "SwitchOff")
+    t = np.linspace(0, 3, 7)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    after = (t >= 1).astype(float)        # at 1 itself: the value after the event
+    for name in ("y", "count", "anyLit"):
+        assert np.array_equal(res.output(name), 1 - after), name
+    fmu = build_fmu(model, tmp_path / "switch.fmu")
+    for kind in ("CoSimulation", "ModelExchange"):
+        out = simulate_fmu(str(fmu), fmi_type=kind, stop_time=3, output_interval=0.5)
+        late, early = out["time"] > 1 + 1e-9, out["time"] < 1 - 1e-9
+        for name in ("y", "count", "anyLit"):
+            assert np.all(out[name][early] == 1) and np.all(out[name][late] == 0), (kind, name)
+
+
+THERMOSTAT = """
+package Heating
+  type Mode = enumeration(Off "off", Heating "heating", Cooling "cooling");
+  model Room "a room heated below T_low and cooled above T_high; the mode at the start follows
+    the start temperature"
+    import Modelica.Units.SI;
+    parameter SI.Temperature T_low = 293.15;
+    parameter SI.Temperature T_high = 297.15;
+    parameter SI.HeatCapacity C = 1000;
+    parameter SI.ThermalConductance G = 10;
+    Modelica.Blocks.Interfaces.RealInput T_amb(unit = "K");
+    SI.Temperature T(start = 290, fixed = true);
+    Mode mode;
+    Integer level "the mode as a number, set the same way";
+    SI.HeatFlowRate Q;
+    output Real Tout = T;
+    output Real levelOut = level;
+  initial equation
+    mode = if T < T_low then Mode.Heating else Mode.Off;
+    level = if T < T_low then 2 else 1;
+  equation
+    when T < T_low then
+      mode = Mode.Heating;
+      level = 2;
+    elsewhen T > T_high then
+      mode = Mode.Cooling;
+      level = 3;
+    end when;
+    Q = if mode == Mode.Heating then 200 elseif mode == Mode.Cooling then -100 else 0;
+    C*der(T) = G*(T_amb - T) + Q;
+  end Room;
+end Heating;
+"""
+
+
+@needs_msl()
+def test_a_discrete_value_set_at_the_start_from_a_state_starts_there(tmp_path):
+    """Initial equations that set a mode (an enumeration's, rumoca refused: 'found Enumeration')
+    and an Integer from the start temperature: the room starts cold, so heating, and warms as
+    T = 300 - 10 exp(-t/100) until T_high (t = 100 ln(10/2.85)), then cools. Dropped, the mode
+    started off and the room cooled to the ambient 280 K."""
+    (tmp_path / "Heating.mo").write_text(THERMOSTAT)
+    model = compile_model([tmp_path / "Heating.mo"], "Heating.Room", libraries=[msl_path()])
+    t = np.linspace(0, 120, 13)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.full((len(t), 1), 280.0), ["T_amb"]), options=None)
+    assert res.ok, res.reason
+    # (within the solver's default tolerance, rtol 1e-6 of 300 K)
+    assert np.max(np.abs(res.output("Tout") - (300 - 10 * np.exp(-t / 100)))) < 1e-3
+    assert np.all(res.output("levelOut") == 2)

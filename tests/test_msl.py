@@ -752,3 +752,23 @@ def test_tanks_between_shut_valves_wait_then_fill_and_transfer_as_their_balances
     assert np.max(np.abs(m - m[0] - flow * np.maximum(t - 20, 0.0))) < 1e-4 * flow * 100
     after = t > 60          # the transfer valve open: the upper tank drains into the lower one
     assert np.all(np.diff(up[after]) < 0) and np.all(np.diff(low[after]) > 0)
+
+
+def test_a_stategraph_composite_step_is_suspended_and_resumed_on_its_transitions_timers(msl_path):
+    """StateGraph.Examples.ShowExceptions: the composite step, entered after 1 s, is suspended
+    by a transition that waits 2 s and resumed by one that waits 1 s, over and over: active on
+    [1, 3), [4, 6), [7, 9), ... Its count of active inner steps is integer() of a sum of flows,
+    and 'count > 0' kept the band a continuous relation has: at count = 0 it stayed true, and
+    the step was never suspended."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    model = mcl.compile_model([], "Modelica.StateGraph.Examples.ShowExceptions")
+    t = np.linspace(0.0, 20.0, 401)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    active = res.states[:, model.ode.x_names.index("compositeStep.active")]
+    phase = np.mod(t - 1.0, 3.0)
+    expected = ((t >= 1.0) & (phase < 2.0)).astype(float)
+    edges = np.isclose(phase, 0.0, atol=1e-9) | np.isclose(phase, 2.0, atol=1e-9)   # (the value after the event)
+    assert np.array_equal(active[~edges], expected[~edges])

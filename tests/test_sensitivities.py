@@ -147,3 +147,40 @@ def test_the_parameters_only_initial_equations_read_are_told_apart(tmp_path):
     model = compile_model([tmp_path / "Heated.mo"], "Heated", libraries=[msl_path()])
     assert "T0" in model.initial_parameters, model.parameters
     assert not {"G", "body.C", "wall.G"} & set(model.initial_parameters)
+
+
+THERMOSTAT = """
+model Thermostat "a room heated between two thresholds"
+  parameter Real G = 20;
+  parameter Real C = 2e4;
+  parameter Real P = 1500;
+  Real T(start = 290, fixed = true);
+  Boolean on(start = true, fixed = true);
+  input Real Ta;
+  output Real y = T;
+equation
+  when T > 295 then
+    on = false;
+  elsewhen T < 293 then
+    on = true;
+  end when;
+  C*der(T) = (if on then P else 0) - G*(T - Ta);
+end Thermostat;
+"""
+
+
+def test_a_switching_systems_sensitivities_move_its_switching_times(tmp_path):
+    """Each switch's time moves with the parameters (dtau/dp = -S/f- where T crosses its
+    threshold), and past it the temperature's slope is another: its sensitivity jumps by
+    (f- - f+) dtau/dp. Carried through unchanged (and, until stop 83, read at the integration
+    points instead of the output points, which an event's detection points outnumber), the
+    sensitivities of a thermostat's room were off by 100 % after the first switch."""
+    (tmp_path / "Thermostat.mo").write_text(THERMOSTAT)
+    model = compile_model([tmp_path / "Thermostat.mo"], "Thermostat")
+    t = np.linspace(0, 2000, 41)          # about ten switches
+    u = series(t, Ta=np.full(len(t), 280.0))
+    res = simulate(model, u, sensitivities=["G", "P"])
+    assert res.ok, res.reason
+    for j, (name, h) in enumerate((("G", 1e-4), ("P", 1e-3))):
+        fd = finite_difference(model, u, name, model.parameters[name], h)
+        assert np.max(np.abs(res.sensitivities[:, :, j] - fd)) < 0.01 * np.max(np.abs(fd)), name

@@ -1995,7 +1995,10 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     # change past a band, where an arc's quenched = abs(i) <= abs(v)*Goff or pre(quenched),
     # equal up to rounding once quenched, crossed at every step (SMEE_LoadDump: 45 000 a second)
     n_d = len(names["d"])
-    keep = _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d], d_update[n_d:])
+    whole_values = ca.vertcat(*[flat(slot[i]) for i in index["d"] if st["value_types"][variables[i]["value_type"]].get(
+        "scalar") in ("integer", "boolean", "enumeration")], d[len(names["d"]):], *[h for _, h, _, _, _ in tr.held])
+    keep = _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d], d_update[n_d:],
+                 whole_values)
     live = _Live(tr, keep)
     residual, init_residual, d_update, x_reinit, asserts = map(
         live, (residual, init_residual, d_update, x_reinit, asserts))
@@ -2098,6 +2101,7 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     for j in range(d_start.numel()):     # a start value read from a variable: the iteration sets it
         if ca.depends_on(d_start[j], others):
             d_start[j] = 0
+    later = {}        # pre(v) = a value read from the variables: set by the initial event's iteration
     for init_value in st.get("initial_discrete_values", []):
         i = init_value["target"]
         tr.span = (init_value.get("provenance") or {}).get("span")
@@ -2106,12 +2110,16 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
         v = flat(bind(flat(tr.sx(init_value["value"]))))
         for j in range(size[i]):
             e = v[j] if v.numel() > 1 else v[0]
-            d_start[offsets[i] + j] = e if not ca.depends_on(e, others) else 0
+            reads = ca.depends_on(e, others)
+            d_start[offsets[i] + j] = e if not reads else 0
+            if reads and not ca.depends_on(e, dx):
+                later[offsets[i] + j] = e
     given = {offsets[v["target"]] + j for v in st.get("initial_discrete_values", []) if v["target"] in offsets
              for j in range(size[v["target"]])}
     given |= {offsets[i] + j for i in index["d"] if attrs[i].get("fixed") in ([True], True) for j in range(size[i])}
     given |= set(range(len(names["d"]), nd))            # (the memories and held relations: 0)
-    d_start, init_residual = _discrete_starts(d, d_start, init_residual, given, ca.vertcat(x, dx, z))
+    d_start, init_residual, at_start = _discrete_starts(d, d_start, init_residual, given, ca.vertcat(x, z), dx)
+    at_start.update(later)
 
     def bind_event(e):            # pre(), initial() and the ticks stay symbols in the update
         return ca.substitute(e, p_all, resolved)
@@ -2128,6 +2136,8 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
 
     # pre() of algebraic variables read at events: each from the variable's value before it
     d_update = bind_event(d_update) if nd else ca.SX(0, 1)
+    for j, e in at_start.items():        # (the initial event's iteration sets them: initial() true)
+        d_update[j] = ca.if_else(flags[0], e, d_update[j])
     x_reinit = bind_event(x_reinit) if x.numel() else ca.SX(0, 1)
     read = sorted(set(ca.jacobian_sparsity(ca.vertcat(d_update, x_reinit), z_pre).get_triplet()[1]))
     z_pre = z_pre[read] if read else ca.SX(0, 1)
@@ -2157,13 +2167,19 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
                assert_info=assert_info, preferred=preferred, state_select=state_select))))
 
 
-def _discrete_starts(d: ca.SX, d_start: ca.SX, init: ca.SX, given: set, continuous: ca.SX):
-    """(start values, initial equations left): the initial equations on discrete values alone
-    (y = 2*x, a noise block's r = f(pre(state))) solved, in turn, for the start of the one value
-    each sets that no start or pre() equation ``given`` sets, where it is linear in it; the
-    initial system then solves for the continuous unknowns. Without this the start read 0."""
+def _discrete_starts(d: ca.SX, d_start: ca.SX, init: ca.SX, given: set, continuous: ca.SX, dx: ca.SX):
+    """(start values, initial equations left, {discrete value: its value at the start}): the
+    initial equations on discrete values alone (y = 2*x, a noise block's r = f(pre(state)))
+    solved, in turn, for the start of the one value each sets that no start or pre() equation
+    ``given`` sets (:func:`_solved_for`); the initial system then solves for the continuous
+    unknowns. Without this the start read 0. Those that read the continuous unknowns (a mode
+    set from the start temperature, mode = if T < T_low then 1 else 0) give the value at the
+    start, which the initial event's iteration sets once the continuous start is known (they
+    were dropped: the mode started at 0), where they read the continuous values only through
+    relations (x = n sets x, not n)."""
     rows = ca.vertsplit(init) if init.numel() and d.numel() else []
-    candidates = [r for r, row in enumerate(rows) if ca.depends_on(row, d) and not ca.depends_on(row, continuous)]
+    moving = ca.vertcat(continuous, dx)
+    candidates = [r for r, row in enumerate(rows) if ca.depends_on(row, d) and not ca.depends_on(row, moving)]
     starts, known, solved = ca.vertsplit(d_start), set(given), set()
     progress = True
     while progress:
@@ -2174,19 +2190,68 @@ def _discrete_starts(d: ca.SX, d_start: ca.SX, init: ca.SX, given: set, continuo
             at = sorted(known)
             e = ca.substitute(rows[r], d[at], ca.vertcat(*[starts[j] for j in at])) if at else rows[r]
             free = [j for j in range(d.numel()) if j not in known and ca.depends_on(e, d[j])]
-            if len(free) != 1:
+            value = _solved_for(e, d[free[0]]) if len(free) == 1 else None
+            if value is None:
                 continue
-            coef = ca.jacobian(e, d[free[0]])
-            if not coef.is_constant() or float(coef) == 0:
-                continue
-            starts[free[0]] = ca.substitute(-e / float(coef), d[free[0]], ca.SX(0))
+            starts[free[0]] = value
             known.add(free[0])
             solved.add(r)
             progress = True
+    at_start = {}
+    for r, row in enumerate(rows):
+        if r in solved or not ca.depends_on(row, d) or not ca.depends_on(row, continuous) or ca.depends_on(row, dx):
+            continue
+        if not ca.jacobian(row, continuous).is_zero():     # (it sets a continuous value: x = n)
+            continue
+        free = [j for j in range(d.numel()) if j not in known and j not in at_start and ca.depends_on(row, d[j])]
+        value = _solved_for(row, d[free[0]]) if len(free) == 1 else None
+        if value is not None:
+            at_start[free[0]] = value
+            solved.add(r)
     if not solved:
-        return d_start, init
+        return d_start, init, at_start
     left = [row for r, row in enumerate(rows) if r not in solved]
-    return ca.vertcat(*starts), (ca.vertcat(*left) if left else ca.SX(0, 1))
+    return ca.vertcat(*starts), (ca.vertcat(*left) if left else ca.SX(0, 1)), at_start
+
+
+def _solved_for(e: ca.SX, v: ca.SX) -> ca.SX | None:
+    """The ``v`` where ``e`` = 0, or None: explicit where ``e`` is linear in ``v`` (a constant,
+    nonzero coefficient); where ``e`` reads ``v`` only through comparisons with constants (an
+    enumeration's mode == Mode.Heating), the whole number next to those constants that makes
+    ``e`` nearest 0."""
+    coef = ca.jacobian(e, v)
+    if not coef.is_constant():
+        return None
+    if float(coef) != 0:
+        return ca.substitute(-e / float(coef), v, ca.SX(0))
+    compared = sorted(_compared_with(e, v))
+    # (the constants themselves first, then past them: an enumeration's Integer() is written as
+    # if v == 1 then 1 elseif v == 2 then 2 else 3, which v = 0 satisfies as well as v = 3)
+    if not compared:
+        return None
+    values = list(dict.fromkeys([*compared, *[c + 1 for c in compared], *[c - 1 for c in compared], 0.0, 1.0]))
+    best, err = ca.SX(values[0]), ca.fabs(ca.substitute(e, v, ca.SX(values[0])))
+    for c in values[1:]:
+        r = ca.fabs(ca.substitute(e, v, ca.SX(c)))
+        best, err = ca.if_else(r < err, c, best), ca.fmin(r, err)
+    return best
+
+
+def _compared_with(e: ca.SX, v: ca.SX, limit: int = 10_000) -> set:
+    """The whole-number constants ``v`` is compared with in ``e``."""
+    key, out, todo, seen = v.element_hash(), set(), [e], set()
+    while todo and len(seen) < limit:
+        a = todo.pop()
+        if a.element_hash() in seen or a.is_leaf():
+            continue
+        seen.add(a.element_hash())
+        deps = [a.dep(i) for i in range(a.n_dep())]
+        if a.op() in (ca.OP_EQ, ca.OP_NE, ca.OP_LT, ca.OP_LE) and len(deps) == 2:
+            for x, y in (deps, deps[::-1]):
+                if x.element_hash() == key and y.is_constant() and float(y) == round(float(y)):
+                    out.add(float(y))
+        todo += deps
+    return out
 
 
 def _started_discretes(dae: Dae) -> Dae:
@@ -2212,20 +2277,66 @@ def _hysteresis(op: str, lhs: ca.SX, rhs: ca.SX, held: ca.SX) -> tuple[ca.SX, ca
 
 
 def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX, discrete: ca.SX,
-          whens: ca.SX) -> list:
+          whens: ca.SX, whole: ca.SX) -> list:
     """(index, symbol, value at an event, crossing) of the relations held between events: those
     the continuous equations read that read an unknown, and those the discrete equations read
     outside when-conditions that read a continuous one (not asserts, nor when-conditions
-    alone, nor time against a discrete variable: an event's iteration reads them there anyway)."""
+    alone, nor time against a discrete variable: an event's iteration reads them there anyway).
+    ``whole``: the symbols of Integer and Boolean values (a relation between whole numbers is
+    read at an event as it is, see :func:`_integral`)."""
     if not tr.held or not (residual.numel() or discrete.numel()):
         return []
     syms = ca.vertcat(*[h[1] for h in tr.held])
     read_by = lambda e: set(ca.jacobian_sparsity(e, syms).get_triplet()[1]) if e.numel() else set()
     by_residual, by_discrete = read_by(residual), read_by(discrete) - read_by(whens)
     unknowns = ca.vertcat(continuous, discrete_vars)
-    return [(k, h, e, cross) for j, (k, h, _, e, cross) in enumerate(tr.held) if k < met and (
+    ints = {v.element_hash() for v in ca.vertsplit(whole)}
+
+    def at_event(k, e):       # (an Integer's n > 0 at n = 0 is false, where the band kept it true)
+        g = tr.relations[k]
+        return _EXACT[tr.relation_ops[k]](g) if _integral(g, ints) else e
+    return [(k, h, at_event(k, e), cross) for j, (k, h, _, e, cross) in enumerate(tr.held) if k < met and (
             j in by_residual and ca.depends_on(tr.relations[k], unknowns)
             or j in by_discrete and ca.depends_on(tr.relations[k], continuous))]
+
+
+#: a held relation between whole numbers, at an event: as it reads, without the band
+_EXACT = {"greater": lambda g: g > 0, "greater_equal": lambda g: g >= 0,
+          "less": lambda g: g < 0, "less_equal": lambda g: g <= 0}
+#: operations whose value is a whole number (comparisons and logic: 0 or 1), and those that keep
+#: whole numbers whole
+_WHOLE_OPS = {ca.OP_FLOOR, ca.OP_CEIL, ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_NOT, ca.OP_AND, ca.OP_OR}
+_WHOLE_KEEPING = {ca.OP_ADD, ca.OP_SUB, ca.OP_MUL, ca.OP_NEG, ca.OP_IF_ELSE_ZERO, ca.OP_ASSIGN}
+
+
+def _integral(e: ca.SX, ints: set, limit: int = 10_000) -> bool:
+    """Whether the scalar ``e`` takes only whole values: whole constants, the symbols ``ints``
+    (element hashes of Integer and Boolean variables), floor, ceil, comparisons, and sums,
+    products and branches of those. No drift by rounding can cross such a relation: it needs
+    no band (an Integer's n > 0 read through integer() of a sum of flows, a StateGraph's count
+    of its active steps)."""
+    todo, seen = [e], set()
+    while todo:
+        a = todo.pop()
+        h = a.element_hash()
+        if h in seen:
+            continue
+        seen.add(h)
+        if len(seen) > limit:
+            return False
+        if a.is_constant():
+            if float(a) != round(float(a)):
+                return False
+        elif a.is_symbolic():
+            if h not in ints:
+                return False
+        elif a.op() in _WHOLE_OPS:
+            continue
+        elif a.op() in _WHOLE_KEEPING:
+            todo += [a.dep(i) for i in range(a.n_dep()) if not (a.op() == ca.OP_IF_ELSE_ZERO and i == 0)]
+        else:
+            return False
+    return True
 
 
 class _Live:

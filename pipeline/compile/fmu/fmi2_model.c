@@ -325,6 +325,15 @@ static void set_flags(Model* m, int initial, int terminal, const int* ticks) {
 
 /* an event at t: the clocks ticking there (m->due) with their flags, then once more without
  * (a sampled condition is true only at its instant) */
+/* at a time event, the time its iteration reads: a moment after it, where a relation on time
+ * has its value after the event (time > 1 is true after the event at 1, false at 1 itself; as
+ * engine_casadi.AFTER_TIME_EVENT) */
+static double after_time_event(double t) {
+    for (int k = 0; k < N_EVENTS; k++)
+        if (fabs(EVENTS[k] - t) <= TIME_EPS(t)) return t + 1024 * DBL_EPSILON * fmax(1.0, fabs(t));
+    return t;
+}
+
 static fmi2Status event_at(Model* m, double t, const double* u, int* changed) {
     int any = 0;
     for (int k = 0; k < NCLOCK; k++) any |= m->due[k];
@@ -333,7 +342,7 @@ static fmi2Status event_at(Model* m, double t, const double* u, int* changed) {
         if (iterate(m, t, u, changed) != fmi2OK) return fmi2Error;
     }
     set_flags(m, 0, 0, NULL);
-    return iterate(m, t, u, changed);
+    return iterate(m, after_time_event(t), u, changed);
 }
 
 static double next_tick(const State* s, int k) {
