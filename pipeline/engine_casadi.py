@@ -49,6 +49,10 @@ _INTEGRATORS = 64         # integrators kept per plan (built on demand: a few ms
 SENS_SCALE = 1e-6
 DETECTION_POINTS = 400    # at least this many points over the horizon where relations are checked
 MAX_EVENT_ITERATIONS = 100
+#: a state's derivative that changes across a located event by more than this (relative) is a
+#: switched right-hand side (SimulationResult.switched): rounding is far below, a heater's
+#: power switched on or off far above
+SWITCHED = 1e-6
 #: a time event's iteration reads time this far past the instant (relative, at least 1): a
 #: relation on time takes its value after the event there (``time > 1`` is true after the
 #: event at 1, but false at 1 itself, and a when-clause on it waited for the run's end); well
@@ -742,6 +746,7 @@ class _Plan:
         result = SimulationResult(t_out[:n].copy(), y.T[:n], list(names), seconds=clock.elapsed,
                                   engine="casadi", states=X.T[:n])
         result.steps = budget.steps
+        result.switched = hybrid is not None and hybrid.switched
         scale = 1.0 + (np.max(np.abs(X)) if X.size else 0.0)
         # a failed assert first: the model's own words for what went wrong (sqrt of a negative
         # argument asserted >= 0 is also a non-finite output)
@@ -810,6 +815,7 @@ class _Hybrid:
 
     def reset(self):
         self.count = 0
+        self.switched = False     # the right-hand side jumped at a located event (see SimulationResult)
         self.span = None          # how far past its start a call goes: EVENT_SPAN x the events' spacing
         self.last_event = None
 
@@ -1061,15 +1067,18 @@ class _Hybrid:
         derivative)."""
         nx, ns = plan.nx, plan.ns
         rels = np.flatnonzero(rels) if np.asarray(rels).dtype == bool else np.asarray(rels, int)
-        if not ns or self.zero is None or not len(rels):
-            return after
-        jac = self.g_jacobian()
-        if jac is None:
+        if self.zero is None or not len(rels):
             return after
         u = plan.u_at(t)
-        gx, gp, gt = (np.array(v) for v in jac(before[:nx], u, p, t))
         f_minus = np.array(self.ode.ode(before[:nx], u, p, t)).ravel()
         f_plus = np.array(self.ode.ode(after[:nx], u, p, t)).ravel()
+        step = np.abs(f_minus - f_plus)[: nx - self.nd]
+        if np.any(step > SWITCHED * (np.abs(f_minus) + np.abs(f_plus))[: nx - self.nd] + 1e-300):
+            self.switched = True
+        jac = self.g_jacobian() if ns else None
+        if jac is None:
+            return after
+        gx, gp, gt = (np.array(v) for v in jac(before[:nx], u, p, t))
         S = before[nx:nx * (ns + 1)].reshape(nx, ns, order="F")
         speed = gx[rels] @ f_minus + gt[rels, 0]
         # the relation that crossed here: the one nearest its crossing, in time along f-

@@ -28,6 +28,7 @@ simulating again, so an interrupted fit resumes where it stopped.
 from __future__ import annotations
 
 import json
+import logging
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -41,6 +42,7 @@ from .feasibility import LogisticFeasibility, binary_entropy
 from .stats import gram_inverse
 
 LOG_EPS = 1e-12
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -146,6 +148,8 @@ class FitProblem:
         from .sensitivity import SUBSTEPS
 
         self.sensitivity, self.substeps, self._grid_checked = sensitivity, SUBSTEPS, False
+        #: the model switched its right-hand side at an event (SimulationResult.switched)
+        self.switched = False
 
     @property
     def scale(self) -> float:
@@ -191,6 +195,16 @@ class FitProblem:
         while True:
             fine, at = fine_grid(self.time, self.substeps)
             res = self.engine.simulate(self.model, self.inputs, params, t_out=fine, options=self.options).through(fine)
+            self.switched = self.switched or res.switched
+            if res.switched:
+                # the right-hand side jumps where the states cross a threshold (a thermostat's
+                # heater): the switching times move with w, which the linearisation along this
+                # run leaves out; the engine's sensitivities jump there (the room's wall fit
+                # stalled at 15x the noise on the linearisation's gradient)
+                log.info("%s switches its right-hand side at events: the fit takes the integrator's "
+                         "sensitivities", self.model.name)
+                self.sensitivity = "integrator"
+                return self.simulate(w, gradient=True)
             if not res.ok:
                 return dataclasses.replace(res, time=self.time, outputs=np.full((len(self.time), len(res.output_names)), np.nan))
             lin = Linearisation(self.model, res.states, fine, self.inputs, self.model.parameter_vector(params),

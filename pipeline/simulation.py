@@ -103,6 +103,10 @@ class SimulationResult:
     #: a failed run's outputs at the points it reached (NaN after), for the user to look at
     #: (its ``outputs`` stay NaN: a fit must not read them)
     partial: np.ndarray | None = None
+    #: the right-hand side jumped at an event the run located on the states (a thermostat's
+    #: heater, a relay): the switching times move with the parameters, and a sensitivity must
+    #: jump there too (the engine's own sensitivities do; a linearisation along the run cannot)
+    switched: bool = False
 
     def output(self, name: str) -> np.ndarray:
         return self.outputs[:, self.output_names.index(name)]

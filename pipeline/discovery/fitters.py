@@ -174,7 +174,9 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     record(problem, active)
     sims = res.simulations
     start = next((e.cost for e in problem.recorder.evaluations if e.feasible), None)
-    windows = moving(horizons(data), model.output_names)
+    # (a switched system's ladder starts shorter: its phase drifts from its first switches on;
+    # the room of a thermostat fitted from its first quarter, two dozen switches, stalled)
+    windows = moving(horizons(data, **(SWITCHED_LADDER if problem.switched else {})), model.output_names)
     # (not when another law already fits to the noise: this one could at best tie with it)
     settled = getattr(give_up, "settled", None)
     if (len(windows) > 1 and start is not None and rss > 0.5 * start * len(data.time)
@@ -301,6 +303,12 @@ def _group_to_drop(w: np.ndarray, H_inv: np.ndarray, est: np.ndarray, rss: float
         if score_without(rss + _joint_increase(w, H_inv, group), m) < score:
             best = group
     return best
+
+
+#: the refits on growing windows of a switched system (FitProblem.switched): from its first
+#: 32nd, windows of 20 samples or more (a thermostat's room: its first 16th, one switch, fits
+#: from the nominal law to the truth; its first quarter does not)
+SWITCHED_LADDER = {"first": 1 / 32, "min_samples": 20}
 
 
 def horizons(data: TimeSeries, first: float = 1 / 8, min_samples: int = 100) -> list[TimeSeries]:
