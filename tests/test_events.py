@@ -1232,3 +1232,28 @@ def test_a_discrete_value_set_at_the_start_from_a_state_starts_there(tmp_path):
     # (within the solver's default tolerance, rtol 1e-6 of 300 K)
     assert np.max(np.abs(res.output("Tout") - (300 - 10 * np.exp(-t / 100)))) < 1e-3
     assert np.all(res.output("levelOut") == 2)
+
+
+def test_a_when_on_time_against_a_parameter_fires_where_the_runs_value_puts_it(tmp_path):
+    """``when time > t0``: its time event sits where the compiled t0 puts it; a run (a fit, a
+    calibration) that sets another t0 saw no event there, and the clause waited for the run's
+    end. Watched as a relation on time, its crossing is found where the run's t0 puts it."""
+    (tmp_path / "Late.mo").write_text("""
+model Late
+  parameter Real t0 = 1;
+  Boolean a(start = true, fixed = true);
+  output Real ya = if a then 1 else 0;
+equation
+  when time > t0 then
+    a = false;
+  end when;
+end Late;
+""")
+    model = compile_model([tmp_path / "Late.mo"], "Late")
+    t = np.linspace(0, 4, 17)
+    for t0 in (1.0, 2.6):
+        res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), params={"t0": t0},
+                                      options=None)
+        assert res.ok, res.reason
+        off = t > t0 + 1e-9
+        assert np.all(res.output("ya")[off] == 0) and np.all(res.output("ya")[t < t0 - 1e-9] == 1), t0

@@ -1995,6 +1995,11 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     # change past a band, where an arc's quenched = abs(i) <= abs(v)*Goff or pre(quenched),
     # equal up to rounding once quenched, crossed at every step (SMEE_LoadDump: 45 000 a second)
     n_d = len(names["d"])
+    # the relations a when-condition reads (time > t0 of a when-clause: a time event, at the
+    # instant the compiled parameters give; see ``timed`` below)
+    held_syms = ca.vertcat(*[h[1] for h in tr.held]) if tr.held else ca.SX(0, 1)
+    in_whens = ({tr.held[j][0] for j in set(ca.jacobian_sparsity(d_update[n_d:], held_syms).get_triplet()[1])}
+                if tr.held and d_update[n_d:].numel() else set())
     whole_values = ca.vertcat(*[flat(slot[i]) for i in index["d"] if st["value_types"][variables[i]["value_type"]].get(
         "scalar") in ("integer", "boolean", "enumeration")], d[len(names["d"]):], *[h for _, h, _, _, _ in tr.held])
     keep = _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d], d_update[n_d:],
@@ -2085,7 +2090,13 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     # relations on the unknowns are state events; on time alone they are time events (above);
     # time against a discrete value (time >= pre(nextEvent): the MSL's tables) a state event too
     unknowns = ca.vertcat(x, dx, z, d, d_pre)
-    on = set(ca.jacobian_sparsity(ca.vertcat(*tr.relations), unknowns).get_triplet()[0]) if tr.relations else ()
+    on = set(ca.jacobian_sparsity(ca.vertcat(*tr.relations), unknowns).get_triplet()[0]) if tr.relations else set()
+    # and a when-condition on time against a parameter a run may set (when time > t0): its
+    # time event sits where the compiled t0 puts it, and with another t0 the clause waited for
+    # the run's end; watched, its crossing is found where the run's t0 puts it (on time alone:
+    # foreseen, without integrating)
+    timed = {k for k in in_whens if ca.depends_on(tr.relations[k], t) and ca.depends_on(bind(tr.relations[k]), p)}
+    on |= timed
     rel = [r for k, r in enumerate(tr.relations) if k in on]
     rel_ops = tuple(o for k, o in enumerate(tr.relation_ops) if k in on)
     relations = bind(ca.vertcat(*rel)) if rel else ca.SX(0, 1)
