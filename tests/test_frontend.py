@@ -759,3 +759,31 @@ def test_records_are_copied_as_modifiers_only_where_exact():
         assert kept in out
     assert out.count("\n") == text.count("\n")
     assert copied(text, records, calls=False).count("Cell a = Cell(") == 1      # a constructor not listed
+
+
+PHASORS = """
+model Phasors "a phasor and twice it, summed"
+  Complex a, b, c;
+  output Real cre = c.re, cim = c.im;
+equation
+  %s
+  a = Complex(time, 1);
+  b = Complex.'*'.multiply(Complex(2, 0), a);
+end Phasors;
+"""
+
+
+@needs_msl()
+def test_complex_arithmetic_written_as_calls_runs_and_as_operators_says_why_not(tmp_path, monkeypatch):
+    """``Complex`` named bare (no ``Modelica.`` in the file) is found on the library path (it
+    was 'unresolved type reference'). rumoca 0.10 translates an operator on Complex values one
+    equation short: the error says so and how to write it; written as a call it runs."""
+    monkeypatch.setenv("MODELICAPATH", str(msl_path()))
+    (tmp_path / "Phasors.mo").write_text(PHASORS % "c = Complex.'+'(a, b);")
+    model = compile_model([tmp_path / "Phasors.mo"], "Phasors")
+    t = np.linspace(0, 2, 3)
+    res = simulate(model, series(t))
+    assert res.ok and np.allclose(res.output("cre"), 3 * t) and np.allclose(res.output("cim"), 3.0)
+    (tmp_path / "Phasors.mo").write_text(PHASORS % "c = a + b;")
+    with pytest.raises(ModelicaError, match=r"Phasors\.mo.*unbalanced.*Complex\.'\+'\(a, b\)"):
+        compile_model([tmp_path / "Phasors.mo"], "Phasors")

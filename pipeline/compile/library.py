@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 from ..modelica import MCL_LIBRARY
+from .sources import masked
 
 ENV = "MODELICAPATH"
 
@@ -91,6 +92,9 @@ def needed(texts, defined: set[str], model: str | None, path) -> list[Path]:
     wanted = {model.split(".")[0]} if model else set()
     joined = "\n".join(texts)
     wanted |= {name for name in libs if re.search(rf"(?<![\w.]){re.escape(name)}\.\w", joined)}
+    # a top-level class used by its bare name, as a type or a call (Complex a; Complex(0, 0))
+    code = masked(joined)
+    wanted |= {name for name in libs if re.search(rf"(?<![\w.]){re.escape(name)}(?=\s*\(|\s+[A-Za-z_]\w*\s*[;,(=\[])", code)}
     out: list[Path] = []
     todo = sorted(wanted - defined)
     while todo:

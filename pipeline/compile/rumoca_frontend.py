@@ -783,10 +783,28 @@ def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> Model
     except Exception:      # noqa: BLE001 - a hint only, read from text mcl did not check: the counts stand
         return err
     if not loose:
-        return err
+        return type(err)(err.message + _COMPLEX_HINT, where=err.where) if _in_complex(model, prep) else err
     more = f" and {len(loose) - 8} more" if len(loose) > 8 else ""
     return type(err)(f"{err.message}: nothing connects or sets the input{'s' * (len(loose) > 1)} "
                      f"{', '.join(loose[:8])}{more}", where=err.where)
+
+
+#: the MSL's packages that write their equations in Complex arithmetic, and the record itself
+_COMPLEX = re.compile(r"\b(?:Complex|FundamentalWave|QuasiStatic|ComplexBlocks|ComplexMath)\b")
+_COMPLEX_HINT = ("; rumoca 0.10 translates an operator on Complex values (a + b = Complex(0, 0), 2*a) as "
+                 "one equation short: written as a call (Complex.'+'(a, b), Complex.'*'.multiply(a, b)) it "
+                 "balances, and mcl does not yet rewrite the operators")
+
+
+def _in_complex(model: str, prep: Prepared) -> bool:
+    """Whether the model or the user's files name Complex or a package built on it."""
+    texts = [model]
+    for f in prep.files:
+        try:
+            texts.append(Path(f).read_text(encoding="utf-8", errors="replace"))
+        except OSError:
+            pass
+    return any(_COMPLEX.search(t) for t in texts)
 
 
 def _located_error(exc, model: str, files: list[Path], real: dict | None = None) -> ModelicaError:
