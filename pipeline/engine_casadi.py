@@ -32,6 +32,7 @@ from .calls import Call
 from .data import TimeSeries
 from .errors import DataError
 from .compile import parametric
+from .compile.dae import RELATION_TRUTH
 from .compile.structure import differentiable, initial_state
 from .model import CompiledModel
 from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
@@ -83,10 +84,6 @@ ADAMS_REACH = 1.0
 #: the stiffness is judged (eigenvalues of the state Jacobian) on models up to this many states
 ADAMS_STATES = 64
 
-
-#: a relation's value from lhs - rhs, by its operator
-_TRUTH = {"greater": lambda g: g > 0, "greater_equal": lambda g: g >= 0,
-          "less": lambda g: g < 0, "less_equal": lambda g: g <= 0}
 
 
 class CasadiEngine(Engine):
@@ -1150,7 +1147,7 @@ class _Hybrid:
             return s0
         out = s0.copy()
         for k in np.flatnonzero(s0 == 0):
-            truth = _TRUTH.get(ops[k])
+            truth = RELATION_TRUTH.get(ops[k])
             if truth is not None and truth(0.0) == truth(float(g1[k])):
                 out[k] = s1[k]
         return out

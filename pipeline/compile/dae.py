@@ -17,6 +17,10 @@ import numpy as np
 
 from ..errors import ModelicaError
 
+#: a relation's value from lhs - rhs, by its operator (numbers or symbols)
+RELATION_TRUTH = {"greater": lambda g: g > 0, "greater_equal": lambda g: g >= 0,
+                  "less": lambda g: g < 0, "less_equal": lambda g: g <= 0}
+
 
 @dataclass
 class Dae:

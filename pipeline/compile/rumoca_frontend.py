@@ -29,7 +29,7 @@ from .bindings import restated
 from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
 from .redeclares import lifted, lifted_tree, tree_copy
-from .dae import Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
+from .dae import RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import KEYWORDS, first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
@@ -2015,12 +2015,12 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     n_d = len(names["d"])
     # the relations a when-condition reads (time > t0 of a when-clause: a time event, at the
     # instant the compiled parameters give; see ``timed`` below)
-    held_syms = ca.vertcat(*[h[1] for h in tr.held]) if tr.held else ca.SX(0, 1)
-    in_whens = ({tr.held[j][0] for j in set(ca.jacobian_sparsity(d_update[n_d:], held_syms).get_triplet()[1])}
-                if tr.held and d_update[n_d:].numel() else set())
+    when_read = (set(ca.jacobian_sparsity(d_update[n_d:], ca.vertcat(*[h[1] for h in tr.held])).get_triplet()[1])
+                 if tr.held and d_update[n_d:].numel() else set())     # (indices into tr.held)
+    in_whens = {tr.held[j][0] for j in when_read}
     whole_values = ca.vertcat(*[flat(slot[i]) for i in index["d"] if st["value_types"][variables[i]["value_type"]].get(
         "scalar") in ("integer", "boolean", "enumeration")], d[len(names["d"]):], *[h for _, h, _, _, _ in tr.held])
-    keep = _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d], d_update[n_d:],
+    keep = _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d], when_read,
                  whole_values)
     live = _Live(tr, keep)
     residual, init_residual, d_update, x_reinit, asserts = map(
@@ -2266,21 +2266,34 @@ def _solved_for(e: ca.SX, v: ca.SX) -> ca.SX | None:
     return best
 
 
-def _compared_with(e: ca.SX, v: ca.SX, limit: int = 10_000) -> set:
+def _compared_with(e: ca.SX, v: ca.SX) -> set:
     """The whole-number constants ``v`` is compared with in ``e``."""
-    key, out, todo, seen = v.element_hash(), set(), [e], set()
-    while todo and len(seen) < limit:
-        a = todo.pop()
-        if a.element_hash() in seen or a.is_leaf():
-            continue
-        seen.add(a.element_hash())
-        deps = [a.dep(i) for i in range(a.n_dep())]
-        if a.op() in (ca.OP_EQ, ca.OP_NE, ca.OP_LT, ca.OP_LE) and len(deps) == 2:
-            for x, y in (deps, deps[::-1]):
+    key, out = v.element_hash(), set()
+    for a in _sx_nodes(e, lambda a: [a.dep(i) for i in range(a.n_dep())]):
+        if a is None:
+            break
+        if a.op() in (ca.OP_EQ, ca.OP_NE, ca.OP_LT, ca.OP_LE) and a.n_dep() == 2:
+            for x, y in ((a.dep(0), a.dep(1)), (a.dep(1), a.dep(0))):
                 if x.element_hash() == key and y.is_constant() and float(y) == round(float(y)):
                     out.add(float(y))
-        todo += deps
     return out
+
+
+def _sx_nodes(e: ca.SX, children, limit: int = 10_000):
+    """The distinct nodes of the scalar ``e`` that ``children`` (a node's list) leads to, each
+    once; past ``limit`` of them, None (a graph too large to read whole) and no more."""
+    todo, seen = [e], set()
+    while todo:
+        a = todo.pop()
+        h = a.element_hash()
+        if h in seen:
+            continue
+        if len(seen) >= limit:
+            yield None
+            return
+        seen.add(h)
+        yield a
+        todo += children(a)
 
 
 def _started_discretes(dae: Dae) -> Dae:
@@ -2306,64 +2319,56 @@ def _hysteresis(op: str, lhs: ca.SX, rhs: ca.SX, held: ca.SX) -> tuple[ca.SX, ca
 
 
 def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX, discrete: ca.SX,
-          whens: ca.SX, whole: ca.SX) -> list:
+          when_read: set, whole: ca.SX) -> list:
     """(index, symbol, value at an event, crossing) of the relations held between events: those
     the continuous equations read that read an unknown, and those the discrete equations read
     outside when-conditions that read a continuous one (not asserts, nor when-conditions
     alone, nor time against a discrete variable: an event's iteration reads them there anyway).
+    ``when_read``: the held relations (indices into ``tr.held``) the when-conditions read.
     ``whole``: the symbols of Integer and Boolean values (a relation between whole numbers is
     read at an event as it is, see :func:`_integral`)."""
     if not tr.held or not (residual.numel() or discrete.numel()):
         return []
     syms = ca.vertcat(*[h[1] for h in tr.held])
     read_by = lambda e: set(ca.jacobian_sparsity(e, syms).get_triplet()[1]) if e.numel() else set()
-    by_residual, by_discrete = read_by(residual), read_by(discrete) - read_by(whens)
+    by_residual, by_discrete = read_by(residual), read_by(discrete) - when_read
     unknowns = ca.vertcat(continuous, discrete_vars)
     ints = {v.element_hash() for v in ca.vertsplit(whole)}
 
     def at_event(k, e):       # (an Integer's n > 0 at n = 0 is false, where the band kept it true)
         g = tr.relations[k]
-        return _EXACT[tr.relation_ops[k]](g) if _integral(g, ints) else e
+        return RELATION_TRUTH[tr.relation_ops[k]](g) if _integral(g, ints) else e  # (no band)
     return [(k, h, at_event(k, e), cross) for j, (k, h, _, e, cross) in enumerate(tr.held) if k < met and (
             j in by_residual and ca.depends_on(tr.relations[k], unknowns)
             or j in by_discrete and ca.depends_on(tr.relations[k], continuous))]
 
 
-#: a held relation between whole numbers, at an event: as it reads, without the band
-_EXACT = {"greater": lambda g: g > 0, "greater_equal": lambda g: g >= 0,
-          "less": lambda g: g < 0, "less_equal": lambda g: g <= 0}
 #: operations whose value is a whole number (comparisons and logic: 0 or 1), and those that keep
 #: whole numbers whole
 _WHOLE_OPS = {ca.OP_FLOOR, ca.OP_CEIL, ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_NOT, ca.OP_AND, ca.OP_OR}
 _WHOLE_KEEPING = {ca.OP_ADD, ca.OP_SUB, ca.OP_MUL, ca.OP_NEG, ca.OP_IF_ELSE_ZERO, ca.OP_ASSIGN}
 
 
-def _integral(e: ca.SX, ints: set, limit: int = 10_000) -> bool:
+def _integral(e: ca.SX, ints: set) -> bool:
     """Whether the scalar ``e`` takes only whole values: whole constants, the symbols ``ints``
     (element hashes of Integer and Boolean variables), floor, ceil, comparisons, and sums,
     products and branches of those. No drift by rounding can cross such a relation: it needs
     no band (an Integer's n > 0 read through integer() of a sum of flows, a StateGraph's count
     of its active steps)."""
-    todo, seen = [e], set()
-    while todo:
-        a = todo.pop()
-        h = a.element_hash()
-        if h in seen:
-            continue
-        seen.add(h)
-        if len(seen) > limit:
+    def children(a):        # (not below a whole-valued operation, nor a branch's condition)
+        if a.is_leaf() or a.op() in _WHOLE_OPS:
+            return []
+        return [a.dep(i) for i in range(a.n_dep()) if not (a.op() == ca.OP_IF_ELSE_ZERO and i == 0)]
+    for a in _sx_nodes(e, children):
+        if a is None:
             return False
         if a.is_constant():
             if float(a) != round(float(a)):
                 return False
         elif a.is_symbolic():
-            if h not in ints:
+            if a.element_hash() not in ints:
                 return False
-        elif a.op() in _WHOLE_OPS:
-            continue
-        elif a.op() in _WHOLE_KEEPING:
-            todo += [a.dep(i) for i in range(a.n_dep()) if not (a.op() == ca.OP_IF_ELSE_ZERO and i == 0)]
-        else:
+        elif a.op() not in _WHOLE_OPS and a.op() not in _WHOLE_KEEPING:
             return False
     return True
 

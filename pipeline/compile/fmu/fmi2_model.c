@@ -323,8 +323,6 @@ static void set_flags(Model* m, int initial, int terminal, const int* ticks) {
     for (int k = 0; k < NCLOCK; k++) m->flags[2 + k] = ticks ? ticks[k] : 0;
 }
 
-/* an event at t: the clocks ticking there (m->due) with their flags, then once more without
- * (a sampled condition is true only at its instant) */
 /* at a time event, the time its iteration reads: a moment after it, where a relation on time
  * has its value after the event (time > 1 is true after the event at 1, false at 1 itself; as
  * engine_casadi.AFTER_TIME_EVENT) */
@@ -334,6 +332,8 @@ static double after_time_event(double t) {
     return t;
 }
 
+/* an event at t: the clocks ticking there (m->due) with their flags, then once more without
+ * (a sampled condition is true only at its instant) */
 static fmi2Status event_at(Model* m, double t, const double* u, int* changed) {
     int any = 0;
     for (int k = 0; k < NCLOCK; k++) any |= m->due[k];
