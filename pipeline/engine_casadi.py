@@ -35,7 +35,7 @@ from .compile import parametric
 from .compile.dae import RELATION_TRUTH
 from .compile.structure import differentiable, initial_state
 from .model import CompiledModel
-from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, prepare_inputs,
+from .simulation import (Engine, SimulationOptions, SimulationResult, Stopwatch, Switch, crossed, prepare_inputs,
                          quiet_native_output)
 
 log = logging.getLogger(__name__)
@@ -743,7 +743,7 @@ class _Plan:
         result = SimulationResult(t_out[:n].copy(), y.T[:n], list(names), seconds=clock.elapsed,
                                   engine="casadi", states=X.T[:n])
         result.steps = budget.steps
-        result.switched = hybrid is not None and hybrid.switched
+        result.switches = list(hybrid.switches) if hybrid is not None else []
         scale = 1.0 + (np.max(np.abs(X)) if X.size else 0.0)
         # a failed assert first: the model's own words for what went wrong (sqrt of a negative
         # argument asserted >= 0 is also a non-finite output)
@@ -812,7 +812,7 @@ class _Hybrid:
 
     def reset(self):
         self.count = 0
-        self.switched = False     # the right-hand side jumped at a located event (see SimulationResult)
+        self.switches = []        # the located events where the right-hand side jumped (SimulationResult)
         self.span = None          # how far past its start a call goes: EVENT_SPAN x the events' spacing
         self.last_event = None
 
@@ -1070,20 +1070,19 @@ class _Hybrid:
         f_minus = np.array(self.ode.ode(before[:nx], u, p, t)).ravel()
         f_plus = np.array(self.ode.ode(after[:nx], u, p, t)).ravel()
         step = np.abs(f_minus - f_plus)[: nx - self.nd]
-        if np.any(step > SWITCHED * (np.abs(f_minus) + np.abs(f_plus))[: nx - self.nd] + 1e-300):
-            self.switched = True
+        if np.any(step > SWITCHED * (np.abs(f_minus) + np.abs(f_plus))[: nx - self.nd] + 1e-300) \
+                and len(self.switches) < MAX_EVENTS:
+            self.switches.append(Switch(t, rels, np.array(before[:nx], float), np.array(after[:nx], float)))
         jac = self.g_jacobian() if ns else None
         if jac is None:
             return after
         gx, gp, gt = (np.array(v) for v in jac(before[:nx], u, p, t))
         S = before[nx:nx * (ns + 1)].reshape(nx, ns, order="F")
-        speed = gx[rels] @ f_minus + gt[rels, 0]
-        # the relation that crossed here: the one nearest its crossing, in time along f-
-        g_now = self.g(plan, before, p, t)[rels]
-        r = int(np.argmin(np.abs(g_now) / np.maximum(np.abs(speed), 1e-300)))
-        if not np.isfinite(speed[r]) or abs(speed[r]) <= 1e-12 * (np.abs(gx[rels[r]]) @ np.abs(f_minus) + abs(gt[rels[r], 0])):
-            return after       # (grazing: the event's time is not a smooth function of p)
-        dtau = -(gx[rels[r]] @ S + gp[rels[r], plan.sel] * plan.scale(p)) / speed[r]
+        hit = crossed(self.g(plan, before, p, t), gx, gt, f_minus, rels)
+        if hit is None:
+            return after
+        r, speed = hit
+        dtau = -(gx[r] @ S + gp[r, plan.sel] * plan.scale(p)) / speed
         jump = np.outer(f_minus - f_plus, dtau)
         kept = after[:nx] != before[:nx]
         kept[nx - self.nd:] = False

@@ -21,7 +21,7 @@ import casadi as ca
 import numpy as np
 
 from .compile import parametric
-from .simulation import prepare_inputs
+from .simulation import crossed, prepare_inputs
 
 #: points per data interval on the grid the rule integrates on (at least, and at most)
 SUBSTEPS, MAX_SUBSTEPS = 1, 24
@@ -192,11 +192,32 @@ def _low_rank_steps(A, prev_A, G, h, S0, first: bool) -> np.ndarray | None:
     return out
 
 
+def _steps(A, prev_A, G, h, S, first: bool) -> np.ndarray:
+    """The rule's states S_k at the points of a block (A_k, A_(k-1), the forcing's half-sums
+    G_k = h/2 (F_(k-1) + F_k), steps h_k), from S before it (S(t0) itself where ``first``)."""
+    nx = A.shape[1]
+    Sk = _low_rank_steps(A, prev_A, G, h, S, first) if nx >= LOW_RANK_MIN_STATES else None
+    if Sk is None:
+        I, hh = np.eye(nx), h[:, None, None]
+        lhs = I - 0.5 * hh * A
+        P = np.linalg.solve(lhs, I + 0.5 * hh * prev_A)
+        G = np.linalg.solve(lhs, G)
+        if first:                 # S(t0) = S0
+            G[0] = S
+            P[0] = 0.0
+        Sk = affine_scan(P, G, S)
+    return Sk
+
+
 class Linearisation:
     """df/dx, df/dq, dy/dx, dy/dq along a run (``states`` (N, nx) at ``time``, parameter vector
-    ``p``) for the free parameters named ``params``, evaluated a chunk of the run at a time."""
+    ``p``) for the free parameters named ``params``, evaluated a chunk of the run at a time;
+    with the run's ``switches`` (:class:`mcl.simulation.Switch`), S jumps at each (:class:`_Jumps`)."""
 
-    def __init__(self, model, states: np.ndarray, time: np.ndarray, inputs, p: np.ndarray, params: list[str]):
+    jumps = None
+
+    def __init__(self, model, states: np.ndarray, time: np.ndarray, inputs, p: np.ndarray, params: list[str],
+                 switches=()):
         ode = model.ode
         self.time = np.asarray(time, float)
         idx = [ode.p_names.index(n) for n in params]
@@ -214,6 +235,7 @@ class Linearisation:
         # per point: the four Jacobians, and the rule's matrices and partial solutions
         per_point = nx * (nx + nq) + ny * (nx + nq) + 4 * nx * nx + 3 * nx * nq
         self.chunk = int(max(16, CHUNK_NUMBERS // max(1, per_point)))
+        self.jumps = _Jumps(self, switches) if len(switches) and nx else None
 
     def _mapped(self, fun: ca.Function, n: int) -> "_Mapped":
         key = (fun.name(), n)
@@ -262,7 +284,6 @@ class Linearisation:
         at = np.asarray(at, int)
         Y = np.zeros((len(at), ny, ns))
         S = np.zeros((nx, ns)) if S0 is None else np.asarray(S0, float).reshape(nx, ns)
-        I = np.eye(nx)
         F_prev, A_prev = None, None
         for k0 in range(0, N, self.chunk):
             k1 = min(N, k0 + self.chunk)
@@ -280,17 +301,19 @@ class Linearisation:
                 prev_A = np.concatenate([A_prev[None] if A_prev is not None else A[:1], A[:-1]])
                 prev_F = np.concatenate([F_prev[None] if F_prev is not None else Fx[:1], Fx[:-1]])
                 h = (t[k0:k1] - t[np.maximum(np.arange(k0, k1) - 1, 0)])[:, None, None]
-                Sk = (_low_rank_steps(A, prev_A, 0.5 * h * (prev_F + Fx), h[:, 0, 0], S, k0 == 0)
-                      if nx >= LOW_RANK_MIN_STATES else None)
-                if Sk is None:
-                    lhs = I - 0.5 * h * A
-                    P = np.linalg.solve(lhs, I + 0.5 * h * prev_A)
-                    G = np.linalg.solve(lhs, 0.5 * h * (prev_F + Fx))
-                    if k0 == 0:                 # S(t0) = S0
-                        G[0] = S
-                        P[0] = 0.0
-                    Sk = affine_scan(P, G, S)
-                S = Sk[-1]
+                G = 0.5 * h * (prev_F + Fx)
+                # the block's steps; a step with a switch in it is taken in two, S jumping between
+                cuts = [] if self.jumps is None else sorted({k - k0 for k in self.jumps.at if k0 <= k < k1})
+                parts, j0 = [], 0
+                for j in [*cuts, k1 - k0]:
+                    if j > j0:
+                        parts.append(_steps(A[j0:j], prev_A[j0:j], G[j0:j], h[j0:j, 0, 0], S, k0 + j0 == 0))
+                        S = parts[-1][-1]
+                    if j < k1 - k0:
+                        S = self.jumps.across(k0 + j, S, (prev_A[j], prev_F[j]), (A[j], Fx[j]), forcing, batched)
+                        parts.append(S[None])
+                    j0 = j + 1
+                Sk = np.concatenate(parts) if len(parts) > 1 else parts[0]
                 A_prev, F_prev = A[-1], Fx[-1]
                 Y[out] = np.einsum("kij,kjs->kis", C[j_out], Sk[j_out]) + Fy[j_out]
             else:
@@ -316,3 +339,57 @@ class Linearisation:
         except RuntimeError:        # an initial solve that does not differentiate: from 0, as before
             return np.zeros((self.nx, self.nq))
         return np.where(np.isfinite(S0), S0, 0.0)
+
+
+class _Jumps:
+    """The sensitivities' jumps at a run's switches (:class:`mcl.simulation.Switch`): where the
+    relation g(x, p, t) that switched crosses 0, its time moves by dtau = -(g_x S + g_q) /
+    (g_x f- + g_t) with the parameters, and past it the states' slopes are f+ instead of f-:
+    S+ = S- + (f- - f+) dtau. The grid step a switch falls in is taken in two, by implicit
+    Euler on each side (the trapezoidal rule across it averages two modes' forcing: a
+    thermostat's sensitivity to its heater's power drifted 45 % off over ten switches).
+    Left out, a thermostat's room seemed not to care how fast its wall loses heat."""
+
+    def __init__(self, lin: Linearisation, switches):
+        ode, t = lin.ode, lin.time
+        x, u, p, tt = (ca.MX.sym(n, ode.zero.size1_in(k)) for k, n in enumerate(("x", "u", "p", "t")))
+        g = ode.zero(x, u, p, tt)
+        fun = ca.Function("jump", [x, u, p, tt], [g, ca.jacobian(g, x), ca.jacobian(g, p), ca.jacobian(g, tt),
+                                                  ode.ode(x, u, p, tt)])
+        self.time = t
+        self.at, self.rows = [], []
+        for sw in switches:
+            k = int(np.searchsorted(t, sw.time, side="left"))
+            if not 0 < k < len(t):
+                continue
+            uk = np.array([np.interp(sw.time, t, row) for row in lin.U])
+            g0, gx, gp, gt, f_minus = (np.array(v, float) for v in fun(sw.before, uk, lin.p, sw.time))
+            f_plus = np.array(fun(sw.after, uk, lin.p, sw.time)[4], float).ravel()
+            f_minus = f_minus.ravel()
+            hit = crossed(g0, gx, gt, f_minus, sw.relations)
+            if hit is None:
+                continue
+            r, v = hit
+            step = f_minus - f_plus
+            step[sw.after != sw.before] = 0.0           # (states a reinit() set)
+            if not np.all(np.isfinite(step)):
+                continue
+            self.at.append(k)
+            self.rows.append((float(sw.time), step, gx[r] / v, gp[r, lin.idx] / v))
+
+    def across(self, k: int, S: np.ndarray, before, after, forcing, batched: bool) -> np.ndarray:
+        """S (nx, ns) at grid point k from S at k - 1, across the switches between them:
+        ``before`` and ``after`` are (A, F) at k - 1 and at k, the modes on either side."""
+        I = np.eye(len(S))
+        t0, (A, F) = self.time[k - 1], before
+        for tk, step, a, b in sorted((row for kk, row in zip(self.at, self.rows) if kk == k), key=lambda r: r[0]):
+            dt = max(tk - t0, 0.0)
+            S = np.linalg.solve(I - dt * A, S + dt * F)
+            if batched:
+                gq = forcing(k, k + 1, b[None, None, :], np.zeros((1, 1, len(b))))[0].reshape(-1)
+            else:
+                gq = np.asarray(forcing(k, b[None, :], np.zeros((1, len(b))))[0], float).reshape(-1)
+            S = S - np.outer(step, a @ S + gq)
+            t0, (A, F) = tk, after
+        dt = self.time[k] - t0
+        return np.linalg.solve(I - dt * A, S + dt * F)

@@ -83,6 +83,32 @@ def _check_options(values: dict, option) -> None:
 
 
 @dataclass
+class Switch:
+    """An event located on the states where the right-hand side jumped: its time, the relations
+    that changed sign there (indices into the model's relations) and the states (with the
+    discrete values) just before and just after it."""
+
+    time: float
+    relations: np.ndarray
+    before: np.ndarray
+    after: np.ndarray
+
+
+def crossed(g, gx, gt, f_minus, rels):
+    """(r, speed) of the relation among ``rels`` that crossed at an event: the one nearest its
+    crossing in time along the slopes f- (g / (g_x f- + g_t), from its values ``g``, its
+    derivatives ``gx`` in the states and ``gt`` in time); None where it grazes (its speed
+    is 0: the event's time is not a smooth function of the parameters)."""
+    rels = np.asarray(rels, int)
+    speed = gx[rels] @ f_minus + gt[rels, 0]
+    k = int(np.argmin(np.abs(np.ravel(g)[rels]) / np.maximum(np.abs(speed), 1e-300)))
+    r = int(rels[k])
+    if not np.isfinite(speed[k]) or abs(speed[k]) <= 1e-12 * (np.abs(gx[r]) @ np.abs(f_minus) + abs(gt[r, 0])):
+        return None
+    return r, float(speed[k])
+
+
+@dataclass
 class SimulationResult:
     """Outputs on the output grid; ``sensitivities[k, i, j]`` = d y_i(t_k) / d p_j."""
 
@@ -103,10 +129,14 @@ class SimulationResult:
     #: a failed run's outputs at the points it reached (NaN after), for the user to look at
     #: (its ``outputs`` stay NaN: a fit must not read them)
     partial: np.ndarray | None = None
-    #: the right-hand side jumped at an event the run located on the states (a thermostat's
-    #: heater, a relay): the switching times move with the parameters, and a sensitivity must
-    #: jump there too (the engine's own sensitivities do; a linearisation along the run cannot)
-    switched: bool = False
+    #: the events the run located on the states where the right-hand side jumped (a
+    #: thermostat's heater, a relay): the switching times move with the parameters, and a
+    #: sensitivity jumps there (the engine's own do; a linearisation along the run reads these)
+    switches: list = field(default_factory=list)
+
+    @property
+    def switched(self) -> bool:
+        return bool(self.switches)
 
     def output(self, name: str) -> np.ndarray:
         return self.outputs[:, self.output_names.index(name)]

@@ -502,28 +502,34 @@ end Room;
 """
 
 
-def thermostat_room(path, seed, k):
-    """The room by hand: C T' = P on - (20 dT + k dT |dT|), the heater on below 293.15 K until
-    295.15 K (the controller's band), solved by SciPy from switch to switch; the outdoor
-    temperature three slow sines about 280 K; 0.05 K of noise, a sample every 30 s for 6 h."""
+def heated(path, seed, rhs, n):
+    """A room heated by an on-off thermostat, by hand: ``rhs(s, x, on, T_amb)`` of ``n`` states
+    from 290 K, the air's temperature x[0] first; the heater on below 293.15 K until 295.15 K
+    (the controller's band), solved by SciPy from switch to switch; the outdoor temperature
+    three slow sines about 280 K; 0.05 K of noise, a sample every 30 s for 6 h."""
     rng = np.random.default_rng(seed)
     w, ph = rng.uniform(2e-4, 1.5e-3, 3), rng.uniform(0, 6, 3)
     amb = lambda s: 280 + sum(3 * np.sin(wk * s + pk) for wk, pk in zip(w, ph))
     t = np.arange(0, 6 * 3600 + 1, 30.0)
-    t0, x0, on, ts, xs = 0.0, 290.0, True, [], []
+    t0, x0, on, ts, xs = 0.0, [290.0] * n, True, [], []
     while t0 < t[-1]:
         edge = lambda s, x, on=on: x[0] - (295.15 if on else 293.15)
         edge.terminal, edge.direction = True, (1 if on else -1)
-        sol = solve_ivp(lambda s, x, on=on: [((1500.0 if on else 0.0) - 20 * (x[0] - amb(s))
-                                              - k * (x[0] - amb(s)) * abs(x[0] - amb(s))) / 2e5],
-                        (t0, t[-1]), [x0], events=edge, rtol=1e-10, atol=1e-10, dense_output=True)
+        sol = solve_ivp(lambda s, x, on=on: rhs(s, x, on, amb(s)), (t0, t[-1]), x0, events=edge,
+                        rtol=1e-10, atol=1e-10, dense_output=True)
         end = sol.t_events[0][0] if len(sol.t_events[0]) else t[-1]
         keep = t[(t > t0) & (t <= end)]
         ts, xs = ts + list(keep), xs + list(sol.sol(keep)[0])
-        t0, x0, on = end, float(sol.sol(end)[0]), not on
+        t0, x0, on = end, list(sol.sol(end)), not on
     T = np.interp(t, [0.0, *ts], [290.0, *xs]) + rng.normal(0, 0.05, len(t))
     path.write_text("time,T_amb,T_room\n" + "\n".join(f"{a:.10g},{b:.10g},{c:.10g}" for a, b, c in
                                                        zip(t, amb(t), T)) + "\n")
+
+
+def thermostat_room(path, seed, k):
+    """The room: C T' = P on - (20 dT + k dT |dT|) (:func:`heated`)."""
+    heated(path, seed, lambda s, x, on, Ta: [((1500.0 if on else 0.0) - 20 * (x[0] - Ta)
+                                              - k * (x[0] - Ta) * abs(x[0] - Ta)) / 2e5], 1)
 
 
 def test_a_thermostats_room_is_found_to_lose_heat_faster_than_its_wall_says(tmp_path):
@@ -549,3 +555,73 @@ def test_a_thermostats_room_is_found_to_lose_heat_faster_than_its_wall_says(tmp_
     thermostat_room(null / "train.csv", 3, 0.0)
     thermostat_room(null / "validate.csv", 4, 0.0)
     assert discovered(null, "Room.mo", "Room", THERMOSTAT_ROOM).get("cause") is None
+
+
+FURNISHED_ROOM = """
+model House "a room with its furniture, heated by an on-off thermostat; it loses heat through a
+  wall and a window"
+  import Modelica.Thermal.HeatTransfer;
+  import Modelica.Blocks;
+  import Modelica.Units.SI;
+  parameter SI.HeatCapacity C_air = 2e5 "air";
+  parameter SI.HeatCapacity C_mass = 1e6 "furniture and inner walls";
+  Blocks.Interfaces.RealInput T_amb(unit = "K") "outdoor temperature";
+  Blocks.Interfaces.RealOutput T_room(unit = "K") "measured room temperature";
+  HeatTransfer.Components.HeatCapacitor air(C = C_air, T(start = 290, fixed = true));
+  HeatTransfer.Components.HeatCapacitor mass(C = C_mass, T(start = 290, fixed = true));
+  HeatTransfer.Components.ThermalConductor surface(G = 100) "air to furniture";
+  HeatTransfer.Components.ThermalConductor wall(G = 20);
+  HeatTransfer.Components.ThermalConductor window(G = 8);
+  HeatTransfer.Sources.PrescribedTemperature ambient;
+  HeatTransfer.Sources.PrescribedHeatFlow heater;
+  HeatTransfer.Sensors.TemperatureSensor sensor;
+  Blocks.Logical.OnOffController thermostat(bandwidth = 2);
+  Blocks.Sources.Constant setpoint(k = 294.15);
+  Blocks.Math.BooleanToReal power(realTrue = 2000, realFalse = 0);
+equation
+  connect(T_amb, ambient.T);
+  connect(ambient.port, wall.port_b);
+  connect(ambient.port, window.port_b);
+  connect(wall.port_a, air.port);
+  connect(window.port_a, air.port);
+  connect(surface.port_a, air.port);
+  connect(surface.port_b, mass.port);
+  connect(heater.port, air.port);
+  connect(sensor.port, air.port);
+  connect(sensor.T, T_room);
+  connect(setpoint.y, thermostat.reference);
+  connect(sensor.T, thermostat.u);
+  connect(thermostat.y, power.u);
+  connect(power.y, heater.Q_flow);
+end House;
+"""
+
+
+def furnished_room(path, seed):
+    """The furnished room: the air gives heat to the furniture by convection, 100 dT + 30 dT|dT|."""
+    def rhs(s, x, on, Ta):
+        q = 100 * (x[0] - x[1]) + 30 * (x[0] - x[1]) * abs(x[0] - x[1])
+        return [((2000.0 if on else 0.0) - 28 * (x[0] - Ta) - q) / 2e5, q / 1e6]
+
+    heated(path, seed, rhs, 2)
+
+
+def test_a_furnished_rooms_convection_is_found_among_its_parts(tmp_path):
+    """A switched system of several parts (air, furniture, the surface between them, a wall
+    and a window): the screening's linear responses jump at the switches and are read over
+    the record's first windows as well, where they still hold (without the jumps, over the
+    6 h, the surface's and the wall's laws were predicted to remove 0.5 % and 0.2 % of the
+    misfit; with them, 14 % and 11 %; over the windows too, 68 % and 66 %); its fits run at
+    a tolerance that puts the switches where they are (at the fits' usual one the 4th switch
+    came 3 s late, and the surface's law stalled at 0.22 K against 0.05 K of noise). The
+    surface is named alone, its law within 5 % of the truth over the range the run visits,
+    and the validation error comes down to the noise."""
+    from helpers import discovered
+
+    furnished_room(tmp_path / "train.csv", 1)
+    furnished_room(tmp_path / "validate.csv", 2)
+    report = discovered(tmp_path, "House.mo", "House", FURNISHED_ROOM)
+    assert [c["component"] for c in report["causes"]] == ["surface"], report["causes"]
+    assert curve_error(report["cause"], lambda dT: 100 * dT + 30 * dT * np.abs(dT)) < 0.05
+    g = report["gain"]
+    assert g["validation_rms_after"] < 1.5 * 0.05 < 0.1 * g["validation_rms_before"]

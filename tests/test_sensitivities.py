@@ -184,3 +184,26 @@ def test_a_switching_systems_sensitivities_move_its_switching_times(tmp_path):
     for j, (name, h) in enumerate((("G", 1e-4), ("P", 1e-3))):
         fd = finite_difference(model, u, name, model.parameters[name], h)
         assert np.max(np.abs(res.sensitivities[:, :, j] - fd)) < 0.01 * np.max(np.abs(fd)), name
+
+
+def test_the_linearisation_along_a_switching_run_jumps_at_its_switches(tmp_path):
+    """The screening's and the fits' sensitivities come from the model linearised along one
+    plain run (:class:`mcl.sensitivity.Linearisation`): the run reports the events where the
+    right-hand side jumped, and the linearisation's sensitivities jump there as the engine's
+    do, the grid step a switch falls in taken in two (within 0.4 %; without the switches
+    60-110 % off, and 45 % with the trapezoidal rule across them)."""
+    from mcl.sensitivity import Linearisation, fine_grid
+
+    (tmp_path / "Thermostat.mo").write_text(THERMOSTAT)
+    model = compile_model([tmp_path / "Thermostat.mo"], "Thermostat")
+    t = np.linspace(0, 2000, 41)
+    u = series(t, Ta=np.full(len(t), 280.0))
+    fine, at = fine_grid(t, 8)
+    run = simulate(model, u, t_out=fine, options=OPTS)
+    assert run.ok and run.switched and len(run.switches) >= 8, run.switches
+    fd = np.stack([finite_difference(model, u, n, model.parameters[n], h) for n, h in (("G", 1e-4), ("P", 1e-3))], -1)
+    err = {}
+    for name, switches in (("with", run.switches), ("without", [])):
+        S = Linearisation(model, run.states, fine, u, model.parameter_vector(), ["G", "P"], switches).parameters(at)
+        err[name] = [np.max(np.abs(S[:, :, j] - fd[:, :, j])) / np.max(np.abs(fd[:, :, j])) for j in range(2)]
+    assert max(err["with"]) < 0.01 and min(err["without"]) > 0.3, err

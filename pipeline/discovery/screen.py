@@ -114,7 +114,8 @@ def linear_response(model, j_names: list[str], inputs, result, at_data: np.ndarr
     model on a fine grid) to a deviation j = phi_k(t) at a component, for every term signal
     ``phis[key]`` ((n_terms, N_fine) on that grid) whose component's deviation parameter is
     ``j_names[i]`` (one per key, in order)."""
-    lin = Linearisation(model, result.states, result.time, inputs, model.parameter_vector(), j_names)
+    lin = Linearisation(model, result.states, result.time, inputs, model.parameter_vector(), j_names,
+                        result.switches)
     columns, comp_of, sig = [], [], []
     for ci, (key, phi) in enumerate(phis.items()):
         for k in range(phi.shape[0]):
