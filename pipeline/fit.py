@@ -45,8 +45,6 @@ LOG_EPS = 1e-12
 log = logging.getLogger(__name__)
 #: the relative tolerance of a switched system's fits (SimulationResult.switched)
 SWITCHED_RTOL = 1e-8
-#: the models already said to switch (the message once per model and process, not per fit)
-_SAID_SWITCHED: set = set()
 
 
 @dataclass
@@ -203,26 +201,15 @@ class FitProblem:
             if res.switched and self.options.rtol > SWITCHED_RTOL:
                 # a switching time is as accurate as the states' crossing: at the fits' usual
                 # tolerance a furnished room's 4th switch was 3 s late, its temperature 0.2 K off
-                # by the end, and the fit chased the solver's error
+                # by the end, and the fit chased the solver's error (and, on the linearisation,
+                # a thermostat's wall came out with the radiation law, 44 % off; the integrator's
+                # sensitivities, which stop 83 took for switched systems instead, cost 25 % more)
                 self.options = dataclasses.replace(self.options, rtol=SWITCHED_RTOL)
                 continue
-            if res.switched:
-                # the right-hand side jumps where the states cross a threshold (a thermostat's
-                # heater): the switching times move with w, and the engine's sensitivities jump
-                # there (the room's wall fit stalled at 15x the noise on the linearisation's
-                # gradient without its jumps; with them, which agree with the engine's to
-                # 0.05 %, the room's wall still came out with the radiation law, 44 % off:
-                # not understood)
-                if self.model.name not in _SAID_SWITCHED:
-                    _SAID_SWITCHED.add(self.model.name)
-                    log.info("%s switches its right-hand side at events: the fits take the integrator's "
-                             "sensitivities", self.model.name)
-                self.sensitivity = "integrator"
-                return self.simulate(w, gradient=True)
             if not res.ok:
                 return dataclasses.replace(res, time=self.time, outputs=np.full((len(self.time), len(res.output_names)), np.nan))
             lin = Linearisation(self.model, res.states, fine, self.inputs, self.model.parameter_vector(params),
-                                self.parameters)
+                                self.parameters, res.switches)
             if not self._grid_checked:       # dynamics fast against the data's sampling: a finer grid
                 self._grid_checked = True
                 h = float(np.max(np.diff(self.time)))
