@@ -351,12 +351,10 @@ class _Jumps:
     Left out, a thermostat's room seemed not to care how fast its wall loses heat."""
 
     def __init__(self, lin: Linearisation, switches):
-        ode, t = lin.ode, lin.time
-        x, u, p, tt = (ca.MX.sym(n, ode.zero.size1_in(k)) for k, n in enumerate(("x", "u", "p", "t")))
-        g = ode.zero(x, u, p, tt)
-        fun = ca.Function("jump", [x, u, p, tt], [g, ca.jacobian(g, x), ca.jacobian(g, p), ca.jacobian(g, tt),
-                                                  ode.ode(x, u, p, tt)])
-        self.time = t
+        t = self.time = lin.time
+        if "jump" not in lin._maps:
+            lin._maps["jump"] = self.function(lin.ode)
+        fun = lin._maps["jump"]
         self.at, self.rows = [], []
         for sw in switches:
             k = int(np.searchsorted(t, sw.time, side="left"))
@@ -376,6 +374,15 @@ class _Jumps:
                 continue
             self.at.append(k)
             self.rows.append((float(sw.time), step, gx[r] / v, gp[r, lin.idx] / v))
+
+    @staticmethod
+    def function(ode) -> ca.Function:
+        """(g, dg/dx, dg/dp, dg/dt, f) at a point: made once per model and kept with the
+        linearisation's other functions, not again at each linearisation of a fit's runs."""
+        x, u, p, t = (ca.MX.sym(n, ode.zero.size1_in(k)) for k, n in enumerate(("x", "u", "p", "t")))
+        g = ode.zero(x, u, p, t)
+        return ca.Function("jump", [x, u, p, t], [g, ca.jacobian(g, x), ca.jacobian(g, p), ca.jacobian(g, t),
+                                                  ode.ode(x, u, p, t)])
 
     def across(self, k: int, S: np.ndarray, before, after, forcing, batched: bool) -> np.ndarray:
         """S (nx, ns) at grid point k from S at k - 1, across the switches between them:
