@@ -762,28 +762,36 @@ def test_records_are_copied_as_modifiers_only_where_exact():
 
 
 PHASORS = """
-model Phasors "a phasor and twice it, summed"
-  Complex a, b, c;
-  output Real cre = c.re, cim = c.im;
+model Phasors "phasors in Complex arithmetic, written with operators as an engineer writes them"
+  import Modelica.ComplexMath.j;
+  Complex a, b, c, d, e;
+  output Real cre = c.re, cim = c.im, dre = d.re, dim = d.im, ere = e.re, eim = e.im;
 equation
-  %s
   a = Complex(time, 1);
-  b = Complex.'*'.multiply(Complex(2, 0), a);
+  b = 2*a;
+  a + b - c = Complex(0) "c = 3 a";
+  %s
+  Complex(0) = e - a*a/b "e = a/2";
 end Phasors;
 """
 
 
 @needs_msl()
-def test_complex_arithmetic_written_as_calls_runs_and_as_operators_says_why_not(tmp_path, monkeypatch):
-    """``Complex`` named bare (no ``Modelica.`` in the file) is found on the library path (it
-    was 'unresolved type reference'). rumoca 0.10 translates an operator on Complex values one
-    equation short: the error says so and how to write it; written as a call it runs."""
+def test_complex_arithmetic_written_with_operators_runs_and_what_cannot_be_read_says_why(tmp_path, monkeypatch):
+    """rumoca 0.10 translates an operator on Complex values as if on Reals (``b = a + a`` one
+    equation short): mcl writes each as the record's call and each Complex equation with a
+    reference on its left (:mod:`mcl.compile.complexops`), so the model runs as written.
+    ``Complex`` named bare (no ``Modelica.`` in the file) is found on the library path. An
+    equation with no reference to solve for says how to write it."""
     monkeypatch.setenv("MODELICAPATH", str(msl_path()))
-    (tmp_path / "Phasors.mo").write_text(PHASORS % "c = Complex.'+'(a, b);")
+    (tmp_path / "Phasors.mo").write_text(PHASORS % "2*d*b = j*a;")
     model = compile_model([tmp_path / "Phasors.mo"], "Phasors")
     t = np.linspace(0, 2, 3)
     res = simulate(model, series(t))
-    assert res.ok and np.allclose(res.output("cre"), 3 * t) and np.allclose(res.output("cim"), 3.0)
-    (tmp_path / "Phasors.mo").write_text(PHASORS % "c = a + b;")
-    with pytest.raises(ModelicaError, match=r"Phasors\.mo.*unbalanced.*Complex\.'\+'\(a, b\)"):
+    assert res.ok, res.reason
+    assert np.allclose(res.output("cre"), 3 * t) and np.allclose(res.output("cim"), 3.0)
+    assert np.allclose(res.output("dre"), 0.0) and np.allclose(res.output("dim"), 0.25)
+    assert np.allclose(res.output("ere"), t / 2) and np.allclose(res.output("eim"), 0.5)
+    (tmp_path / "Phasors.mo").write_text(PHASORS % "Modelica.ComplexMath.conj(d) = Complex(0, -0.25);")
+    with pytest.raises(ModelicaError, match=r"Phasors\.mo.*unbalanced.*reference"):
         compile_model([tmp_path / "Phasors.mo"], "Phasors")

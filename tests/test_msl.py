@@ -772,3 +772,73 @@ def test_a_stategraph_composite_step_is_suspended_and_resumed_on_its_transitions
     expected = ((t >= 1.0) & (phase < 2.0)).astype(float)
     edges = np.isclose(phase, 0.0, atol=1e-9) | np.isclose(phase, 2.0, atol=1e-9)   # (the value after the event)
     assert np.array_equal(active[~edges], expected[~edges])
+
+
+MAINS_LOAD = """
+model MainsLoad "a winding on the mains, as a phasor circuit of the MSL's quasi-static parts"
+  import Modelica.Electrical.QuasiStatic.SinglePhase;
+  import Modelica.ComplexMath;
+  parameter Real R = 10 "winding resistance";
+  parameter Real L = 0.05 "winding inductance";
+  SinglePhase.Sources.VoltageSource mains(f = 50, V = 230, phi = 0, gamma(fixed = true, start = 0));
+  SinglePhase.Sensors.CurrentSensor ammeter;
+  SinglePhase.Basic.Resistor winding(R_ref = R);
+  SinglePhase.Basic.Inductor reactance(L = L);
+  SinglePhase.Basic.Ground ground;
+  output Real I = ComplexMath.abs(ammeter.i) "RMS current";
+  output Real phase = ComplexMath.arg(ammeter.i) "current's phase";
+  output Real P = winding.LossPower;
+equation
+  connect(mains.pin_p, ammeter.pin_p);
+  connect(ammeter.pin_n, winding.pin_p);
+  connect(winding.pin_n, reactance.pin_p);
+  connect(reactance.pin_n, ground.pin);
+  connect(mains.pin_n, ground.pin);
+end MainsLoad;
+"""
+
+
+def test_a_phasor_circuit_of_quasi_static_parts_draws_the_current_its_impedance_says(msl_path, tmp_path):
+    """The MSL's QuasiStatic parts write their equations in Complex arithmetic (``v = R*i``,
+    ``pin_p.i + pin_n.i = Complex(0)``), which rumoca 0.10 translates one equation short: mcl
+    writes the operators as the record's calls (:mod:`mcl.compile.complexops`). The winding's
+    current and loss are those of its impedance R + jwL, in process and in the FMU."""
+    import mcl
+    from fmpy import simulate_fmu
+    from mcl.data import TimeSeries
+
+    (tmp_path / "MainsLoad.mo").write_text(MAINS_LOAD)
+    model = mcl.compile_model([tmp_path / "MainsLoad.mo"], "MainsLoad")
+    t = np.linspace(0.0, 0.1, 11)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []))
+    assert res.ok, res.reason
+    z = 10 + 2j * np.pi * 50 * 0.05
+    current = 230 / z
+    assert np.allclose(res.output("I"), abs(current)) and np.allclose(res.output("phase"), np.angle(current))
+    assert np.allclose(res.output("P"), abs(current) ** 2 * 10)
+    fmu = tmp_path / "load.fmu"
+    assert main(["compile", str(tmp_path / "MainsLoad.mo"), "--model", "MainsLoad", "-o", str(fmu)]) == 0
+    assert validate_fmu(fmu) == []
+    out = simulate_fmu(str(fmu), stop_time=0.1, output=["I", "P"])
+    assert np.allclose(out["I"], abs(current)) and np.allclose(out["P"], abs(current) ** 2 * 10)
+
+
+def test_an_unbalanced_star_load_balanced_by_reactances_draws_no_neutral_current(msl_path):
+    """The MSL's BalancingStar: a resistor, an inductor and a capacitor in star on three phases,
+    sized so that the source sees a balanced resistive load. Its phasors are arrays of Complex
+    records, their equations written element by element and its power sensor's sum of products
+    as the sum of the parts (:mod:`mcl.compile.complexops`). No current in the neutral; the
+    apparent power is the resistor's V^2/R, with no reactive part."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    model = mcl.compile_model([], "Modelica.Electrical.QuasiStatic.Polyphase.Examples.BalancingStar")
+    model = model.with_outputs([f"{name}.{part}" for name in ("currentSensor0.i", "powerSensor.apparentPower")
+                                for part in ("re", "im")], only=True)
+    t = np.linspace(0.0, 1.0, 5)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []))
+    assert res.ok, res.reason
+    for part in ("re", "im"):
+        assert np.allclose(res.output(f"currentSensor0.i.{part}"), 0.0, atol=1e-9)
+    assert np.allclose(res.output("powerSensor.apparentPower.re"), 100.0 ** 2 / 10.0)
+    assert np.allclose(res.output("powerSensor.apparentPower.im"), 0.0, atol=1e-9)

@@ -45,6 +45,7 @@ class ClassInfo:
     imports: dict[str, str] = field(default_factory=dict)  # import A.B.C / X = A.B: the short name's class
     wildcards: list[str] = field(default_factory=list)     # import A.B.*: the packages searched
     bound: set[str] = field(default_factory=set)           # members given a value: a binding, an extends modifier
+    arrays: set[str] = field(default_factory=set)          # members declared with dimensions
 
 #: a literal start value in a declaration's modifier: ``period(final min=small, start=1)``
 _START = re.compile(r"\bstart\s*=\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|true|false)\s*[,)]")
@@ -142,6 +143,18 @@ def _binds(statement: str, name: str) -> bool:
             return False
 
 
+def _more_names(statement: str, first: str) -> list[str]:
+    """The names a declaration ``statement`` declares after ``first`` (``Real a, b(start = 1), c``)."""
+    m = re.search(rf"(?<![\w.]){re.escape(first)}\b", statement)
+    names, depth = [], 0
+    for k in range(m.end() if m else len(statement), len(statement)):
+        ch = statement[k]
+        depth += 1 if ch in "([{" else -1 if ch in ")]}" else 0
+        if ch == "," and depth == 0 and (more := re.match(r"\s*([A-Za-z_]\w*)", statement[k + 1:])):
+            names.append(more.group(1))
+    return names
+
+
 def _statements(body: str):
     """Declaration statements of a class body (up to its first equation/algorithm section)."""
     body = re.split(r"\b(?:initial\s+)?(?:equation|algorithm)\b", body, maxsplit=1)[0]
@@ -236,6 +249,7 @@ class LibraryClasses:
             if len(tokens) < 2 or not re.match(r"[A-Za-z_]", tokens[0]):
                 continue
             type_name, k = tokens[0], 1
+            dimensioned = tokens[k] == "["
             if tokens[k] == "[":                       # Real[3] x
                 while k < len(tokens) and tokens[k] != "]":
                     k += 1
@@ -243,9 +257,12 @@ class LibraryClasses:
             if k >= len(tokens) or not re.match(r"[A-Za-z_]\w*$", tokens[k]):
                 continue
             conditional = bool(re.search(r"\bif\b", st))
-            info.declarations.append((prefixes, type_name, tokens[k], conditional))
-            if _binds(st, tokens[k]):
-                info.bound.add(tokens[k])
+            for name in [tokens[k], *_more_names(st, tokens[k])]:      # Complex a, b, c
+                info.declarations.append((prefixes, type_name, name, conditional))
+                if _binds(st, name):
+                    info.bound.add(name)
+                if dimensioned or re.search(rf"(?<![\w.]){re.escape(name)}\s*\[", st):
+                    info.arrays.add(name)
             start = _START.search(st)
             if start:
                 info.starts[tokens[k]] = start.group(1)
@@ -267,6 +284,11 @@ class LibraryClasses:
             found = self.find(".".join([*parts[:k], name]))
             if found is not None:
                 return found
+        head = name.partition(".")[0]
+        for k in range(len(parts) - 1, 0, -1):    # an enclosing package's import (SI in Modelica.Electrical)
+            outer = self.find(".".join(parts[:k]))
+            if outer is not None and head in outer.imports:
+                return self.resolve(name, scope, outer)
         return None
 
     def members(self, info: ClassInfo, seen=None):
@@ -302,6 +324,14 @@ class LibraryClasses:
             return set()
         seen.add(info.name)
         return set(info.bound).union(*(self.bound(b, seen) for b in self.bases(info)))
+
+    def arrays(self, info: ClassInfo, seen=None) -> set[str]:
+        """The members ``info`` and the classes it extends declare with dimensions."""
+        seen = seen if seen is not None else set()
+        if info.name in seen:
+            return set()
+        seen.add(info.name)
+        return set(info.arrays).union(*(self.arrays(b, seen) for b in self.bases(info)))
 
     def bases(self, info: ClassInfo) -> list[ClassInfo]:
         """The classes ``info`` extends that are found (looked up from its enclosing scope, then

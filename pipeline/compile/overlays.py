@@ -7,11 +7,12 @@ a message naming a line of the file still names the right one.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import re
 from pathlib import Path
 
-from . import bindings, records, redeclares
+from . import bindings, complexops, records, redeclares
 from .bindings import distributed
 from .redeclares import lifted
 
@@ -313,7 +314,25 @@ _MOIST_AIR_R = [
      "  constant IdealGases.Common.DataRecord steam=IdealGases.Common.SingleGasesData.H2O;"
      " constant Real dryair_R_s = 287.0512249529787; constant Real steam_R_s = 461.5233290850878; // mcl\n")]
 
+# Modelica.Electrical.QuasiStatic.Polyphase.Functions.activePower: rumoca reads neither an
+# input sized by another input (i[size(v, 1)]: 'unresolved flat reference: v') nor the real
+# parts of an array of Complex values; the same sum written over the phasors' parts.
+_ACTIVE_POWER = (
+    """  input SI.ComplexCurrent i[size(v, 1)]
+    "QuasiStatic current phasors";
+  output SI.Power p "Active power";
+algorithm
+  p := sum(Modelica.ComplexMath.real({v[k]*Modelica.ComplexMath.conj(i[k])
+    for k in 1:size(v, 1)}));""",
+    """  input SI.ComplexCurrent i[:]
+    "QuasiStatic current phasors";
+  output SI.Power p "Active power";
+algorithm
+  p := sum(v[k].re*i[k].re
+    + v[k].im*i[k].im for k in 1:size(v, 1));""")
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
+    ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Functions", "activePower.mo")): [_ACTIVE_POWER],
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
     ("Modelica", ("Math", "Nonlinear.mo")): _SOLVE_ONE,
@@ -366,12 +385,23 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
 
         root = path.parents[len(unit) - 1]
         text = records.copied(text, records.declared_records([text], LibraryClasses({library: root})), calls=False)
+    if complexops.MENTIONS.search(text):
+        text = complexops.rewrite(text, _classes(str(path.parents[len(unit)])))
     text = lifted(text)       # (any library's redeclarations with modifiers: :mod:`.redeclares`)
     return text if text != original else None
+
+
+@functools.lru_cache(maxsize=8)
+def _classes(directory: str):
+    """The classes of the libraries in ``directory`` (the MSL's: Modelica beside Complex)."""
+    from .classes import LibraryClasses
+    from .library import available
+
+    return LibraryClasses(available([directory]))
 
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
 VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + repr(sorted(PASSED))
                           + Path(redeclares.__file__).read_text()
-                          + Path(bindings.__file__).read_text() + Path(records.__file__).read_text()).encode()).hexdigest()[:12]
+                          + Path(bindings.__file__).read_text() + complexops.MARK + Path(records.__file__).read_text()).encode()).hexdigest()[:12]

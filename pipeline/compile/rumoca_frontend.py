@@ -22,7 +22,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import homotopy, overlays, tables, xorshift
+from . import complexops, homotopy, overlays, tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
 from .balance import unconnected_inputs, unfound_class
 from .bindings import restated
@@ -120,6 +120,9 @@ class _Front:
         import rumoca
 
         mark, rewrite = _mark(restate, records), _rewrite(restate, tuple(records))
+        calls = self._complex_calls(docs)
+        if calls is not None:
+            mark, rewrite = mark + complexops.MARK, _composed(rewrite, calls)
         if mark:
             docs = {p: (h + mark, names) for p, (h, names) in docs.items()}
         if any(self.docs.get(str(p), h) != h or any(self.owner.get(n, str(p)) != str(p) for n in names)
@@ -143,6 +146,16 @@ class _Front:
         # a class of a library on the path: compiled through a one-line model extending it
         stub = f"model {ENTRY}\n  extends {model};\nend {ENTRY};\n"
         return self.session.loads(stub, model=ENTRY, filename=f"{VIRTUAL}/{ENTRY}.mo")
+
+    def _complex_calls(self, docs: dict[Path, tuple[str, set]]):
+        """The rewrite of Complex operators as calls (:mod:`.complexops`), for documents that use
+        Complex; else None."""
+        if not any(complexops.MENTIONS.search(text) for text in _doc_texts(docs)):
+            return None
+        from .library import available
+
+        classes = LibraryClasses.with_user(available(self.roots), docs)
+        return lambda text: complexops.rewrite(text, classes)
 
     def _use_libraries(self):
         """Register a document that imports every library of the roots. rumoca reads the
@@ -203,6 +216,11 @@ def _rewrite(restate: bool, records: tuple):
     if records:
         return lambda text: copied(text, records, calls=False)
     return None
+
+
+def _composed(first, then):
+    """``then`` after ``first`` (None: nothing)."""
+    return then if first is None else (lambda text: then(first(text)))
 
 
 def _doc_texts(docs: dict[Path, tuple[str, set]]):
@@ -454,6 +472,8 @@ def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
     used, texts = None, None
     if files or model:
         texts = [f.read_text(encoding="utf-8", errors="replace") for f in files]
+        if any(complexops.MENTIONS.search(t) for t in texts):
+            texts.append(f"{complexops.REAL} {complexops.IMAG}")     # what the rewrite of Complex operators calls
         used = needed(texts, defined, model, search)
         texts.append(model or "")
     return Prepared(docs, files, library_roots(search, shadowed=defined, used=used), texts,
@@ -789,11 +809,9 @@ def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> Model
                      f"{', '.join(loose[:8])}{more}", where=err.where)
 
 
-#: the MSL's packages that write their equations in Complex arithmetic, and the record itself
-_COMPLEX = re.compile(r"\b(?:Complex|FundamentalWave|QuasiStatic|ComplexBlocks|ComplexMath)\b")
-_COMPLEX_HINT = ("; rumoca 0.10 translates an operator on Complex values (a + b = Complex(0, 0), 2*a) as "
-                 "one equation short: written as a call (Complex.'+'(a, b), Complex.'*'.multiply(a, b)) it "
-                 "balances, and mcl does not yet rewrite the operators")
+_COMPLEX_HINT = ("; rumoca 0.10 translates an operator on Complex values (a + b, 2*a) as one equation short, "
+                 "and mcl writes it as a call (Complex.'+'(a, b)) only in an equation it can solve for a "
+                 "reference (a side, a term of a sum, or a term's factor): write the others so")
 
 
 def _in_complex(model: str, prep: Prepared) -> bool:
@@ -804,7 +822,7 @@ def _in_complex(model: str, prep: Prepared) -> bool:
             texts.append(Path(f).read_text(encoding="utf-8", errors="replace"))
         except OSError:
             pass
-    return any(_COMPLEX.search(t) for t in texts)
+    return any(complexops.MENTIONS.search(t) for t in texts)
 
 
 def _located_error(exc, model: str, files: list[Path], real: dict | None = None) -> ModelicaError:
