@@ -795,3 +795,38 @@ def test_complex_arithmetic_written_with_operators_runs_and_what_cannot_be_read_
     (tmp_path / "Phasors.mo").write_text(PHASORS % "Modelica.ComplexMath.conj(d) = Complex(0, -0.25);")
     with pytest.raises(ModelicaError, match=r"Phasors\.mo.*unbalanced.*reference"):
         compile_model([tmp_path / "Phasors.mo"], "Phasors")
+
+
+PHASOR_ARRAYS = """
+model PhasorArrays "three-phase phasors, whole arrays in a binding and in an equation"
+  Complex u[3], v[3], s[3];
+  Complex w[3] = u - v "a binding on whole arrays";
+  Complex total;
+equation
+  for k in 1:3 loop
+    u[k] = Complex(k, time);
+    v[k] = Complex(0, k);
+  end for;
+  s = 2*w;
+  total = s*v;
+end PhasorArrays;
+"""
+
+
+@needs_msl()
+def test_complex_arrays_are_written_element_by_element(tmp_path, monkeypatch):
+    """rumoca reads no arithmetic on whole arrays of Complex records: a binding becomes the
+    comprehension of its elements, an equation a for-loop, ``s*v`` of two vectors the sum of
+    its terms (:mod:`mcl.compile.complexops`)."""
+    monkeypatch.setenv("MODELICAPATH", str(msl_path()))
+    (tmp_path / "PhasorArrays.mo").write_text(PHASOR_ARRAYS)
+    model = compile_model([tmp_path / "PhasorArrays.mo"], "PhasorArrays")
+    model = model.with_outputs(["w[2].re", "w[2].im", "total.re", "total.im"], only=True)
+    t = np.linspace(0, 1, 3)
+    res = simulate(model, series(t))
+    assert res.ok, res.reason
+    k = np.arange(1, 4)
+    w = k[None, :] + 1j * (t[:, None] - k[None, :])              # u - v
+    total = (2 * w * (1j * k[None, :])).sum(axis=1)              # sum of s[k] v[k]
+    assert np.allclose(res.output("w[2].re"), w[:, 1].real) and np.allclose(res.output("w[2].im"), w[:, 1].imag)
+    assert np.allclose(res.output("total.re"), total.real) and np.allclose(res.output("total.im"), total.imag)

@@ -208,13 +208,15 @@ class _Parser:
                     raise _Unread(close)
             self.take(close)
             node = self.node("array", tok, kids, type_=C if any(k.type == C for k in kids) else R)
-            node.iterator = iterators[0] if len(kids) == 1 and len(iterators) == 1 else ""
+            if len(kids) == 1 and len(iterators) == 1:
+                node.iterator = iterators[0]
             return node
         if tok.kind == "id" or tok.text in ("der", "initial", "pre"):
             return self.reference()
         raise _Unread(tok.text)
 
     def iterators(self) -> list[str]:
+        """A comprehension's iterators' names."""
         names = []
         while self.peek() in ("for", ","):
             self.take()
@@ -689,6 +691,17 @@ def rewrite(text: str, lc: LibraryClasses) -> str:
     return "".join(out)
 
 
+def _comprehension(e: Node, text: str) -> str:
+    """A Complex array's value computed on whole arrays (``plug_p.pin.v - plug_n.pin.v``) as
+    the comprehension of its elements' constructors (rumoca reads no arithmetic on whole record
+    arrays); any other value (a comprehension, a fill) as it is written after the rewrite."""
+    whole = next((n for n in _walk(e) if n.kind == "ref" and n.array_at is not None), None)
+    if whole is None:
+        return _emit(e, text)
+    el = _Element("mcl_k")
+    return f"{{{_record(e, text, el=el)} for {el.index} in 1:size({text[whole.start:whole.array_at]}, 1)}}"
+
+
 def _complex_equation(lhs: Node, rhs: Node, text: str):
     """(start, end, new text) of a Complex equation; an equation of whole arrays as a for-loop
     over their elements (rumoca reads no record array's equation)."""
@@ -728,7 +741,10 @@ def _statement(st: list[Tok], section: str, typer: _Typer, text: str):
         p = _Parser(st[k + 1:], typer)
         e = p.expression()
         array = any(t.text == "[" for t in st[:k]) or _arrayed(e)
-        new = _record(e, text) if e.type == C and not array else _emit(e, text)     # a binding is an equation too
+        if e.type == C and array and _arrayed(e):
+            new = _comprehension(e, text)
+        else:
+            new = _record(e, text) if e.type == C and not array else _emit(e, text)     # a binding is an equation too
         return (e.start, e.end, new) if new != text[e.start:e.end] else None
     # structured headers: for ... loop, if ... then, else, end if, when ... then
     while k < len(st):
