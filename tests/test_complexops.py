@@ -55,3 +55,12 @@ def test_operators_on_complex_values_become_calls_and_each_equation_has_a_refere
 def test_text_without_complex_values_is_returned_as_it_is(tmp_path):
     text = "model Plain\n  Real x(start = 1), y;\nequation\n  der(x) = -2*x + y;\n  y = x^2;\nend Plain;\n"
     assert _rewritten(tmp_path, text) == text
+
+
+def test_a_class_nested_after_its_packages_description_is_read_in_its_own_scope(tmp_path):
+    text = ('package Nest "phasor parts"\n  model Load "a load"\n    Complex v, i;\n    parameter Real R = 2;\n'
+            '  equation\n    v = R*i;\n    i = Complex(1, time);\n  end Load;\nend Nest;\n')
+    (tmp_path / "Nest.mo").write_text(text)
+    docs, _ = documents([tmp_path / "Nest.mo"])
+    out = rewrite(text, LibraryClasses.with_user({}, docs)).splitlines()
+    assert out[5].strip().startswith("v = Complex(Modelica.ComplexMath.real(Complex.'*'.multiply(Complex(R), i)),")

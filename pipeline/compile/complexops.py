@@ -616,6 +616,8 @@ def _statements(toks: list[Tok]):
                 continue
             stack.append([name, "decl"])
             i = j
+            while i < n and toks[i].kind == "str":      # its description (a nested class may follow)
+                i += 1
             continue
         if t in ("equation", "algorithm") and stack:
             stack[-1][1] = t
@@ -662,7 +664,7 @@ def _class_head(toks, i):
 
 def rewrite(text: str, lc: LibraryClasses) -> str:
     """``text`` (a file of Modelica classes) with its Complex operators written as calls."""
-    if not MENTIONS.search(text) and "'" not in text:
+    if not MENTIONS.search(text):
         return text
     toks = tokens(text)
     edits = []
