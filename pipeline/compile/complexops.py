@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import ClassVar
 
 from .classes import ClassInfo, LibraryClasses
+from .sources import masked
 
 #: the digest's mark of a document compiled with its Complex operators as calls (the rewrite's version)
 MARK = "+complex" + hashlib.sha256(Path(__file__).read_bytes()).hexdigest()[:8]
@@ -662,9 +663,14 @@ def _class_head(toks, i):
     return name, k, False
 
 
+def uses_complex(text: str) -> bool:
+    """Whether ``text``'s code (not its comments and strings) names Complex or a library built on it."""
+    return MENTIONS.search(text) is not None and MENTIONS.search(masked(text)) is not None
+
+
 def rewrite(text: str, lc: LibraryClasses) -> str:
     """``text`` (a file of Modelica classes) with its Complex operators written as calls."""
-    if not MENTIONS.search(text):
+    if not uses_complex(text):
         return text
     toks = tokens(text)
     edits = []

@@ -385,10 +385,17 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
 
         root = path.parents[len(unit) - 1]
         text = records.copied(text, records.declared_records([text], LibraryClasses({library: root})), calls=False)
-    if complexops.MENTIONS.search(text):
-        text = complexops.rewrite(text, _classes(str(path.parents[len(unit)])))
+    if complexops.uses_complex(text):
+        text = _complex_calls(text, str(path.parents[len(unit)]))
     text = lifted(text)       # (any library's redeclarations with modifiers: :mod:`.redeclares`)
     return text if text != original else None
+
+
+@functools.lru_cache(maxsize=256)
+def _complex_calls(text: str, directory: str) -> str:
+    """:func:`.complexops.rewrite` of a library file, once per process (each library root a
+    compile makes holds the files it reaches: Units.mo in nearly all)."""
+    return complexops.rewrite(text, _classes(directory))
 
 
 @functools.lru_cache(maxsize=8)
