@@ -466,8 +466,8 @@ def _closing_at_end(x: str) -> bool:
 class _Typer:
     """The types of the names written inside one class."""
 
-    def __init__(self, lc: LibraryClasses, info: ClassInfo | None, locals_=()):
-        self.lc, self.info, self.locals = lc, info, set(locals_)
+    def __init__(self, lc: LibraryClasses, info: ClassInfo | None):
+        self.lc, self.info, self.locals = lc, info, set()     # locals: a statement's for-loop iterators
         self.scope = info.name if info else ""
         self.env = {}
         if info is not None:
@@ -567,7 +567,7 @@ def _walk(node: Node):
 
 
 @functools.lru_cache(maxsize=4096)
-def _complex_cached(lc: LibraryClasses, name: str) -> bool:
+def _is_complex(lc: LibraryClasses, name: str) -> bool:
     if name.split(".")[-1] == "Complex" and "." not in name:
         return True
     info = lc.find(name)
@@ -580,12 +580,8 @@ def _complex_cached(lc: LibraryClasses, name: str) -> bool:
         if head is None:
             return False
         base = lc.resolve(head.group(), scope, info) or lc.resolve(head.group(), name)
-        return base is not None and _complex_cached(lc, base.name) or head.group().split(".")[-1] == "Complex"
-    return any(_complex_cached(lc, b.name) for b in lc.bases(info))
-
-
-def _is_complex(lc: LibraryClasses, name: str) -> bool:
-    return _complex_cached(lc, name)
+        return base is not None and _is_complex(lc, base.name) or head.group().split(".")[-1] == "Complex"
+    return any(_is_complex(lc, b.name) for b in lc.bases(info))
 
 
 def _statements(toks: list[Tok]):
