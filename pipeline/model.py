@@ -206,11 +206,13 @@ def _recording(o: Ode, kept: list[str], extra: list[str]) -> Ode:
     idx = [o.probe_names.index(n) for n in extra]
     own = [o.y_names.index(n) for n in kept]
     args = o.out.mx_in()
-    y = ca.vertcat(o.out(*args)[own], o.probe(*args)[idx])
+    pick = lambda v, rows: v[rows] if rows else ca.MX(0, 1)     # noqa: E731 - (v[[]] is 1x0: no vertcat)
+    probe = pick(o.probe(*args), idx)
+    y = ca.vertcat(pick(o.out(*args), own), probe)
     y_c, res, drift = o.checks(*args)
     io = (["x", "u", "p", "t"],)
     out = expanded(ca.Function("out", args, [y], *io, ["out"]))
-    checks = expanded(ca.Function("checks", args, [ca.vertcat(y_c[own], o.probe(*args)[idx]), res, drift],
+    checks = expanded(ca.Function("checks", args, [ca.vertcat(pick(y_c, own), probe), res, drift],
                                   *io, ["y", "res", "drift"]))
     warm = _recording(o.warm, kept, extra) if o.warm is not None else None
     return dataclasses.replace(o, y_names=[*kept, *extra], out=out, checks=checks, warm=warm)

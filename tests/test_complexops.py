@@ -33,23 +33,21 @@ def test_operators_on_complex_values_become_calls_and_each_equation_has_a_refere
     out = _rewritten(tmp_path, IMPEDANCE)
     lines = out.splitlines()
     assert len(lines) == len(IMPEDANCE.splitlines())              # messages keep naming the right line
-    # a binding is an equation too: Real terms taken into Complex (j a constant, w*L Real)
-    impedance = "Complex.'+'(Complex(R), Complex.'*'.multiply(Complex.'*'.multiply(j, Complex(w)), Complex(L)))"
-    assert lines[5] == (f"  Complex z = Complex(Modelica.ComplexMath.real({impedance}), "
-                        f"Modelica.ComplexMath.imag({impedance})) \"impedance\";")
-    # swapped to have the reference on the left; the right as the record's parts (rumoca equates
-    # two records only of one class, or a record and its constructor)
-    assert lines[11].strip() == ("v = Complex(Modelica.ComplexMath.real(Complex.'*'.multiply(z, i)), "
-                                 "Modelica.ComplexMath.imag(Complex.'*'.multiply(z, i)));")
-    # a sum solved for its first variable's term (s)
+    # a binding is an equation too: the value's parts in Real arithmetic (j a constant, w*L Real)
+    assert lines[5] == '  Complex z = Complex((R) + (((j.re)*(w))*(L)), ((j.im)*(w))*(L)) "impedance";'
+    # swapped to have the reference on the left; the right as the record's constructor (rumoca
+    # equates two records only of one class, or a record and its constructor)
+    assert lines[11].strip() == "v = Complex(((z.re)*(i.re)) - ((z.im)*(i.im)), ((z.re)*(i.im)) + ((z.im)*(i.re)));"
+    # a sum solved for its first variable's term (s), the rest as the record's calls
     assert lines[12].strip().startswith("s = Complex(Modelica.ComplexMath.real(Complex.'*'.multiply(v, ")
-    # a Real equation keeps its side; its Complex product becomes a call
-    assert lines[13].strip() == "p = Modelica.ComplexMath.real(Complex.'*'.multiply(v, Modelica.ComplexMath.conj(i)));"
+    # a Real equation keeps its side; the real part of a product is written out
+    assert lines[13].strip() == "p = (((v.re)*(i.re)) - ((v.im)*(-(i.im))));"
     # a Complex if-expression is written as its parts' if-expressions (rumoca reads no record-valued one)
-    assert "Complex((if conjugate then Modelica.ComplexMath.real(Modelica.ComplexMath.conj(s)) else s.re)" in lines[14]
-    # what needs no rewrite, and what cannot be solved for a reference, stay as written
+    assert "Complex((if conjugate then s.re else s.re), (if conjugate then -(s.im) else s.im))" in lines[14]
+    # what needs no rewrite stays as written
     assert lines[9:11] == IMPEDANCE.splitlines()[9:11]
-    assert lines[15] == IMPEDANCE.splitlines()[15]
+    # no reference to solve for: two Real equations of the parts
+    assert lines[15].strip() == "1 = s.re; 0 = -(s.im);"
 
 
 def test_text_without_complex_values_is_returned_as_it_is(tmp_path):
@@ -63,4 +61,4 @@ def test_a_class_nested_after_its_packages_description_is_read_in_its_own_scope(
     (tmp_path / "Nest.mo").write_text(text)
     docs, _ = documents([tmp_path / "Nest.mo"])
     out = rewrite(text, LibraryClasses.with_user({}, docs)).splitlines()
-    assert out[5].strip().startswith("v = Complex(Modelica.ComplexMath.real(Complex.'*'.multiply(Complex(R), i)),")
+    assert out[5].strip() == "v = Complex((R)*(i.re), (R)*(i.im));"

@@ -823,6 +823,127 @@ def test_a_phasor_circuit_of_quasi_static_parts_draws_the_current_its_impedance_
     assert np.allclose(out["I"], abs(current)) and np.allclose(out["P"], abs(current) ** 2 * 10)
 
 
+WINDING = """
+model Winding "a three-phase winding on a reluctance, fed from the mains, with its currents' symmetrical components"
+  import Modelica.Electrical.QuasiStatic.Polyphase;
+  import Modelica.Electrical.QuasiStatic.SinglePhase;
+  import Modelica.Magnetic.QuasiStatic.FundamentalWave;
+  parameter Integer m = 3;
+  parameter Real V = 100 "RMS phase voltage";
+  parameter Real turns = 5 "effective turns";
+  parameter Real Rm = 40 "the core's reluctance";
+  Polyphase.Sources.VoltageSource mains(m = m, f = 50, V = fill(V, m), gamma(fixed = true, start = 0));
+  Polyphase.Basic.Star star(m = m);
+  SinglePhase.Basic.Ground ground;
+  Polyphase.Sensors.CurrentSensor ammeter(m = m);
+  FundamentalWave.Components.PolyphaseElectroMagneticConverter winding(m = m, effectiveTurns = turns);
+  FundamentalWave.Components.Reluctance core(R_m(d = Rm, q = Rm));
+  FundamentalWave.Components.Ground magneticGround;
+  Polyphase.Blocks.SymmetricalComponents components(m = m);
+  output Real I1re = ammeter.i[1].re, I1im = ammeter.i[1].im;
+  output Real positive = Modelica.ComplexMath.abs(components.y[1]) "the positive sequence";
+  output Real others = sum(Modelica.ComplexMath.abs(components.y[k]) for k in 2:m);
+equation
+  connect(mains.plug_p, ammeter.plug_p);
+  connect(ammeter.plug_n, winding.plug_p);
+  connect(winding.plug_n, mains.plug_n);
+  connect(mains.plug_n, star.plug_p);
+  connect(star.pin_n, ground.pin);
+  connect(winding.port_p, core.port_p);
+  connect(winding.port_n, core.port_n);
+  connect(winding.port_n, magneticGround.port_p);
+  connect(ammeter.i, components.u);
+end Winding;
+"""
+
+SIX_PHASES = """
+model SixPhases "a six-phase source on an unbalanced resistive star: the currents' symmetrical components"
+  import Modelica.Electrical.QuasiStatic.Polyphase;
+  import Modelica.Electrical.QuasiStatic.SinglePhase;
+  parameter Integer m = 6 "two three-phase systems";
+  Polyphase.Sources.VoltageSource mains(m = m, f = 50, V = {100 + 10*k for k in 1:m}, gamma(fixed = true, start = 0));
+  Polyphase.Basic.Resistor load(m = m, R_ref = {1 + 0.5*k for k in 1:m});
+  Polyphase.Basic.Star star(m = m);
+  SinglePhase.Basic.Ground ground;
+  Polyphase.Sensors.CurrentSensor ammeter(m = m);
+  Polyphase.Blocks.SymmetricalComponents components(m = m);
+  Polyphase.Blocks.FromSymmetricalComponents phases(m = m);
+  output Real back = sum(Modelica.ComplexMath.abs(phases.y[k] - ammeter.i[k]) for k in 1:m);
+equation
+  connect(mains.plug_p, ammeter.plug_p);
+  connect(ammeter.plug_n, load.plug_p);
+  connect(load.plug_n, star.plug_p);
+  connect(mains.plug_n, star.plug_p);
+  connect(star.pin_n, ground.pin);
+  connect(ammeter.i, components.u);
+  connect(components.y, phases.u);
+end SixPhases;
+"""
+
+
+def _symmetric_orientation(m: int) -> np.ndarray:
+    """Modelica.Electrical.Polyphase.Functions.symmetricOrientation, as the MSL writes it."""
+    if m % 2:
+        return np.arange(m) * 2 * np.pi / m
+    if m == 2:
+        return np.array([0.0, np.pi / 2])
+    half = _symmetric_orientation(m // 2)
+    return np.concatenate([half, half - np.pi / m])
+
+
+def _symmetric_transformation(m: int) -> np.ndarray:
+    """Polyphase.Functions.symmetricTransformationMatrix (through symmetricOrientationMatrix)."""
+    n_base = 1
+    k = m
+    while k % 2 == 0 and k != 2:
+        n_base, k = n_base * 2, k // 2
+    m_base = m // n_base
+    o = _symmetric_orientation(m)
+    oM = np.zeros((m, m))
+    oM[:m_base, :m_base] = [o[:2], -o[:2]] if m_base == 2 else [j * o[:m_base] for j in range(1, m_base + 1)]
+    for i in range(1, n_base):
+        s = slice(i * m_base, (i + 1) * m_base)
+        oM[s, s] = oM[:m_base, :m_base] + o[i * m_base]
+    same = np.kron(np.eye(n_base), np.ones((m_base, m_base)))
+    return same * n_base / m * np.exp(1j * oM)
+
+
+def test_a_winding_on_a_quasi_static_fundamental_wave_core_and_symmetrical_components(msl_path, tmp_path):
+    """The QuasiStatic FundamentalWave converter and the symmetrical-components blocks compute
+    their transformation matrices and sequence indices with functions whose output sizes are
+    calls (numberOfSymmetricBaseSystems), which rumoca cannot size: mcl's overlays write them
+    as comprehensions and a local function (:mod:`mcl.compile.overlays`). A three-phase winding
+    of N turns on a reluctance R_m is the inductance m N^2 / (2 R_m) on each phase, drawing a
+    positive sequence only; six unbalanced phases (two base systems) have the symmetrical
+    components of the MSL's matrix, and transformed back they are the phase currents."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    t = np.linspace(0.0, 0.02, 3)
+    none = TimeSeries(t, np.zeros((len(t), 0)), [])
+    (tmp_path / "Winding.mo").write_text(WINDING)
+    res = mcl.simulate(mcl.compile_model([tmp_path / "Winding.mo"], "Winding"), none)
+    assert res.ok, res.reason
+    current = 100 / (1j * 2 * np.pi * 50 * (3 * 5 ** 2 / 2 / 40))
+    assert np.allclose(res.output("I1re"), current.real, atol=1e-9) and np.allclose(res.output("I1im"), current.imag)
+    assert np.allclose(res.output("positive"), abs(current)) and np.allclose(res.output("others"), 0.0, atol=1e-9)
+
+    (tmp_path / "SixPhases.mo").write_text(SIX_PHASES)
+    model = mcl.compile_model([tmp_path / "SixPhases.mo"], "SixPhases")
+    back = mcl.simulate(model, none)
+    assert back.ok, back.reason
+    # (only variables that are not outputs: once an internal error, an empty vertcat)
+    names = [f"components.y[{k}].{p}" for k in range(1, 7) for p in ("re", "im")]
+    res = mcl.simulate(model.with_outputs(names, only=True), none)
+    assert res.ok, res.reason
+    k = np.arange(1, 7)
+    currents = (100 + 10 * k) * np.exp(-1j * _symmetric_orientation(6)) / (1 + 0.5 * k)
+    expected = _symmetric_transformation(6) @ currents
+    got = np.array([res.output(f"components.y[{j}].re")[-1] + 1j * res.output(f"components.y[{j}].im")[-1]
+                    for j in k])
+    assert np.allclose(got, expected) and np.allclose(back.output("back"), 0.0, atol=1e-9)
+
+
 def test_an_unbalanced_star_load_balanced_by_reactances_draws_no_neutral_current(msl_path):
     """The MSL's BalancingStar: a resistor, an inductor and a capacitor in star on three phases,
     sized so that the source sees a balanced resistive load. Its phasors are arrays of Complex

@@ -11,8 +11,11 @@ so. What rumoca does read, and what each Complex statement is rewritten to:
   right (rumoca equates two records only of one class: ``v = a`` with v a ComplexVoltage and a
   a Complex is refused): ``v = Complex(a.re, a.im)``, a value that is not a reference through
   ``Modelica.ComplexMath.real``/``imag``. An equation with no reference on either side is
-  solved for a reference that is a term of a sum, or a term's factor (``p.i + n.i = Complex(0)``
-  -> ``p.i = -n.i``);
+  solved for a reference that is a term of a sum (``p.i + n.i = Complex(0)`` -> ``p.i = -n.i``),
+  or a term's factor where that divides by no variable; any other is written as two Real
+  equations of its parts (``-sqrt(2)*v = j*omega*Phi``: solved for Phi it would divide by omega);
+- an element chosen by an array's element (``x[index[k]]``) through its members: rumoca resolves
+  no record equation of one;
 - a record-valued if-expression as the constructor of its parts' if-expressions;
 - an equation of whole arrays as a for-loop over their elements, a scalar product of two
   vectors as the sum of its terms' parts, ``fill(c, n)`` as a comprehension;
@@ -55,6 +58,10 @@ _SAME = {"pre", "noEvent", "smooth", "homotopy", "delay", "sum", "previous", "ho
 #: the built-in functions a Complex function imported by its short name hides (rumoca takes the built-in)
 _BUILTIN = {"abs", "sqrt", "exp", "log", "log10", "sin", "cos", "tan", "sinh", "cosh", "tanh", "asin", "acos",
             "atan", "sign", "max", "min", "sum", "product"}
+#: the other built-in functions of Real values
+_REAL_BUILTIN = {"atan2", "floor", "ceil", "mod", "rem", "div", "integer", "abs", "exp", "sqrt", "cross", "skew",
+                 "transpose", "identity", "diagonal", "zeros", "ones", "linspace", "scalar", "vector", "matrix",
+                 "cardinality", "sample", "edge", "change", "terminal", "smooth"}
 C, R, U = "C", "R", "U"   # a Complex value; any other; a call of a function not found (taken as Complex beside one)
 
 
@@ -89,10 +96,13 @@ class Node:
     type: str = R
     rewrite: str | None = None  # the node's new text (a Complex operator as its call)
     variable: bool = False     # a reference to a variable of the class (one an equation may be solved for)
+    member: bool = False       # a reference to a component of the class (not an imported or a package's constant)
     qualified: str = ""        # a call's function named in full (an imported ComplexMath.abs is not the built-in)
     head: int = 0              # where a call's name ends
     array_at: int | None = None  # a reference to a whole array: where its array part's name ends
     iterator: str = ""         # an array comprehension's iterator
+    function: str = ""         # a call's function, resolved (Modelica.ComplexMath.real)
+    whole: bool = False        # a call of a function whose output is an array (symmetricOrientation(m))
 
 
 @dataclass(frozen=True)
@@ -253,6 +263,7 @@ class _Parser:
             type_, whole = self.typer.reference(parts, subscripted)
             ref = self.node("ref", first, op=name, type_=R if type_ in ("re", "im") else type_)
             ref.variable = self.typer.variable(parts[0])
+            ref.member = parts[0] in self.typer.env
             ref.array_at = ends[whole] if whole is not None else None
             if type_ in ("re", "im"):       # bw.re of a Complex array bw: rumoca reads no such slice
                 ref.rewrite, ref.head = type_, ends[-2]
@@ -273,6 +284,9 @@ class _Parser:
         self.take(")")
         call = self.node("call", first, kids, op=name)
         call.type = self.typer.call(name, kids)
+        call.whole = self.typer.array_valued(name)
+        if name.split(".")[-1] in _PARTS:
+            call.function = self.typer.qualified(name) or (name if name.startswith("Modelica.ComplexMath.") else "")
         if name in _BUILTIN and any(k.type == C for k in kids):
             call.qualified, call.head = self.typer.qualified(name), head
         return call
@@ -282,9 +296,10 @@ def _emit(node: Node, text: str, el: _Element | None = None) -> str:
     """``node``'s text with its Complex operators written as calls; with ``el``, the element
     ``el.index`` of an array expression."""
     if node.rewrite in ("re", "im"):
-        part = REAL if node.rewrite == "re" else IMAG
+        # bw[k].re, not real(bw[k]): rumoca resolves no comprehension's iterator in a record
+        # function's call inside sum()
         inner = _Element(el.index if el is not None else "mcl_s")
-        x = f"{part}({text[node.start:node.array_at]}[{inner.index}]{text[node.array_at:node.head]})"
+        x = f"{text[node.start:node.array_at]}[{inner.index}]{text[node.array_at:node.head]}.{node.rewrite}"
         return x if el is not None else f"{{{x} for {inner.index} in 1:size({text[node.start:node.array_at]}, 1)}}"
     if el is not None:
         if node.kind == "ref" and node.op in el.iterators:
@@ -295,6 +310,8 @@ def _emit(node: Node, text: str, el: _Element | None = None) -> str:
             return _emit(node.kids[0], text, _Element(el.index, el.iterators | {node.iterator}))
         if node.kind == "call" and node.op == "fill":
             return _emit(node.kids[0], text, el)
+        if node.kind == "call" and node.whole:          # f(m)[k] of an array-valued f
+            return f"({_emit(node, text)})[{el.index}]"
         if node.kind in ("array", "other") or node.kind == "call" and node.op in _SAME | {"size", "ndims"}:
             raise _Unread("an array expression read element by element")
     if node.rewrite == "if":
@@ -305,6 +322,10 @@ def _emit(node: Node, text: str, el: _Element | None = None) -> str:
             arms = [f"{'if' if k == 0 else 'elseif'} {c} then {v[part]}" for k, (c, v) in enumerate(zip(conds, values))]
             return f"({' '.join(arms)} else {values[-1][part]})"
         return f"Complex({chain(0)}, {chain(1)})"
+    if node.function in _OF_PARTS and len(node.kids) == 1:
+        parts = _expanded(node.kids[0], text, el)
+        if parts is not None:
+            return _OF_PARTS[node.function].format(*parts)
     if node.kind == "call" and node.op == "fill" and node.type == C and len(node.kids) == 2:
         # rumoca's shapes miss fill(Complex(1, 0), n); the comprehension it reads
         return f"{{{_emit(node.kids[0], text)} for mcl_j in 1:{_emit(node.kids[1], text)}}}"
@@ -331,16 +352,66 @@ def _emit(node: Node, text: str, el: _Element | None = None) -> str:
     return "".join(out)
 
 
+#: the functions of Complex values whose parts :func:`_expanded` writes out
+_PARTS = {"real", "imag", "conj", "abs", "arg"}
+#: Real functions of a Complex value, written on its parts (re, im)
+_OF_PARTS = {"Modelica.ComplexMath.real": "({0})", "Modelica.ComplexMath.imag": "({1})",
+             "Modelica.ComplexMath.abs": "sqrt(({0})^2 + ({1})^2)", "Modelica.ComplexMath.arg": "atan2({1}, {0})"}
+
+
+def _expanded(node: Node, text: str, el: _Element | None = None, depth: int = 0) -> tuple[str, str] | None:
+    """The real and imaginary parts of a Complex value written in Real arithmetic on its
+    operands' members (``real(v[j]*conj(i[j]))`` -> ``v[j].re*i[j].re - ...``), or None where
+    it holds another call or a division, or grows deep. rumoca resolves no comprehension's
+    iterator in a call of a record function inside ``sum({... for j in 1:m})``."""
+    if node.type == R:
+        return _emit(node, text, el), "0"
+    if depth > 3:
+        return None
+    if node.kind == "ref" and node.rewrite is None and (node.array_at is None or el is not None):
+        x = _emit(node, text, el)       # (rumoca resolves no member of an imported constant: j.re)
+        return (f"{x}.re", f"{x}.im") if node.member else (f"{REAL}({x})", f"{IMAG}({x})")
+    if node.kind == "paren" and len(node.kids) == 1:
+        return _expanded(node.kids[0], text, el, depth)
+    if node.kind == "call" and node.op == "Complex" and 1 <= len(node.kids) <= 2 and "=" not in text[node.start:node.end]:
+        kids = [_emit(k, text, el) for k in node.kids]
+        return kids[0], kids[1] if len(kids) > 1 else "0"
+    kids = [_expanded(k, text, el, depth + 1) for k in node.kids]
+    if any(k is None for k in kids):
+        return None
+    if node.kind == "call" and node.function == "Modelica.ComplexMath.conj" and len(kids) == 1:
+        return kids[0][0], f"-({kids[0][1]})"
+    if node.kind == "un" and node.op in "+-" and len(kids) == 1:
+        return kids[0] if node.op == "+" else (_sum("0", "-", kids[0][0]), _sum("0", "-", kids[0][1]))
+    if node.kind == "bin" and node.op in ("+", "-"):
+        (a, b), (c, d) = kids
+        return _sum(a, node.op, c), _sum(b, node.op, d)
+    if node.kind == "bin" and node.op == "*":
+        (a, b), (c, d) = kids
+        return _sum(_product(a, c), "-", _product(b, d)), _sum(_product(a, d), "+", _product(b, c))
+    return None
+
+
+def _product(a: str, b: str) -> str:
+    return "0" if "0" in (a, b) else f"({a})*({b})"
+
+
+def _sum(a: str, op: str, b: str) -> str:
+    if b == "0":
+        return a
+    return (b if op == "+" else f"-({b})") if a == "0" else f"({a}) {op} ({b})"
+
+
 def _changed(node: Node) -> bool:
     return node.rewrite is not None or bool(node.qualified) or node.kind == "call" and node.op == "fill" \
-        and node.type == C or any(_changed(k) for k in node.kids)
+        and node.type == C or node.function in _OF_PARTS or any(_changed(k) for k in node.kids)
 
 
 def _arrayed(node: Node) -> bool:
     """Whether ``node`` holds a whole array (a reference, a comprehension, a fill) outside a
     scalar product."""
     if node.kind == "ref" and node.array_at is not None or node.kind == "array" and node.iterator \
-            or node.kind == "call" and node.op == "fill":
+            or node.kind == "call" and (node.op == "fill" or node.whole):
         return True
     if node.kind == "call" and node.op in ("sum", "product", "max", "min", "size", "ndims"):
         return False        # a scalar of an array
@@ -378,17 +449,23 @@ def _equation(lhs: Node, rhs: Node, text: str, el: _Element | None = None):
     """(a Complex equation written with a component reference on its left and a record
     constructor on its right, its operators as calls; the reference), or None where neither
     side is a reference nor a sum holding one (times or over a factor)."""
-    if lhs.kind == "ref":
-        right = _record(rhs, text, el=el)
-        return (None if el is None and right == text[rhs.start:rhs.end] else f"{_emit(lhs, text, el)} = {right}"), lhs
-    if rhs.kind == "ref":
-        return f"{_emit(rhs, text, el)} = {_record(lhs, text, el=el)}", rhs
+    for ref, value in ((lhs, rhs), (rhs, lhs)):
+        if ref.kind != "ref":
+            continue
+        x = _emit(ref, text, el)
+        if _INDIRECT.search(x):      # x[index[k]]: rumoca reads the element's members only
+            return "; ".join(f"{x}.{m} = {v}" for m, v in zip(("re", "im"), _parts(value, text, el))), ref
+        right = _record(value, text, el=el)
+        unchanged = ref is lhs and el is None and right == text[value.start:value.end]
+        return (None if unchanged else f"{x} = {right}"), ref
     terms = [(s, n) for s, n in _terms(lhs)] + [(-s, n) for s, n in _terms(rhs)]
     k = next((k for k, (_, n) in enumerate(terms) if _solvable(n) is not None), None)
     if k is None:
-        return None, None
+        return _split(lhs, rhs, text, el)
     sign, term = terms.pop(k)
     ref, op, factor = _solvable(term)
+    if factor is not None and (factor.type != R or any(n.kind == "ref" and n.variable for n in _walk(factor))):
+        return _split(lhs, rhs, text, el)     # solved for, the term would divide by a variable (omega)
     out = None                # term = -sign * (the other terms)
     for s, n in terms:
         if _zero(n, text):
@@ -403,6 +480,18 @@ def _equation(lhs: Node, rhs: Node, text: str, el: _Element | None = None):
         f = _emit(factor, text, el) if factor.type != R else f"Complex({_emit(factor, text, el)})"
         out = f"{_OPS['/' if op == '*' else '*']}({out}, {f})"
     return f"{_emit(ref, text, el)} = {_record(None, text, out)}", ref
+
+
+#: a subscript that is itself an array's element (``x[index[k]]``)
+_INDIRECT = re.compile(r"\[[^\]]*\[")
+
+
+def _split(lhs: Node, rhs: Node, text: str, el: _Element | None = None):
+    """(the equation as two Real equations of its parts, a whole-array reference in it): the
+    form for an equation no reference can be solved for without a division by a variable."""
+    left, right = _parts(lhs, text, el), _parts(rhs, text, el)
+    whole = next((n for n in [*_walk(lhs), *_walk(rhs)] if n.kind == "ref" and n.array_at is not None), None)
+    return f"{left[0]} = {right[0]}; {left[1]} = {right[1]}", whole
 
 
 def _solvable(term: Node):
@@ -429,15 +518,11 @@ REAL, IMAG = "Modelica.ComplexMath.real", "Modelica.ComplexMath.imag"
 
 def _parts(node: Node, text: str, el: _Element | None = None) -> tuple[str, str]:
     """The real and imaginary parts of a value as text."""
-    x = _emit(node, text, el)
-    if node.type == R:
-        return x, "0"
-    if node.kind == "ref" and "[" not in x:        # (rumoca reads no k[1].re of a Complex array k)
-        return f"{x}.re", f"{x}.im"
-    if node.kind == "call" and node.op == "Complex" and len(node.kids) <= 2 and "=" not in text[node.start:node.end]:
-        kids = [_emit(k, text, el) for k in node.kids]
-        return kids[0], kids[1] if len(kids) > 1 else "0"
-    return f"{REAL}({x})", f"{IMAG}({x})"
+    parts = _expanded(node, text, el)
+    if parts is None:
+        x = _emit(node, text, el)
+        parts = f"{REAL}({x})", f"{IMAG}({x})"
+    return parts
 
 
 def _record(node: Node | None, text: str, written: str | None = None, el: _Element | None = None) -> str:
@@ -468,6 +553,7 @@ class _Typer:
 
     def __init__(self, lc: LibraryClasses, info: ClassInfo | None):
         self.lc, self.info, self.locals = lc, info, set()     # locals: a statement's for-loop iterators
+        self.branches = 0     # the if-equations a statement is inside (their branches' equation counts must agree)
         self.scope = info.name if info else ""
         self.env = {}
         if info is not None:
@@ -533,6 +619,16 @@ class _Typer:
         fn = self.lc.resolve(name, self.scope, self.info)
         return fn.name if fn is not None and "." in fn.name else ""
 
+    def array_valued(self, name: str) -> bool:
+        """Whether the function ``name`` returns an array."""
+        if name in _SAME or name in _BUILTIN or name in _REAL_BUILTIN or name.startswith("Complex"):
+            return False
+        fn = self.lc.resolve(name, self.scope, self.info)
+        if fn is None:
+            return False
+        outputs = [n for p, _c, _t, n, _k in self.lc.members(fn) if "output" in p]
+        return bool(outputs) and outputs[0] in _arrays(self.lc, fn.name)
+
     def call(self, name: str, args: list[Node]) -> str:
         if name == "Complex" or name.startswith("Complex.'") and not name.startswith(("Complex.'=='", "Complex.'<>'")):
             return C
@@ -542,7 +638,7 @@ class _Typer:
             return R
         fn = self.lc.resolve(name, self.scope, self.info)
         if fn is None:
-            return U
+            return R if name in _BUILTIN | _REAL_BUILTIN else U
         outputs = [(c, t) for p, c, t, _n, _k in self.lc.members(fn) if "output" in p]
         return C if outputs and self.complex_class(*outputs[0]) else R
 
@@ -680,6 +776,8 @@ def rewrite(text: str, lc: LibraryClasses) -> str:
         typer = typers[key]
         if typer.info is None:
             continue
+        if section == "decl":
+            edits += _modifiers(st, typer, text)
         try:
             edit = _statement(st, section, typer, text)
         except (_Unread, IndexError, RecursionError):
@@ -706,18 +804,47 @@ def _comprehension(e: Node, text: str) -> str:
     return f"{{{_record(e, text, el=el)} for {el.index} in 1:size({text[whole.start:whole.array_at]}, 1)}}"
 
 
-def _complex_equation(lhs: Node, rhs: Node, text: str):
+def _complex_equation(lhs: Node, rhs: Node, text: str, parts: bool = False):
     """(start, end, new text) of a Complex equation; an equation of whole arrays as a for-loop
-    over their elements (rumoca reads no record array's equation)."""
+    over their elements (rumoca reads no record array's equation). ``parts``: as two Real
+    equations always (in an if-equation's branch: rumoca counts a record equation as one, and
+    the branches' counts must agree)."""
+    solve = _split if parts else _equation
     if not (_arrayed(lhs) or _arrayed(rhs)):
-        new, _ = _equation(lhs, rhs, text)
+        new, _ = solve(lhs, rhs, text)
         return (lhs.start, rhs.end, new) if new is not None else None
     comprehension = next((n.iterator for n in (rhs, lhs) if n.kind == "array" and n.iterator), "")
     el = _Element(comprehension or "mcl_k")
-    new, ref = _equation(lhs, rhs, text, el)
-    if new is None or ref.array_at is None:
+    new, ref = solve(lhs, rhs, text, el)
+    if new is None or ref is None or ref.array_at is None:
         return None
     return lhs.start, rhs.end, f"for {el.index} in 1:size({text[ref.start:ref.array_at]}, 1) loop {new}; end for"
+
+
+def _modifiers(st: list[Tok], typer: _Typer, text: str) -> list:
+    """The edits of a declaration's modifiers' values (``powerBalance(power1 = sum({real(v[j]*i[j])
+    for j in 1:m}))``): the class's own names, its operators as calls, a Complex value as the
+    record's constructor."""
+    edits, depth = [], 0
+    for k, t in enumerate(st):
+        depth += {"(": 1, "[": 1, "{": 1, ")": -1, "]": -1, "}": -1}.get(t.text, 0)
+        if t.text == "=" and depth == 0:
+            break           # the binding: the statement's own (named arguments in it are not modifiers)
+        if t.text != "=" or st[k - 1].kind != "id":
+            continue
+        try:
+            e = _Parser(st[k + 1:], typer).expression()
+        except (_Unread, IndexError, RecursionError):
+            continue
+        if e.type == C and not _arrayed(e):
+            new = _record(e, text)
+        elif _changed(e) and not _arrayed(e):
+            new = _emit(e, text)
+        else:
+            continue
+        if new != text[e.start:e.end]:
+            edits.append((e.start, e.end, new))
+    return edits
 
 
 def _statement(st: list[Tok], section: str, typer: _Typer, text: str):
@@ -759,12 +886,14 @@ def _statement(st: list[Tok], section: str, typer: _Typer, text: str):
                 k += 1
             k += 1
         elif t in ("if", "elseif", "when", "elsewhen", "while") and section in ("equation", "algorithm"):
+            typer.branches += t == "if"
             while st[k].text not in ("then", "loop"):
                 k += 1
             k += 1
         elif t == "else":
             k += 1
         elif t == "end" and k + 1 < len(st) and st[k + 1].text in ("for", "if", "when", "while"):
+            typer.branches -= st[k + 1].text == "if"
             k += 2
         else:
             break
@@ -780,7 +909,7 @@ def _statement(st: list[Tok], section: str, typer: _Typer, text: str):
         if p.i != len(rest):
             raise _Unread("trailing")
         if assign == "=" and (lhs.type == C or rhs.type == C):
-            return _complex_equation(lhs, rhs, text)
+            return _complex_equation(lhs, rhs, text, parts=typer.branches > 0)
         if not _changed(rhs) and not _changed(lhs):
             return None
         return lhs.start, rhs.end, f"{_emit(lhs, text)} {assign} {_emit(rhs, text)}"

@@ -331,8 +331,80 @@ algorithm
   p := sum(v[k].re*i[k].re
     + v[k].im*i[k].im for k in 1:size(v, 1));""")
 
+# Symmetrical components (QuasiStatic Polyphase blocks, the FundamentalWave converter): rumoca
+# proves no shape of Polyphase.Functions' index and transformation matrices (their sizes are
+# calls of numberOfSymmetricBaseSystems), reads no member of a Complex matrix, and crashes on a
+# comprehension inside a for-loop equation. The matrices' parts come from a local function,
+# the indices from comprehensions, and each row's product is a Real matrix times a vector.
+_SYMMETRIC_FUNCTION = (
+    "function mcl_symmetric \"the real or imaginary parts of Polyphase.Functions.symmetric(Back)TransformationMatrix"
+    "(m)\" input Integer m; input Boolean imaginary; input Boolean back; output Real tM[m, m]; protected "
+    "Integer nBase = Modelica.Electrical.Polyphase.Functions.numberOfSymmetricBaseSystems(m); "
+    "Integer mBase = integer(m/nBase); Real o[m] = Modelica.Electrical.Polyphase.Functions.symmetricOrientation(m); "
+    "Real angle; Integer r; Integer c; algorithm for ii in 1:m loop for jj in 1:m loop "
+    "r := if back then jj else ii; c := if back then ii else jj; "
+    "angle := (if mBase == 2 then (if mod(r - 1, mBase) == 0 then 1 else -1) else mod(r - 1, mBase) + 1)"
+    "*o[mod(c - 1, mBase) + 1] + o[div(r - 1, mBase)*mBase + 1]; "
+    "tM[ii, jj] := if div(ii - 1, mBase) == div(jj - 1, mBase) then (if back then 1 else nBase/m)"
+    "*(if imaginary then sin(if back then -angle else angle) else cos(if back then -angle else angle)) else 0; "
+    "end for; end for; end mcl_symmetric;")
+
+
+def _symmetric(matrix: str, function: str, vectors: tuple[str, ...], back: bool = False,
+               argument: str = "m") -> list[tuple[str, str]]:
+    """The rewrites of ``Complex matrix[m,m] = function(argument)`` and of its products with ``vectors``."""
+    flag = "true" if back else "false"
+    parts = " ".join(f"Real mcl_{v}_{p}[m] = {{{v}[k].{p} for k in 1:m}};" for v in vectors for p in ("re", "im"))
+    old = f"  final parameter Complex {matrix}[m,m]=\n    Modelica.Electrical.Polyphase.Functions.{function}({argument});"
+    out = [(old, f"  final parameter Real {matrix}_re[m, m] = mcl_symmetric(m, false, {flag}); final parameter Real "
+                 f"{matrix}_im[m, m] = mcl_symmetric(m, true, {flag}); {parts} {_SYMMETRIC_FUNCTION}"
+                 + "\n  // mcl: the parts of {function}(m)".format(function=function) + "\n" * argument.count("\n"))]
+    for v in vectors:
+        out += [(f"sum({{{matrix}[j,k].re*{v}[k].re - {matrix}[j,k].im*{v}[k].im for k in 1:m}})",
+                 f"{matrix}_re[j, :]*mcl_{v}_re - {matrix}_im[j, :]*mcl_{v}_im"),
+                (f"sum({{{matrix}[j,k].re*{v}[k].im + {matrix}[j,k].im*{v}[k].re for k in 1:m}})",
+                 f"{matrix}_re[j, :]*mcl_{v}_im + {matrix}_im[j, :]*mcl_{v}_re")]
+    return out
+
+
+_SEQUENCE_INDICES = [(
+    """  final parameter Integer indexNonPos[:]=
+      Modelica.Electrical.Polyphase.Functions.indexNonPositiveSequence(
+                                                              m)""",
+    """  final parameter Integer mcl_nBase = Modelica.Electrical.Polyphase.Functions.numberOfSymmetricBaseSystems(m); final parameter Integer mcl_mBase = integer(m/mcl_nBase);
+  final parameter Integer indexNonPos[mcl_nBase*(mcl_mBase - 1)] =
+    {k + 1 + integer((k - 1)/max(mcl_mBase - 1, 1)) for k in 1:mcl_nBase*(mcl_mBase - 1)}"""), (
+    """  final parameter Integer indexPos[:]=
+      Modelica.Electrical.Polyphase.Functions.indexPositiveSequence(
+                                                           m)""",
+    """  final parameter Integer indexPos[mcl_nBase]= // mcl: indexPositiveSequence(m)
+      {(k - 1)*mcl_mBase + 1 for k in 1:mcl_nBase}
+""")]
+
+# QuasiStatic.Polyphase.Basic.MultiDelta: rumoca reads no print() in a when-equation ("requires a
+# typed checked event-call owner"); the message says the component replaced a wrong kPolygon by 1,
+# which kP does whether it is printed or not.
+_MULTI_DELTA_PRINT = (
+    """  when initial() then
+    if (mBasic<=2 or kPolygon<1 or kPolygon>integer(mBasic - 1)/2) then
+      print("MultiDelta: replaced erroneous kPolygon = "+String(kPolygon)+" by kPolygon = 1");
+    end if;
+  end when;""",
+    """  // mcl: when initial() then
+  //   if (mBasic<=2 or kPolygon<1 or kPolygon>integer(mBasic - 1)/2) then
+  //     print("MultiDelta: replaced erroneous kPolygon = "+String(kPolygon)+" by kPolygon = 1");
+  //   end if;
+  // end when;""")
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Functions", "activePower.mo")): [_ACTIVE_POWER],
+    ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Basic", "MultiDelta.mo")): [_MULTI_DELTA_PRINT],
+    ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Blocks", "SymmetricalComponents.mo")):
+        _symmetric("sTM", "symmetricTransformationMatrix", ("u",), argument="\n" + " " * 65 + "m"),
+    ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Blocks", "FromSymmetricalComponents.mo")):
+        _symmetric("sbTM", "symmetricBackTransformationMatrix", ("u",), back=True),
+    ("Modelica", ("Magnetic", "QuasiStatic", "FundamentalWave", "Components", "PolyphaseElectroMagneticConverter.mo")):
+        [*_symmetric("sTM", "symmetricTransformationMatrix", ("v", "i")), *_SEQUENCE_INDICES],
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
     ("Modelica", ("Math", "Nonlinear.mo")): _SOLVE_ONE,

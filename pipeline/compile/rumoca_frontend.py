@@ -480,6 +480,10 @@ def prepare(paths, libraries=(), model: str | None = None) -> Prepared:
                     search, defined, used)
 
 
+#: a compile error of a library subset that may be a file the subset missed
+_MISSED = re.compile(r"not found|unresolved (?:component reference|type|class)|does not exist", re.IGNORECASE)
+
+
 def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -> tuple[dict, Located]:
     """rumoca's DAE-stage IR of ``model`` and the text of the files it read."""
     import rumoca
@@ -499,10 +503,17 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
         subset = prep.whole != prep.roots
         try:
             compiled = _compile(prep, prep.roots, model, libs)
-        except rumoca.RumocaError:
+        except rumoca.RumocaError as first:
             if not subset:
                 raise
-            compiled, subset = _compile(prep, prep.whole, model, libs), False   # a file the subset missed
+            try:
+                compiled, subset = _compile(prep, prep.whole, model, libs), False   # a file the subset missed
+            except rumoca.RumocaError:
+                # the whole libraries lack the subset's Complex rewrites: their error is the
+                # subset's own unless the subset's names a class it did not find
+                if _MISSED.search(str(first)):
+                    raise
+                raise first from None
         flat = compiled.to_dict("flat")
         records = _bound_records(prep, flat, libs)
         if records:
@@ -810,8 +821,8 @@ def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> Model
 
 
 _COMPLEX_HINT = ("; rumoca 0.10 translates an operator on Complex values (a + b, 2*a) as one equation short, "
-                 "and mcl writes it as a call (Complex.'+'(a, b)) only in an equation it can solve for a "
-                 "reference (a side, a term of a sum, or a term's factor): write the others so")
+                 "and mcl writes it as a call (Complex.'+'(a, b)) only in the statements it reads (not through "
+                 "an array of arrays, nor in a function it cannot find): write the others with the calls")
 
 
 def _in_complex(model: str, prep: Prepared) -> bool:
