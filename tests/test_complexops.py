@@ -62,3 +62,16 @@ def test_a_class_nested_after_its_packages_description_is_read_in_its_own_scope(
     docs, _ = documents([tmp_path / "Nest.mo"])
     out = rewrite(text, LibraryClasses.with_user({}, docs)).splitlines()
     assert out[5].strip() == "v = Complex((R)*(i.re), (R)*(i.im));"
+
+
+def test_an_if_equations_branches_are_written_as_parts_and_what_follows_it_is_not(tmp_path):
+    """rumoca counts a record equation as one and two Real equations as two, and an
+    if-equation's branches must count alike: inside one, each Complex equation is written as its
+    parts; after its ``end if`` (a statement with nothing to rewrite), as a record again."""
+    text = ("model Branches\n  parameter Boolean on = true;\n  Complex v, w;\nequation\n  if on then\n"
+            "    v = Complex(1, time);\n  else\n    v = Complex(0, 1);\n  end if;\n  w = 2*v;\nend Branches;\n")
+    (tmp_path / "Branches.mo").write_text(text)
+    docs, _ = documents([tmp_path / "Branches.mo"])
+    out = rewrite(text, LibraryClasses.with_user({}, docs)).splitlines()
+    assert out[5].strip() == "v.re = 1; v.im = time;" and out[7].strip() == "v.re = 0; v.im = 1;"
+    assert out[9].strip() == "w = Complex((2)*(v.re), (2)*(v.im));"

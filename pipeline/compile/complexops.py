@@ -59,9 +59,9 @@ _SAME = {"pre", "noEvent", "smooth", "homotopy", "delay", "sum", "previous", "ho
 _BUILTIN = {"abs", "sqrt", "exp", "log", "log10", "sin", "cos", "tan", "sinh", "cosh", "tanh", "asin", "acos",
             "atan", "sign", "max", "min", "sum", "product"}
 #: the other built-in functions of Real values
-_REAL_BUILTIN = {"atan2", "floor", "ceil", "mod", "rem", "div", "integer", "abs", "exp", "sqrt", "cross", "skew",
-                 "transpose", "identity", "diagonal", "zeros", "ones", "linspace", "scalar", "vector", "matrix",
-                 "cardinality", "sample", "edge", "change", "terminal", "smooth"}
+_REAL_BUILTIN = {"atan2", "floor", "ceil", "mod", "rem", "div", "integer", "cross", "skew", "transpose", "identity",
+                 "diagonal", "zeros", "ones", "linspace", "scalar", "vector", "matrix", "cardinality", "sample",
+                 "edge", "change", "terminal"}
 C, R, U = "C", "R", "U"   # a Complex value; any other; a call of a function not found (taken as Complex beside one)
 
 
@@ -376,20 +376,20 @@ def _expanded(node: Node, text: str, el: _Element | None = None, depth: int = 0)
     if node.kind == "call" and node.op == "Complex" and 1 <= len(node.kids) <= 2 and "=" not in text[node.start:node.end]:
         kids = [_emit(k, text, el) for k in node.kids]
         return kids[0], kids[1] if len(kids) > 1 else "0"
+    conj = node.kind == "call" and node.function == "Modelica.ComplexMath.conj" and len(node.kids) == 1
+    if not (conj or node.kind == "un" and node.op in ("+", "-") or node.kind == "bin" and node.op in ("+", "-", "*")):
+        return None
     kids = [_expanded(k, text, el, depth + 1) for k in node.kids]
     if any(k is None for k in kids):
         return None
-    if node.kind == "call" and node.function == "Modelica.ComplexMath.conj" and len(kids) == 1:
+    if conj:
         return kids[0][0], f"-({kids[0][1]})"
-    if node.kind == "un" and node.op in "+-" and len(kids) == 1:
+    if node.kind == "un":
         return kids[0] if node.op == "+" else (_sum("0", "-", kids[0][0]), _sum("0", "-", kids[0][1]))
-    if node.kind == "bin" and node.op in ("+", "-"):
-        (a, b), (c, d) = kids
+    (a, b), (c, d) = kids
+    if node.op in ("+", "-"):
         return _sum(a, node.op, c), _sum(b, node.op, d)
-    if node.kind == "bin" and node.op == "*":
-        (a, b), (c, d) = kids
-        return _sum(_product(a, c), "-", _product(b, d)), _sum(_product(a, d), "+", _product(b, c))
-    return None
+    return _sum(_product(a, c), "-", _product(b, d)), _sum(_product(a, d), "+", _product(b, c))
 
 
 def _product(a: str, b: str) -> str:
@@ -553,7 +553,7 @@ class _Typer:
 
     def __init__(self, lc: LibraryClasses, info: ClassInfo | None):
         self.lc, self.info, self.locals = lc, info, set()     # locals: a statement's for-loop iterators
-        self.branches = 0     # the if-equations a statement is inside (their branches' equation counts must agree)
+        self.functions: dict[str, ClassInfo | None] = {}
         self.scope = info.name if info else ""
         self.env = {}
         if info is not None:
@@ -614,16 +614,23 @@ class _Typer:
                 return None, "", []
         return None, "", []
 
+    def function(self, name: str) -> ClassInfo | None:
+        """The class ``name`` written in this class resolves to (once per name: a call's type,
+        its output's shape and its full name each ask)."""
+        if name not in self.functions:
+            self.functions[name] = self.lc.resolve(name, self.scope, self.info)
+        return self.functions[name]
+
     def qualified(self, name: str) -> str:
         """The full name of the function ``name`` is imported as (or "")."""
-        fn = self.lc.resolve(name, self.scope, self.info)
+        fn = self.function(name)
         return fn.name if fn is not None and "." in fn.name else ""
 
     def array_valued(self, name: str) -> bool:
         """Whether the function ``name`` returns an array."""
         if name in _SAME or name in _BUILTIN or name in _REAL_BUILTIN or name.startswith("Complex"):
             return False
-        fn = self.lc.resolve(name, self.scope, self.info)
+        fn = self.function(name)
         if fn is None:
             return False
         outputs = [n for p, _c, _t, n, _k in self.lc.members(fn) if "output" in p]
@@ -636,7 +643,7 @@ class _Typer:
             return args[0].type if args else R
         if name in ("der", "initial", "terminal", "size", "ndims", "integer", "String"):
             return R
-        fn = self.lc.resolve(name, self.scope, self.info)
+        fn = self.function(name)
         if fn is None:
             return R if name in _BUILTIN | _REAL_BUILTIN else U
         outputs = [(c, t) for p, c, t, _n, _k in self.lc.members(fn) if "output" in p]
@@ -766,11 +773,16 @@ def rewrite(text: str, lc: LibraryClasses) -> str:
         return text
     toks = tokens(text)
     edits = []
-    typers = {}
+    typers, branches = {}, {}     # branches: the if-equations open in each class's equations
     for path, section, st in _statements(toks):
+        key = ".".join(path)
+        if section == "equation":
+            try:
+                branches[key] = branches.get(key, 0) + _headers(st, section)[2]
+            except IndexError:
+                pass
         if not st or not any(t.text in ("+", "-", "*", "/", "^", "=", ".*", "./") for t in st):
             continue
-        key = ".".join(path)
         if key not in typers:
             typers[key] = _Typer(lc, lc.find(key))
         typer = typers[key]
@@ -779,7 +791,7 @@ def rewrite(text: str, lc: LibraryClasses) -> str:
         if section == "decl":
             edits += _modifiers(st, typer, text)
         try:
-            edit = _statement(st, section, typer, text)
+            edit = _statement(st, section, typer, text, branches.get(key, 0) > 0)
         except (_Unread, IndexError, RecursionError):
             continue
         if edit is not None:
@@ -847,16 +859,42 @@ def _modifiers(st: list[Tok], typer: _Typer, text: str) -> list:
     return edits
 
 
-def _statement(st: list[Tok], section: str, typer: _Typer, text: str):
-    """(start, end, new text) of one statement's rewritten part, or None."""
-    locals_ = set()
+def _headers(st: list[Tok], section: str) -> tuple[int, set, int]:
+    """(where the statement's own part starts, the iterators of the for-loops it opens, the
+    if-equations it opens less those it closes) past its structured headers: ``for ... loop``,
+    ``if ... then``, ``else``, ``end if``, ``when ... then``."""
+    k, locals_, opened = 0, set(), 0
+    while k < len(st):
+        t = st[k].text
+        if t == "for":
+            locals_.add(st[k + 1].text)
+            while st[k].text != "loop":
+                k += 1
+            k += 1
+        elif t in ("if", "elseif", "when", "elsewhen", "while") and section in ("equation", "algorithm"):
+            opened += t == "if"
+            while st[k].text not in ("then", "loop"):
+                k += 1
+            k += 1
+        elif t == "else":
+            k += 1
+        elif t == "end" and k + 1 < len(st) and st[k + 1].text in ("for", "if", "when", "while"):
+            opened -= st[k + 1].text == "if"
+            k += 2
+        else:
+            break
+    return k, locals_, opened
+
+
+def _statement(st: list[Tok], section: str, typer: _Typer, text: str, branch: bool = False):
+    """(start, end, new text) of one statement's rewritten part, or None; ``branch``: the
+    statement is inside an if-equation."""
     while st and st[0].kind == "str":      # a class's description
         st = st[1:]
     for k, t in enumerate(st):             # an equation's description and annotation
         if t.text == "annotation" or (t.kind == "str" and section != "decl" and k and st[k - 1].text not in "(,="):
             st = st[:k]
             break
-    k = 0
     if not st:
         return None
     if section == "decl":
@@ -877,26 +915,7 @@ def _statement(st: list[Tok], section: str, typer: _Typer, text: str):
         else:
             new = _record(e, text) if e.type == C and not array else _emit(e, text)     # a binding is an equation too
         return (e.start, e.end, new) if new != text[e.start:e.end] else None
-    # structured headers: for ... loop, if ... then, else, end if, when ... then
-    while k < len(st):
-        t = st[k].text
-        if t == "for":
-            locals_.add(st[k + 1].text)
-            while st[k].text != "loop":
-                k += 1
-            k += 1
-        elif t in ("if", "elseif", "when", "elsewhen", "while") and section in ("equation", "algorithm"):
-            typer.branches += t == "if"
-            while st[k].text not in ("then", "loop"):
-                k += 1
-            k += 1
-        elif t == "else":
-            k += 1
-        elif t == "end" and k + 1 < len(st) and st[k + 1].text in ("for", "if", "when", "while"):
-            typer.branches -= st[k + 1].text == "if"
-            k += 2
-        else:
-            break
+    k, locals_, _ = _headers(st, section)
     rest = st[k:]
     if not rest or rest[0].text in ("connect", "annotation"):
         return None
@@ -909,7 +928,7 @@ def _statement(st: list[Tok], section: str, typer: _Typer, text: str):
         if p.i != len(rest):
             raise _Unread("trailing")
         if assign == "=" and (lhs.type == C or rhs.type == C):
-            return _complex_equation(lhs, rhs, text, parts=typer.branches > 0)
+            return _complex_equation(lhs, rhs, text, parts=branch)
         if not _changed(rhs) and not _changed(lhs):
             return None
         return lhs.start, rhs.end, f"{_emit(lhs, text)} {assign} {_emit(rhs, text)}"

@@ -358,7 +358,7 @@ def _symmetric(matrix: str, function: str, vectors: tuple[str, ...], back: bool 
     old = f"  final parameter Complex {matrix}[m,m]=\n    Modelica.Electrical.Polyphase.Functions.{function}({argument});"
     out = [(old, f"  final parameter Real {matrix}_re[m, m] = mcl_symmetric(m, false, {flag}); final parameter Real "
                  f"{matrix}_im[m, m] = mcl_symmetric(m, true, {flag}); {parts} {_SYMMETRIC_FUNCTION}"
-                 + "\n  // mcl: the parts of {function}(m)".format(function=function) + "\n" * argument.count("\n"))]
+                 f"\n  // mcl: the parts of {function}(m)" + "\n" * argument.count("\n"))]
     for v in vectors:
         out += [(f"sum({{{matrix}[j,k].re*{v}[k].re - {matrix}[j,k].im*{v}[k].im for k in 1:m}})",
                  f"{matrix}_re[j, :]*mcl_{v}_re - {matrix}_im[j, :]*mcl_{v}_im"),
