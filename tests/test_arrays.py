@@ -199,3 +199,48 @@ def test_a_function_of_scalars_called_on_a_vector_applies_to_each_element(tmp_pa
     np.testing.assert_allclose([out["w[1]"], out["w[2]"]], [4.5, 16.5])
     np.testing.assert_allclose(res.states[-1], [0.5, 0.5], rtol=1e-5)
 
+
+
+DILUTION = """
+model Dilution "n well-mixed tanks flushed with fresh water carrying nC substances"
+  model Probe "a sampling point"
+    parameter Integer nC = 1;
+    Real c[nC];
+  end Probe;
+  parameter Integer n = 2;
+  parameter Integer nC = 1;
+  parameter Real q[n] = {1, 2} "flushing rates (1/s)";
+  parameter Real c_in[nC] = fill(3, nC);
+  Real c[n, nC](each start = 0, each fixed = true);
+  Real inflow[n, nC];
+  Probe probes[n](each nC = nC);
+equation
+  for i in 1:n loop
+    inflow[i, :] = q[i]*c_in;
+    der(c[i, :]) = inflow[i, :] - q[i]*c[i, :];
+    probes[i].c = c[i, :];
+  end for;
+end Dilution;
+
+model TwoSubstances
+  extends Dilution(nC = 2, c_in = {3, 5});
+end TwoSubstances;
+"""
+
+
+@pytest.mark.parametrize("name, c_in", [("Dilution", [3.0]), ("TwoSubstances", [3.0, 5.0])])
+def test_for_equations_on_rows_of_one_element_or_more(tmp_path, name, c_in):
+    """Array equations in a for-loop (rows of a matrix, a component's array member), whose
+    arrays have one element (which rumoca refuses as written: written element by element) or
+    two: each tank's concentration approaches the inflow's as c_in (1 - exp(-q t))."""
+    (tmp_path / "Dilution.mo").write_text(DILUTION)
+    probes = [f"probes[{i}].c[{k}]" for i in (1, 2) for k in range(1, len(c_in) + 1)]
+    model = mcl.compile_model([tmp_path / "Dilution.mo"], name).with_outputs(probes)
+    t = np.linspace(0.0, 2.0, 5)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    for i, q in ((1, 1.0), (2, 2.0)):
+        for k, c in enumerate(c_in, start=1):
+            expected = c * (1 - np.exp(-q * t))
+            np.testing.assert_allclose(res.states[:, model.ode.x_names.index(f"c[{i},{k}]")], expected, atol=1e-5 * c)
+            np.testing.assert_allclose(res.output(f"probes[{i}].c[{k}]"), expected, atol=1e-5 * c)

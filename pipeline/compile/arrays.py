@@ -51,7 +51,7 @@ def multiply(a, b):
 
 def array_of(items: list) -> ca.SX:
     """``{a, b, ...}``: a vector of scalars, or the matrix whose rows are the vectors given."""
-    if len(items) > 1 and all(i.size2() == 1 and i.size1() > 1 for i in items) \
+    if items and all(i.size2() == 1 and i.size1() > 1 for i in items) \
             and len({i.size1() for i in items}) == 1:
         return ca.horzcat(*items).T
     return ca.vertcat(*[flat(i) for i in items]) if items else ca.SX(0, 1)

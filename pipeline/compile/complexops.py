@@ -796,6 +796,11 @@ def rewrite(text: str, lc: LibraryClasses) -> str:
             continue
         if edit is not None:
             edits.append(edit)
+    return applied(text, edits)
+
+
+def applied(text: str, edits: list[tuple[int, int, str]]) -> str:
+    """``text`` with each (start, end, new text) edit made, its line count kept."""
     out, at = [], 0
     for start, end, new in sorted(edits):
         lines, new = text.count("\n", start, end), new.replace("\n", " ")
@@ -859,15 +864,16 @@ def _modifiers(st: list[Tok], typer: _Typer, text: str) -> list:
     return edits
 
 
-def _headers(st: list[Tok], section: str) -> tuple[int, set, int]:
+def _headers(st: list[Tok], section: str) -> tuple[int, set, int, int]:
     """(where the statement's own part starts, the iterators of the for-loops it opens, the
-    if-equations it opens less those it closes) past its structured headers: ``for ... loop``,
-    ``if ... then``, ``else``, ``end if``, ``when ... then``."""
-    k, locals_, opened = 0, set(), 0
+    if-equations it opens less those it closes, the same of for-loops) past its structured
+    headers: ``for ... loop``, ``if ... then``, ``else``, ``end if``, ``when ... then``."""
+    k, locals_, opened, loops = 0, set(), 0, 0
     while k < len(st):
         t = st[k].text
         if t == "for":
             locals_.add(st[k + 1].text)
+            loops += 1
             while st[k].text != "loop":
                 k += 1
             k += 1
@@ -880,21 +886,28 @@ def _headers(st: list[Tok], section: str) -> tuple[int, set, int]:
             k += 1
         elif t == "end" and k + 1 < len(st) and st[k + 1].text in ("for", "if", "when", "while"):
             opened -= st[k + 1].text == "if"
+            loops -= st[k + 1].text == "for"
             k += 2
         else:
             break
-    return k, locals_, opened
+    return k, locals_, opened, loops
+
+
+def trimmed(st: list[Tok], section: str) -> list[Tok]:
+    """A statement's tokens without a class's description before it, nor an equation's
+    description and annotation after it."""
+    while st and st[0].kind == "str":      # a class's description
+        st = st[1:]
+    for k, t in enumerate(st):             # an equation's description and annotation
+        if t.text == "annotation" or (t.kind == "str" and section != "decl" and k and st[k - 1].text not in "(,="):
+            return st[:k]
+    return st
 
 
 def _statement(st: list[Tok], section: str, typer: _Typer, text: str, branch: bool = False):
     """(start, end, new text) of one statement's rewritten part, or None; ``branch``: the
     statement is inside an if-equation."""
-    while st and st[0].kind == "str":      # a class's description
-        st = st[1:]
-    for k, t in enumerate(st):             # an equation's description and annotation
-        if t.text == "annotation" or (t.kind == "str" and section != "decl" and k and st[k - 1].text not in "(,="):
-            st = st[:k]
-            break
+    st = trimmed(st, section)
     if not st:
         return None
     if section == "decl":
@@ -915,7 +928,7 @@ def _statement(st: list[Tok], section: str, typer: _Typer, text: str, branch: bo
         else:
             new = _record(e, text) if e.type == C and not array else _emit(e, text)     # a binding is an equation too
         return (e.start, e.end, new) if new != text[e.start:e.end] else None
-    k, locals_, _ = _headers(st, section)
+    k, locals_, _, _ = _headers(st, section)
     rest = st[k:]
     if not rest or rest[0].text in ("connect", "annotation"):
         return None

@@ -12,7 +12,7 @@ import hashlib
 import re
 from pathlib import Path
 
-from . import bindings, complexops, records, redeclares
+from . import bindings, complexops, records, redeclares, scalarloops
 from .bindings import distributed
 from .redeclares import lifted
 
@@ -312,7 +312,20 @@ _MOIST_AIR_R = [
     ("dryair.MM", "0.0289651159", 4), ("steam.MM", "0.01801528", 4),
     ("  constant IdealGases.Common.DataRecord steam=IdealGases.Common.SingleGasesData.H2O;\n",
      "  constant IdealGases.Common.DataRecord steam=IdealGases.Common.SingleGasesData.H2O;"
-     " constant Real dryair_R_s = 287.0512249529787; constant Real steam_R_s = 461.5233290850878; // mcl\n")]
+     " constant Real dryair_R_s = 287.0512249529787; constant Real steam_R_s = 461.5233290850878; // mcl\n"),
+    # BaseProperties' call of the inherited specificEnthalpy_pTX: in a package modified where it is
+    # used (MoistAir(extraPropertiesNames = {"CO2"})), rumoca resolves that function's own call of
+    # setState_pTX in PartialMedium, where it is partial ("unresolved ...PartialMedium.setState_pTX").
+    # Its algorithm written in place calls MoistAir's own functions.
+    ("""    h = specificEnthalpy_pTX(
+          p,
+          T,
+          Xi);
+""", """    h = specificEnthalpy(setState_pTX( // mcl: specificEnthalpy_pTX's algorithm (see overlays.py)
+          p,
+          T,
+          Xi));
+""")]
 
 # Modelica.Electrical.QuasiStatic.Polyphase.Functions.activePower: rumoca reads neither an
 # input sized by another input (i[size(v, 1)]: 'unresolved flat reference: v') nor the real
@@ -396,6 +409,13 @@ _MULTI_DELTA_PRINT = (
   //   end if;
   // end when;""")
 
+# Modelica.Fluid.Sources: rumoca refuses an array member of a component array set to fill()
+# of an array ("expression shape mismatch" for ports.C_outflow = fill(C, nPorts), the trace
+# substances of every source). The same equation for each port.
+_SOURCES_TRACE = [(f"    ports.C_outflow = fill({c}, nPorts);\n",
+                   f"    for i in 1:nPorts loop ports[i].C_outflow = {c}; end for; // mcl: rumoca reads it per port\n", n)
+                  for c, n in (("C", 1), ("C_in_internal", 4))]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Functions", "activePower.mo")): [_ACTIVE_POWER],
     ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Basic", "MultiDelta.mo")): [_MULTI_DELTA_PRINT],
@@ -405,6 +425,7 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
         _symmetric("sbTM", "symmetricBackTransformationMatrix", ("u",), back=True),
     ("Modelica", ("Magnetic", "QuasiStatic", "FundamentalWave", "Components", "PolyphaseElectroMagneticConverter.mo")):
         [*_symmetric("sTM", "symmetricTransformationMatrix", ("v", "i")), *_SEQUENCE_INDICES],
+    ("Modelica", ("Fluid", "Sources.mo")): _SOURCES_TRACE,
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
     ("Modelica", ("Math", "Nonlinear.mo")): _SOLVE_ONE,
@@ -435,9 +456,19 @@ PASSED = {("Modelica", ("Electrical", "Batteries", "Examples", f"{name}.mo"))
           for name in ("CCCV_CellRC", "CCCVcharging")}
 
 
-def files_of(library: str) -> list[tuple[str, ...]]:
-    """The files of ``library`` (below its directory) that a rewrite may change."""
-    return [unit for lib, unit in [*REWRITES, *DISTRIBUTED, *PASSED] if lib == library]
+#: the packages whose for-equations on arrays are written element by element
+#: (:mod:`.scalarloops`): the fluid library's balances of mass fractions and trace substances
+SCALARISED = {("Modelica", ("Fluid",))}
+
+
+def files_of(library: str, directory: Path | None = None) -> list[tuple[str, ...]]:
+    """The files of ``library`` (below its ``directory``) that a rewrite may change."""
+    units = [unit for lib, unit in [*REWRITES, *DISTRIBUTED, *PASSED] if lib == library]
+    for lib, package in SCALARISED if directory is not None else ():
+        if lib == library:
+            units += [tuple(f.relative_to(directory).parts) for f in sorted(directory.joinpath(*package).rglob("*.mo"))
+                      if tuple(f.relative_to(directory).parts) not in units]
+    return units
 
 
 def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
@@ -459,6 +490,8 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
         text = records.copied(text, records.declared_records([text], LibraryClasses({library: root})), calls=False)
     if complexops.uses_complex(text):
         text = _complex_calls(text, str(path.parents[len(unit)]))
+    if any(lib == library and tuple(unit[:len(package)]) == package for lib, package in SCALARISED):
+        text = scalarloops.scalarised(text, _classes(str(path.parents[len(unit)])))
     text = lifted(text)       # (any library's redeclarations with modifiers: :mod:`.redeclares`)
     return text if text != original else None
 
@@ -471,6 +504,7 @@ def _complex_calls(text: str, directory: str) -> str:
 
 
 @functools.lru_cache(maxsize=8)
+@functools.lru_cache(maxsize=8)
 def _classes(directory: str):
     """The classes of the libraries in ``directory`` (the MSL's: Modelica beside Complex)."""
     from .classes import LibraryClasses
@@ -481,6 +515,7 @@ def _classes(directory: str):
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
-VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + repr(sorted(PASSED))
+VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + repr(sorted(PASSED)) + repr(sorted(SCALARISED))
                           + Path(redeclares.__file__).read_text()
-                          + Path(bindings.__file__).read_text() + complexops.MARK + Path(records.__file__).read_text()).encode()).hexdigest()[:12]
+                          + Path(bindings.__file__).read_text() + complexops.MARK + Path(records.__file__).read_text()
+                          + Path(scalarloops.__file__).read_text()).encode()).hexdigest()[:12]

@@ -22,13 +22,14 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from . import complexops, homotopy, overlays, tables, xorshift
+from . import complexops, homotopy, overlays, scalarloops, tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
 from .balance import unconnected_inputs, unfound_class
 from .bindings import restated
 from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
 from .redeclares import lifted, lifted_tree, tree_copy
+from .scalarloops import scalarised
 from .dae import RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
 from .sources import KEYWORDS, first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
@@ -113,16 +114,21 @@ class _Front:
         self.owner: dict[str, str] = {}     # top-level class -> path
         self.uses = False                   # the libraries named (:meth:`_use_libraries`)
 
-    def compile(self, docs: dict[Path, tuple[str, set]], model: str, restate: bool = False, records=()):
+    def compile(self, docs: dict[Path, tuple[str, set]], model: str, restate: bool = False, records=(),
+                scalar: bool = False):
         """rumoca's compiled ``model`` from ``docs``; ``restate``: each document restated
         (:func:`.bindings.restated`); ``records``: its record components bound by declaration
-        written as modifiers (:func:`.records.copied`)."""
+        written as modifiers (:func:`.records.copied`); ``scalar``: its for-equations on arrays
+        written element by element (:mod:`.scalarloops`)."""
         import rumoca
 
         mark, rewrite = _mark(restate, records), _rewrite(restate, tuple(records))
         calls = self._complex_calls(docs)
         if calls is not None:
             mark, rewrite = mark + complexops.MARK, _composed(rewrite, calls)
+        if scalar:
+            classes = self._classes(docs)
+            mark, rewrite = mark + _SCALAR, _composed(rewrite, lambda text: scalarised(text, classes))
         if mark:
             docs = {p: (h + mark, names) for p, (h, names) in docs.items()}
         if any(self.docs.get(str(p), h) != h or any(self.owner.get(n, str(p)) != str(p) for n in names)
@@ -152,10 +158,14 @@ class _Front:
         Complex; else None."""
         if not any(complexops.MENTIONS.search(text) for text in _doc_texts(docs)):
             return None
+        classes = self._classes(docs)
+        return lambda text: complexops.rewrite(text, classes)
+
+    def _classes(self, docs: dict[Path, tuple[str, set]]) -> LibraryClasses:
+        """The classes of the libraries on the path and of the user's documents."""
         from .library import available
 
-        classes = LibraryClasses.with_user(available(self.roots), docs)
-        return lambda text: complexops.rewrite(text, classes)
+        return LibraryClasses.with_user(available(self.roots), docs)
 
     def _use_libraries(self):
         """Register a document that imports every library of the roots. rumoca reads the
@@ -195,6 +205,10 @@ _RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a 
                          r"unresolved Flat reference|function shape proof|found Enumeration|unknown modifier")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
+#: the mark of a document compiled with its for-equations on arrays element by element
+_SCALAR = "+scalar" + hashlib.sha256(Path(scalarloops.__file__).read_bytes()).hexdigest()[:8]
+#: rumoca's error on a for-equation on an array of one element (:mod:`.scalarloops`)
+_SCALAR_ON = "expected a scalar expression"
 #: the length of a document's own digest (sha256, hex), before the marks of its rewrites
 _DIGEST = 64
 
@@ -587,6 +601,11 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
                      "modifiers of component arrays element by element, while loops as bounded for loops, Integer() of "
                      "an enumeration as comparisons, replaceable components' own modifiers in short classes)", model)
             return compiled
+        if _SCALAR_ON in str(exc):
+            try:
+                return _guarded(front, lambda: front.compile(prep.docs, model, records=records, scalar=True))
+            except rumoca.RumocaError:
+                raise exc from None
         if _UNVALUED.search(str(exc)):
             compiled = _started(front, prep, model, libs, exc)
             if compiled is None:
@@ -1966,7 +1985,7 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
         if kind == "derivative":
             if i not in der:
                 tr.refuse(f"der() of {variables[i]['name']}, which is not a state")
-            return der[i]
+            return shaped(der[i], dims[i])        # (der(c[i, :]) of a matrix reads a row)
         if kind == "terminal":
             return flags[1]
         if kind == "initial":
@@ -2767,6 +2786,12 @@ def _residual(op: dict, tr: _Translator, model: str) -> ca.SX:
         finally:
             tr.projected = set()
     binders = tr.binders(eq["domain"])
+    view = eq["scalar_view"]
+    if isinstance(view, dict) and "BinderPrefixProjection" in view:
+        # a for-equation on arrays (``ports[i].C = c``): rumoca adds the element binders, and
+        # the body at the loop's own binders is already the whole array
+        own = len(tr.st["domains"][eq["domain"]]["domain"]["binders"])
+        binders = binders[:len(binders) - own + view["BinderPrefixProjection"]["binder_count"]]
     rows = []
     for values in itertools.product(*[r for _, _, r in binders]):
         bound = {"params": {}, "values": {}, "binders": {(dd, i): v for (dd, i, _), v in zip(binders, values)}}

@@ -157,7 +157,7 @@ def mirror(root: Path, library: Path, units: set[Unit]) -> None:
 def link_whole(root: Path, library: Path) -> None:
     """``root``: all of ``library`` as one link, or, where an overlay rewrites some of its
     files, as links beside the directories leading to those files, which are written out."""
-    units = [u for u in files_of(root.name) if rewritten(root.name, u, library.joinpath(*u)) is not None]
+    units = [u for u in files_of(root.name, library) if rewritten(root.name, u, library.joinpath(*u)) is not None]
     if not units:
         root.symlink_to(library)
         return
