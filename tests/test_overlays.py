@@ -264,3 +264,39 @@ end MoistGas;
 """, "MoistGas", np.linspace(0.0, 1.0, 3))[1].output
     R = 8.314472        # J/(mol K), CODATA 2006, as the MSL's gas records were computed with
     assert abs(out("R")[0] - (0.99 * R / 0.0289651159 + 0.01 * R / 0.01801528)) < 1e-6 * 288.8
+
+
+ROOM = """
+model Room "a room of moist air that holds CO2, open to the outside"
+  import Modelica.Fluid.Sources.FixedBoundary;
+  import Modelica.Fluid.Vessels.ClosedVolume;
+  package Medium = Modelica.Media.Air.MoistAir(extraPropertiesNames = {"CO2"}, C_nominal = {1.519e-3});
+  inner Modelica.Fluid.System system;
+  ClosedVolume room(redeclare package Medium = Medium, V = 100, nPorts = 1, use_portsData = false,
+    X_start = {0.01, 0.99}, C_start = {1.519e-3}, energyDynamics = Modelica.Fluid.Types.Dynamics.FixedInitial);
+  FixedBoundary outside(redeclare package Medium = Medium, nPorts = 1);
+  output Real C = room.C[1];
+  output Real m = room.m;
+  output Real Xw = room.medium.Xi[1];
+  output Real T = room.medium.T;
+equation
+  connect(room.ports[1], outside.ports[1]);
+end Room;
+"""
+
+
+def test_a_room_of_moist_air_holding_co2_starts_where_its_initial_equations_say(tmp_path, monkeypatch):
+    """MoistAir modified for one trace substance, in the fluid library's boundary and vessel:
+    rumoca refuses their for-equations on arrays of one element (one mass fraction of water,
+    one trace substance; written element by element) and resolves the inherited enthalpy
+    function's call in PartialMedium (what it computes written in place). The vessel's states,
+    mass and energy, start at 0, where moist air's specific energy U/m is 0/0: its temperature,
+    humidity and CO2 are still those its initial equations give, and it holds p V / (R T) of
+    air, R moist air's gas constant, which it keeps at rest."""
+    t = np.linspace(0.0, 3600.0, 13)
+    out = _simulated(tmp_path, monkeypatch, ROOM, "Room", t)[1].output
+    R = 0.99 * 287.0512249529787 + 0.01 * 461.5233290850878
+    np.testing.assert_allclose(out("T"), 293.15, rtol=1e-9)
+    np.testing.assert_allclose(out("Xw"), 0.01, rtol=1e-9)
+    np.testing.assert_allclose(out("C"), 1.519e-3, rtol=1e-9)
+    np.testing.assert_allclose(out("m"), 101325.0 * 100 / (R * 293.15), rtol=1e-6)

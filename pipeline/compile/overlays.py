@@ -316,15 +316,17 @@ _MOIST_AIR_R = [
     # BaseProperties' call of the inherited specificEnthalpy_pTX: in a package modified where it is
     # used (MoistAir(extraPropertiesNames = {"CO2"})), rumoca resolves that function's own call of
     # setState_pTX in PartialMedium, where it is partial ("unresolved ...PartialMedium.setState_pTX").
-    # Its algorithm written in place calls MoistAir's own functions.
+    # What it computes, specificEnthalpy(setState_pTX(p, T, Xi)), is MoistAir's h_pTX of the
+    # state's X, which reads X[Water] = Xi[1] alone (setState_pTX itself, called with Xi, fails
+    # rumoca's shape proof of its branch for a whole X).
     ("""    h = specificEnthalpy_pTX(
           p,
           T,
           Xi);
-""", """    h = specificEnthalpy(setState_pTX( // mcl: specificEnthalpy_pTX's algorithm (see overlays.py)
+""", """    h = h_pTX( // mcl: what specificEnthalpy_pTX computes (see overlays.py)
           p,
           T,
-          Xi));
+          Xi);
 """)]
 
 # Modelica.Electrical.QuasiStatic.Polyphase.Functions.activePower: rumoca reads neither an

@@ -1764,6 +1764,9 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
                 (start, init_start, _), worst = other, better
             if worst <= INIT_TOL:
                 break
+    if worst > INIT_TOL:
+        log.warning("the initial equations are not all met at the initial state found (largest "
+                    "residual %.3g at the model's parameter values)", worst)
     return start, init_start
 
 
@@ -2061,15 +2064,22 @@ def _joint_jacobian(joint, x0: np.ndarray, dae) -> np.ndarray | None:
                                              ca.jacobian(hard, xs), ca.jacobian(hard, zs)])
     z0 = _start_values(zs, dae)
     at = ca.vertcat(dae.u_start, dae.p_values)
-    gx, gz, hx, hz = (scipy.sparse.csc_matrix(m.sparse()) for m in parts(x0, z0, at, 0.0))
-    try:
-        with np.errstate(all="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", scipy.sparse.linalg.MatrixRankWarning)
-            dz = scipy.sparse.linalg.spsolve(gz, gx.toarray()) if zs.numel() else np.zeros((0, nx))
-        J = hx.toarray() - hz @ np.asarray(dz).reshape(zs.numel(), nx)
-    except (RuntimeError, ValueError):
-        return None
-    return J if np.all(np.isfinite(J)) else None
+    # states started at 0 may make it 0/0 (a vessel's specific energy U/m at no mass), and the
+    # algebraic equations may be singular at their start values (flows of 0 through a fitting):
+    # which equations and states are independent is then read next to them
+    ones = np.where(x0 == 0.0, 1.0, x0)
+    for x, z in ((x0, z0), (ones, z0), (ones, _beside(z0, 1e-3))):
+        gx, gz, hx, hz = (scipy.sparse.csc_matrix(m.sparse()) for m in parts(x, z, at, 0.0))
+        try:
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", scipy.sparse.linalg.MatrixRankWarning)
+                dz = scipy.sparse.linalg.spsolve(gz, gx.toarray()) if zs.numel() else np.zeros((0, nx))
+            J = hx.toarray() - hz @ np.asarray(dz).reshape(zs.numel(), nx)
+        except (RuntimeError, ValueError):
+            continue
+        if np.all(np.isfinite(J)):
+            return J
+    return None
 
 
 def _independent_rows(J: np.ndarray) -> list[int]:
