@@ -300,3 +300,25 @@ def test_a_room_of_moist_air_holding_co2_starts_where_its_initial_equations_say(
     np.testing.assert_allclose(out("Xw"), 0.01, rtol=1e-9)
     np.testing.assert_allclose(out("C"), 1.519e-3, rtol=1e-9)
     np.testing.assert_allclose(out("m"), 101325.0 * 100 / (R * 293.15), rtol=1e-6)
+
+
+PROBE = """
+model Probe "a trace substance sensor at a boundary of air carrying two"
+  package Medium = Modelica.Media.Air.SimpleAir(extraPropertiesNames = {"CO2", "H2O"});
+  inner Modelica.Fluid.System system;
+  Modelica.Fluid.Sources.FixedBoundary air(redeclare package Medium = Medium, C = {1e-3, 7e-3}, nPorts = 1);
+  Modelica.Fluid.Sensors.TraceSubstances sensor(redeclare package Medium = Medium, substanceName = "H2O");
+  Real x(start = 0, fixed = true);
+  output Real C = sensor.C;
+equation
+  der(x) = 1;
+  connect(sensor.port, air.ports[1]);
+end Probe;
+"""
+
+
+def test_a_trace_substance_sensor_finds_its_substance_by_name(tmp_path, monkeypatch):
+    """The sensor's initial algorithm finds its substance among the medium's names with
+    Strings.isEqual (compared at compile time: both are constant strings) and reads that one."""
+    out = _simulated(tmp_path, monkeypatch, PROBE, "Probe", np.linspace(0.0, 1.0, 3))[1].output
+    np.testing.assert_allclose(out("C"), 7e-3, rtol=1e-12)

@@ -1131,6 +1131,8 @@ class _Translator:
                 compared = self.string_comparison(k)
                 if compared is None:
                     compared = self.string_hash(k)
+                if compared is None:
+                    compared = self.strings_compared(k)
                 if compared is not None:
                     done[k] = compared
                     continue
@@ -1197,6 +1199,32 @@ class _Translator:
         text = self.string_value(ops[0])
         return None if text is None else ca.SX(xorshift.hash_string(text))
 
+    def strings_compared(self, k: int) -> ca.SX | None:
+        """Modelica.Utilities.Strings.isEqual or compare() of two constant strings, as its value
+        (compare's Types.Compare: Less 1, Equal 2, Greater 3); None for anything else. A trace
+        substance sensor finds its substance's index among the medium's names so."""
+        node = self.nodes[k]
+        body = node.get("call") if isinstance(node, dict) else None
+        if not body or not isinstance(body.get("function"), int):
+            return None
+        f = self.functions[body["function"]]
+        name = f.get("name", "")
+        compare = (f.get("external") or {}).get("symbol") == "ModelicaStrings_compare" or name.endswith("Strings.compare")
+        if not (compare or name.endswith("Strings.isEqual")):
+            return None
+        ops = self.call_operands(k)
+        if len(ops) not in (2, 3):
+            return None
+        a, b = self.string_value(ops[0]), self.string_value(ops[1])
+        sensitive = self.sx(ops[2]) if len(ops) == 3 else ca.SX(1)
+        if a is None or b is None or not sensitive.is_constant():
+            return None
+        if not float(sensitive):
+            a, b = a.lower(), b.lower()
+        if not compare:
+            return ca.SX(float(a == b))
+        return ca.SX(2.0 if a == b else 1.0 if a < b else 3.0)
+
     def string_value(self, k: int, depth: int = 0, hole: str | None = None) -> str | None:
         """Node ``k``'s value where it is a constant string: a literal, a String variable bound
         to one, substring() of one, or two joined with +; else None. With ``hole``, a join's
@@ -1216,6 +1244,13 @@ class _Translator:
                 return hole
             binding = variables[i]["attributes"].get("binding")
             return hole if binding is None else self.string_value(binding, depth + 1, hole)
+        if kind == "index" and body.get("subscript_count") == 1:      # {"CO2", "H2O"}[i], i a constant
+            items = self.string_items(body["base"], depth)
+            sub = self.subscripts[self.sub_offsets[k]]["kind"] if items is not None else None
+            at = self.sx(sub["index"]) if isinstance(sub, dict) and "index" in sub else None
+            if at is not None and at.is_constant() and at.numel() == 1 and 1 <= int(float(at)) <= len(items):
+                return items[int(float(at)) - 1]
+            return hole
         if kind == "binary" and body.get("operator") == "add":
             a, b = (self.string_value(body[side], depth + 1, hole) for side in ("lhs", "rhs"))
             return None if a is None or b is None else a + b
@@ -1236,6 +1271,15 @@ class _Translator:
                 x = float(v)
                 return str(int(x)) if x.is_integer() and abs(x) < 1e15 else f"{x:.6g}"
         return hole
+
+    def string_items(self, k: int, depth: int) -> list[str] | None:
+        """The elements of node ``k`` where it is an array of constant strings (a literal, or a
+        String array bound to one), else None."""
+        node = self.nodes[k]
+        if isinstance(node, dict) and "array" in node:
+            items = [self.string_value(o, depth + 1) for o in self.operands(k)]
+            return None if any(i is None for i in items) else items
+        return None
 
     def live_branches(self, k: int, done: dict) -> list:
         """(condition, branch) of conditional ``k`` that a constant condition does not rule
