@@ -413,7 +413,8 @@ _MULTI_DELTA_PRINT = (
 
 # Modelica.Fluid.Sources: rumoca refuses an array member of a component array set to fill()
 # of an array ("expression shape mismatch" for ports.C_outflow = fill(C, nPorts), the trace
-# substances of every source). The same equation for each port.
+# substances of every source). The same equation for each port (with one substance, written
+# element by element in turn: :mod:`.scalarloops`).
 _SOURCES_TRACE = [(f"    ports.C_outflow = fill({c}, nPorts);\n",
                    f"    for i in 1:nPorts loop ports[i].C_outflow = {c}; end for; // mcl: rumoca reads it per port\n", n)
                   for c, n in (("C", 1), ("C_in_internal", 4))]
@@ -468,9 +469,8 @@ def files_of(library: str, directory: Path | None = None) -> list[tuple[str, ...
     units = [unit for lib, unit in [*REWRITES, *DISTRIBUTED, *PASSED] if lib == library]
     for lib, package in SCALARISED if directory is not None else ():
         if lib == library:
-            units += [tuple(f.relative_to(directory).parts) for f in sorted(directory.joinpath(*package).rglob("*.mo"))
-                      if tuple(f.relative_to(directory).parts) not in units]
-    return units
+            units += [f.relative_to(directory).parts for f in sorted(directory.joinpath(*package).rglob("*.mo"))]
+    return list(dict.fromkeys(units))
 
 
 def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
@@ -505,7 +505,6 @@ def _complex_calls(text: str, directory: str) -> str:
     return complexops.rewrite(text, _classes(directory))
 
 
-@functools.lru_cache(maxsize=8)
 @functools.lru_cache(maxsize=8)
 def _classes(directory: str):
     """The classes of the libraries in ``directory`` (the MSL's: Modelica beside Complex)."""

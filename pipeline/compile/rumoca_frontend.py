@@ -1166,13 +1166,20 @@ class _Translator:
             return None
         return ca.SX(float((a == b) == (body["operator"] == "equal")))
 
+    def called(self, k: int) -> dict | None:
+        """The function node ``k`` calls, where it is a call of a Modelica function (else None)."""
+        node = self.nodes[k]
+        body = node.get("call") if isinstance(node, dict) else None
+        if not body or not isinstance(body.get("function"), int):
+            return None
+        return self.functions[body["function"]]
+
     def text_arguments(self, k: int, done: dict):
         """A constant string passed to a Modelica function (the message of Fluid's
         assertPositiveDifference) as its hash: the function is then interpreted for that string,
         and an assert in it that names the parameter as its message says the string."""
-        node = self.nodes[k]
-        body = node.get("call") if isinstance(node, dict) else None
-        if not body or not isinstance(body.get("function"), int) or self.functions[body["function"]].get("external"):
+        f = self.called(k)
+        if f is None or f.get("external"):
             return
         for o in self.call_operands(k):
             lit = self.nodes[o]
@@ -1186,12 +1193,8 @@ class _Translator:
     def string_hash(self, k: int) -> ca.SX | None:
         """Modelica.Utilities.Strings.hashString of a constant string (a noise block's automatic
         seed, from its instance's name), as its value; None for anything else."""
-        node = self.nodes[k]
-        body = node.get("call") if isinstance(node, dict) else None
-        if not body or not isinstance(body.get("function"), int):
-            return None
-        ext = self.functions[body["function"]].get("external") or {}
-        if ext.get("symbol") != "ModelicaStrings_hashString":
+        f = self.called(k)
+        if f is None or (f.get("external") or {}).get("symbol") != "ModelicaStrings_hashString":
             return None
         ops = self.call_operands(k)
         if len(ops) != 1:
@@ -1203,11 +1206,9 @@ class _Translator:
         """Modelica.Utilities.Strings.isEqual or compare() of two constant strings, as its value
         (compare's Types.Compare: Less 1, Equal 2, Greater 3); None for anything else. A trace
         substance sensor finds its substance's index among the medium's names so."""
-        node = self.nodes[k]
-        body = node.get("call") if isinstance(node, dict) else None
-        if not body or not isinstance(body.get("function"), int):
+        f = self.called(k)
+        if f is None:
             return None
-        f = self.functions[body["function"]]
         name = f.get("name", "")
         compare = (f.get("external") or {}).get("symbol") == "ModelicaStrings_compare" or name.endswith("Strings.compare")
         if not (compare or name.endswith("Strings.isEqual")):

@@ -33,8 +33,9 @@ def scalarised(text: str, lc: LibraryClasses) -> str:
         key = ".".join(path)
         if section != "equation":
             continue
+        own = trimmed(st, section)
         try:
-            k, _locals, _ifs, loops = _headers(st, section)
+            k, _locals, _ifs, loops = _headers(own, section)
         except IndexError:
             continue
         inside = depth.get(key, 0) + max(loops, 0) > 0
@@ -45,7 +46,7 @@ def scalarised(text: str, lc: LibraryClasses) -> str:
             typers[key] = _Typer(lc, lc.find(key))
         if typers[key].info is None:
             continue
-        edit = _element_loop(trimmed(st, section), k, typers[key], text, st[-1].end)
+        edit = _element_loop(own, k, typers[key], text, st[-1].end)
         if edit is not None:
             edits.append(edit)
     return applied(text, edits)

@@ -2064,9 +2064,10 @@ def _joint_jacobian(joint, x0: np.ndarray, dae) -> np.ndarray | None:
                                              ca.jacobian(hard, xs), ca.jacobian(hard, zs)])
     z0 = _start_values(zs, dae)
     at = ca.vertcat(dae.u_start, dae.p_values)
-    # states started at 0 may make it 0/0 (a vessel's specific energy U/m at no mass), and the
-    # algebraic equations may be singular at their start values (flows of 0 through a fitting):
-    # which equations and states are independent is then read next to them
+    # states started at 0 may make it 0/0 (a vessel's specific energy U/m at no mass): which
+    # equations and states are independent is then read with those states at 1; and beside the
+    # algebraic start values, where the algebraic equations are singular at them (tried, not yet
+    # seen to help: a moist-air room fed straight into a boundary stays singular there)
     ones = np.where(x0 == 0.0, 1.0, x0)
     for x, z in ((x0, z0), (ones, z0), (ones, _beside(z0, 1e-3))):
         gx, gz, hx, hz = (scipy.sparse.csc_matrix(m.sparse()) for m in parts(x, z, at, 0.0))
