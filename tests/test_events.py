@@ -1257,3 +1257,58 @@ end Late;
         assert res.ok, res.reason
         off = t > t0 + 1e-9
         assert np.all(res.output("ya")[off] == 0) and np.all(res.output("ya")[t < t0 - 1e-9] == 1), t0
+
+
+GEARED_AXIS = """
+model Axis "a geared axis held against a load torque at rest, its speed controlled by a PI
+  whose reference steps at 0.5 s; started at rest with its acceleration 0, as a robot's axis"
+  import Modelica.Mechanics.Rotational;
+  import Modelica.Blocks;
+  Rotational.Components.Inertia motorJ(J = 0.01);
+  Rotational.Components.BearingFriction friction(tau_pos = [0, 0.5; 1, 0.6]);
+  Rotational.Components.IdealGear gear(ratio = 50);
+  Rotational.Components.Inertia arm(J = 2);
+  Rotational.Sources.ConstantTorque load(tau_constant = -20);
+  Rotational.Sources.Torque drive;
+  Rotational.Sensors.SpeedSensor speed;
+  Blocks.Continuous.PI pi(k = 2, T = 0.1);
+  Blocks.Sources.Step ref(height = 1, startTime = 0.5);
+  Blocks.Math.Feedback err;
+initial equation
+  arm.phi = 0;
+  arm.w = 0;
+  arm.a = 0;
+equation
+  connect(drive.flange, motorJ.flange_a);
+  connect(motorJ.flange_b, friction.flange_a);
+  connect(friction.flange_b, gear.flange_a);
+  connect(gear.flange_b, arm.flange_a);
+  connect(load.flange, arm.flange_b);
+  connect(speed.flange, arm.flange_b);
+  connect(ref.y, err.u1);
+  connect(speed.w, err.u2);
+  connect(err.y, pi.u);
+  connect(pi.y, drive.tau);
+end Axis;
+"""
+
+
+@needs_msl()
+def test_an_axis_started_at_rest_with_its_bearing_stuck_holds_its_load(tmp_path):
+    """At rest the bearing friction is stuck, so arm.a = 0 holds whatever the controller's
+    state: that state keeps its start value (0), the motor gives no torque, and the bearing
+    holds the load through the gear, 20/50 N.m, below its 0.5 N.m of static friction. At the
+    step the axis breaks loose and the controller brings it to speed 1."""
+    (tmp_path / "Axis.mo").write_text(GEARED_AXIS)
+    model = compile_model([tmp_path / "Axis.mo"], "Axis", libraries=[msl_path()])
+    t = np.linspace(0, 2, 201)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    o = model.ode
+    probe = np.array([np.array(o.probe(x, o.u_start, o.p_values, tk)).ravel() for x, tk in zip(res.states, t)])
+    at = dict(zip(o.probe_names, probe.T))
+    still = t < 0.5
+    assert np.all(at["friction.locked"][still] == 1)
+    assert np.max(np.abs(at["pi.x"][still])) < 1e-12 and np.max(np.abs(at["arm.w"][still])) < 1e-12
+    assert np.max(np.abs(np.abs(at["friction.tau"][still]) - 20 / 50)) < 1e-9
+    assert at["friction.locked"][-1] == 0 and abs(at["arm.w"][-1] - 1) < 0.01

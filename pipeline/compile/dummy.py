@@ -59,9 +59,10 @@ def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values
     dummies, ties = set(), []
     while H:
         rows = ca.vertcat(*[eqs[e] for e in H])
-        if _switching(rows, modes, impl["p"], p_values):
+        if _switching(ca.jacobian(rows, ca.vertcat(*[var[v] for v in cand])), modes, impl["p"], p_values):
             # (chosen in the mode the model starts in, the states may not determine the
-            # others in another: a machine braked by a switch)
+            # others in another: a machine braked by a switch; a reference path's position,
+            # piecewise in time, differentiated twice switches only in what no choice reads)
             log.debug("dummy derivatives: a differentiated equation switches with the model's modes")
             return None
         wants = [want[v] for v in cand]
@@ -103,8 +104,9 @@ def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values
 
 
 def _switching(rows: ca.SX, modes: ca.SX, p: ca.SX, p_values: np.ndarray) -> bool:
-    """Do ``rows`` read a discrete value or hold a branch (if-then-else) on more than the
-    parameters ``p`` (a joint's axis normalised by cases of its direction is no branch)?"""
+    """Do ``rows`` (the differentiated equations' Jacobian in the candidates) read a discrete
+    value or hold a branch (if-then-else) on more than the parameters ``p`` (a joint's axis
+    normalised by cases of its direction is no branch)?"""
     if modes.numel() and ca.depends_on(rows, modes):
         return True
     rows = ca.substitute(rows, p, ca.DM(p_values))
