@@ -825,7 +825,7 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         # behind by the flux, sends Newton's method away where 0 does not)
         z1 = _otherwise(ok, z1, lambda p: quick(ca.DM(start), p), par)
         ok = met(z1, par, LOOP_TOL)
-    step, jac = _damped_step(name, resid, sx)
+    step, jac = _damped_step(name, resid, sx, least_squares=strict)
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
 
     def fallback(z0, par):
@@ -971,7 +971,7 @@ def _within(r, tol: float):
     return ca.logic_and(ca.mmax(ca.fabs(r)) <= tol, ca.sumsqr(r) <= r.numel() * tol ** 2)
 
 
-def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Function]:
+def _damped_step(name: str, resid: ca.Function, sx, least_squares: bool = False) -> tuple[ca.Function, ca.Function]:
     """One step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
     decreases |r|^2 enough (Armijo), the shortest when none does; and the Jacobian it uses
     (in SX where ``sx``, :func:`_sx_residual`'s, has the residual)."""
@@ -982,15 +982,18 @@ def _damped_step(name: str, resid: ca.Function, sx) -> tuple[ca.Function, ca.Fun
     else:                      # (solves of inner loops, an initial system, or too large): in MX
         jac = ca.Function(f"{name}_jac", [z, par], [ca.jacobian(resid(z, par), z)])
     r = resid(z, par)
-    # the least-squares step (see _least_squares_step): Newton's where J is regular; where it
-    # is singular (a pipe closed at both ends by dry tank ports: its pressure is any that its
-    # static head allows) the step nearest dz = 0. Not sparse QR's: with tiny pivots kept its
-    # step was finite but ran off along the directions J leaves free (a robot started at rest
-    # with its bearings locked: twelve of them)
+    # where the Jacobian is singular, the least-squares step (a pipe closed at both ends by dry
+    # tank ports: its pressure is any that its static head allows, and Newton's step is
+    # infinite). Sparse QR is told not to refuse a pivot: its default failed the whole
+    # evaluation (TanksWithOverflow's update had no value at all)
     J = jac(z, par)
-    dz = _least_squares_step(J, r)
-    # (where even that has no value, the normal equations' least-squares step, regularised more)
-    dz = ca.if_else(_all_finite(dz), dz, _nearest(J, r, np.zeros(z.shape), _sparse_qr))
+    # (an initial system, ``least_squares``, singular in the mode the initial event iteration
+    # set: a robot at rest with its bearings locked leaves twelve directions free, where sparse
+    # QR's step, tiny pivots kept, is finite but runs off along them; see _least_squares_step.
+    # Not in a run's loops: a saturating core's then stalled)
+    first = _least_squares_step(J, r) if least_squares else -_sparse_qr(J, r)
+    # (the least-squares solution of J dz + r = 0 nearest dz = 0: already the step, downhill)
+    dz = ca.if_else(_all_finite(first), first, _nearest(J, r, np.zeros(z.shape), _sparse_qr))
     f0 = ca.dot(r, r)
 
     def alpha(j, z, dz, par, f0):
