@@ -825,7 +825,12 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         # behind by the flux, sends Newton's method away where 0 does not)
         z1 = _otherwise(ok, z1, lambda p: quick(ca.DM(start), p), par)
         ok = met(z1, par, LOOP_TOL)
-    step, jac = _damped_step(name, resid, sx, least_squares=strict)
+    step, jac = _damped_step(name, resid, sx)
+    # an initial system singular in the mode the initial event iteration set (a robot at rest
+    # with its bearings locked leaves twelve directions free): where Newton's damped steps do
+    # not meet it, least-squares steps from the same start (first: EngineV6_analytic's start
+    # needs Newton's; nor in a run's loops, where they stalled a saturating core's)
+    step_ls = _damped_step(name, resid, sx, least_squares=True)[0] if strict else None
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
 
     def fallback(z0, par):
@@ -846,6 +851,12 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
             z = step(z, par)
         z2 = polish(z, par)       # (which fails where the Jacobian is singular: then z as it is)
         z2 = ca.if_else(_all_finite(z2), z2, z)
+        if step_ls is not None:
+            def by_least_squares(z, par):
+                for _ in range(DAMPED_ITERATIONS):
+                    z = step_ls(z, par)
+                return z
+            z2 = _otherwise(met(z2, par, INIT_TOL), z2, by_least_squares, off, par)
         if z0.numel() == 1:
             # one unknown: a sign change, then the root inside it (a Newton method with a line
             # search stops at a local minimum of |r|, where an amplifier's branch has just ended)
@@ -987,13 +998,15 @@ def _damped_step(name: str, resid: ca.Function, sx, least_squares: bool = False)
     # infinite). Sparse QR is told not to refuse a pivot: its default failed the whole
     # evaluation (TanksWithOverflow's update had no value at all)
     J = jac(z, par)
-    # (an initial system, ``least_squares``, singular in the mode the initial event iteration
-    # set: a robot at rest with its bearings locked leaves twelve directions free, where sparse
-    # QR's step, tiny pivots kept, is finite but runs off along them; see _least_squares_step.
-    # Not in a run's loops: a saturating core's then stalled)
-    first = _least_squares_step(J, r) if least_squares else -_sparse_qr(J, r)
+    newton = -_sparse_qr(J, r)
     # (the least-squares solution of J dz + r = 0 nearest dz = 0: already the step, downhill)
-    dz = ca.if_else(_all_finite(first), first, _nearest(J, r, np.zeros(z.shape), _sparse_qr))
+    nearest = _nearest(J, r, np.zeros(z.shape), _sparse_qr)
+    dz = ca.if_else(_all_finite(newton), newton, nearest)
+    if least_squares:
+        # (see _least_squares_step: where sparse QR's step, tiny pivots kept, is finite but runs
+        # off along the directions a singular J leaves free)
+        ls = _least_squares_step(J, r)
+        dz = ca.if_else(_all_finite(ls), ls, nearest)
     f0 = ca.dot(r, r)
 
     def alpha(j, z, dz, par, f0):
