@@ -89,6 +89,14 @@ def unforced_run(model, t_end: float, n: int):
     return t, res
 
 
+def probed(model, res) -> dict:
+    """Every named variable of ``model`` along the run ``res`` (name -> values at its points),
+    read from the states it kept."""
+    o = model.ode
+    at = np.array([np.array(o.probe(x, o.u_start, o.p_values, t)).ravel() for x, t in zip(res.states, res.time)])
+    return dict(zip(o.probe_names, at.T))
+
+
 def rel_err(a, b) -> float:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return float(np.max(np.abs(a - b)) / max(np.max(np.abs(b)), 1e-300))

@@ -4,7 +4,7 @@ differentiated variable with the constraints dropped drifts off them."""
 import numpy as np
 from scipy.special import ellipk
 
-from helpers import msl_path, needs_msl, unforced_run
+from helpers import msl_path, needs_msl, probed, unforced_run
 from mcl import compile_model
 
 PENDULUM = """
@@ -43,9 +43,7 @@ def test_a_cartesian_pendulum_keeps_two_states_on_its_rod(tmp_path):
     assert np.ptp(energy) < 1e-4 * 2 * 9.81 * 0.8     # (4e-4 with the constraint dropped)
     # the period of a pendulum of amplitude theta0: 4 sqrt(L/g) K(sin^2(theta0/2))
     period = 4 * np.sqrt(0.8 / 9.81) * ellipk(np.sin(0.3) ** 2)
-    o = model.ode
-    x = np.array([float(o.probe(s, o.u_start, o.p_values, t)[o.probe_names.index("x")])
-                  for s, t in zip(res.states, res.time)])
+    x = probed(model, res)["x"]
     up = np.nonzero((x[:-1] < 0) & (x[1:] >= 0))[0]
     crossings = [res.time[k] - x[k] * (res.time[k + 1] - res.time[k]) / (x[k + 1] - x[k]) for k in up]
     assert len(crossings) >= 5
@@ -62,15 +60,9 @@ def test_an_msl_four_bar_integrates_its_declared_joint_alone():
     model = compile_model([], "Modelica.Mechanics.MultiBody.Examples.Loops.Fourbar1", libraries=[msl_path()])
     assert len(model.ode.x_names) == 2
     _, res = unforced_run(model, 5.0, 501)
-    w = _probe(model, res, "j1.w")
+    w = probed(model, res)["j1.w"]
     assert abs(w[0] - np.radians(300)) < 1e-9
-    assert np.all(np.isfinite(_probe(model, res, "j2.s")))
-
-
-def _probe(model, res, var):
-    o = model.ode
-    k = o.probe_names.index(var)
-    return np.array([float(o.probe(x, o.u_start, o.p_values, t)[k]) for x, t in zip(res.states, res.time)])
+    assert np.all(np.isfinite(probed(model, res)["j2.s"]))
 
 
 @needs_msl()

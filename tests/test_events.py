@@ -8,7 +8,7 @@ from mcl import compile_model
 from mcl.data import TimeSeries
 from mcl.engine_casadi import CasadiEngine
 from mcl.simulation import SimulationOptions
-from helpers import msl_path, needs_msl
+from helpers import msl_path, needs_msl, probed
 
 KINK = """
 model Kink "x falls at rate 1 while positive, at rate 3 once negative; y integrates x"
@@ -1304,9 +1304,7 @@ def test_an_axis_started_at_rest_with_its_bearing_stuck_holds_its_load(tmp_path)
     t = np.linspace(0, 2, 201)
     res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
     assert res.ok, res.reason
-    o = model.ode
-    probe = np.array([np.array(o.probe(x, o.u_start, o.p_values, tk)).ravel() for x, tk in zip(res.states, t)])
-    at = dict(zip(o.probe_names, probe.T))
+    at = probed(model, res)
     still = t < 0.5
     assert np.all(at["friction.locked"][still] == 1)
     assert np.max(np.abs(at["pi.x"][still])) < 1e-12 and np.max(np.abs(at["arm.w"][still])) < 1e-12

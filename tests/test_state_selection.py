@@ -3,6 +3,7 @@ a nonlinear loop become states, as in Modelica tools. Checked against a solution
 without mcl."""
 import numpy as np
 
+from helpers import probed
 from mcl import compile_model
 from mcl.data import TimeSeries
 from mcl.engine_casadi import CasadiEngine
@@ -90,8 +91,8 @@ def test_a_preferred_variable_a_loop_would_solve_for_is_integrated_as_a_state(tm
                                   options=SimulationOptions(rtol=1e-9, atol=1e-9))
     assert res.ok, res.reason
     m_ref, T_ref = _reference(t)
-    at = [np.array(ode.probe(x, ode.u_start, ode.p_values, s)).ravel() for x, s in zip(res.states, t)]
-    m, T = (np.array([v[ode.probe_names.index(n)] for v in at]) for n in ("m", "T"))
+    at = probed(model, res)
+    m, T = at["m"], at["T"]
     assert np.abs(m / m_ref - 1).max() < 1e-6
     assert np.abs(T / T_ref - 1).max() < 1e-6
     assert T_ref[-1] - T_ref[0] > 20          # (it moved: the check is not of a constant)

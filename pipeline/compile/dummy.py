@@ -59,14 +59,15 @@ def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values
     dummies, ties = set(), []
     while H:
         rows = ca.vertcat(*[eqs[e] for e in H])
-        if _switching(ca.jacobian(rows, ca.vertcat(*[var[v] for v in cand])), modes, impl["p"], p_values):
+        jac = ca.jacobian(rows, ca.vertcat(*[var[v] for v in cand]))
+        if _switching(jac, modes, impl["p"], p_values):
             # (chosen in the mode the model starts in, the states may not determine the
             # others in another: a machine braked by a switch; a reference path's position,
             # piecewise in time, differentiated twice switches only in what no choice reads)
             log.debug("dummy derivatives: a differentiated equation switches with the model's modes")
             return None
         wants = [want[v] for v in cand]
-        chosen, Ms = _independent(rows, [var[v] for v in cand], var_p, point, wants)
+        chosen, Ms = _independent(jac, var_p, point, wants)
         if chosen is None:
             return None
         # (at the start and at the random point: a coefficient 0 at the start, y of a pendulum
@@ -141,12 +142,13 @@ def _point(var: list, nx: int, nz: int, start: np.ndarray) -> np.ndarray:
     return values
 
 
-def _independent(rows: ca.SX, cols: list, var: list, point: np.ndarray, want: list):
-    """(positions in ``cols`` of as many columns as ``rows`` with a nonsingular Jacobian, the
-    Jacobian at the start ``point`` and at a random one): chosen at ``point``, else at the
-    random point; None where neither has full rank (see :func:`_pivoted`)."""
+def _independent(jac: ca.SX, var: list, point: np.ndarray, want: list):
+    """(positions of as many columns of the Jacobian ``jac`` (of the differentiated equations in
+    the candidates) as it has rows, nonsingular; ``jac`` at the start ``point`` and at a random
+    one): chosen at ``point``, else at the random point; None where neither has full rank (see
+    :func:`_pivoted`)."""
     V = ca.vertcat(*var)
-    J = ca.Function("J", [V], [ca.jacobian(rows, ca.vertcat(*cols))])
+    J = ca.Function("J", [V], [jac])
     rng = np.random.default_rng(0)
     Ms = [_rows_alike(np.array(J(at))) for at in
           (point, point * rng.uniform(0.5, 1.5, point.size) + rng.uniform(-1, 1, point.size))]

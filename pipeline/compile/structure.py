@@ -825,12 +825,11 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         # behind by the flux, sends Newton's method away where 0 does not)
         z1 = _otherwise(ok, z1, lambda p: quick(ca.DM(start), p), par)
         ok = met(z1, par, LOOP_TOL)
-    step, jac = _damped_step(name, resid, sx)
     # an initial system singular in the mode the initial event iteration set (a robot at rest
     # with its bearings locked leaves twelve directions free): where Newton's damped steps do
     # not meet it, least-squares steps from the same start (first: EngineV6_analytic's start
     # needs Newton's; nor in a run's loops, where they stalled a saturating core's)
-    step_ls = _damped_step(name, resid, sx, least_squares=True)[0] if strict else None
+    step, step_ls, jac = _damped_step(name, resid, sx, least_squares=strict)
     polish = ca.rootfinder(f"{name}_polish", "fast_newton", resid, {**NEWTON_OPTS, "error_on_fail": False})
 
     def fallback(z0, par):
@@ -982,10 +981,11 @@ def _within(r, tol: float):
     return ca.logic_and(ca.mmax(ca.fabs(r)) <= tol, ca.sumsqr(r) <= r.numel() * tol ** 2)
 
 
-def _damped_step(name: str, resid: ca.Function, sx, least_squares: bool = False) -> tuple[ca.Function, ca.Function]:
-    """One step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
-    decreases |r|^2 enough (Armijo), the shortest when none does; and the Jacobian it uses
-    (in SX where ``sx``, :func:`_sx_residual`'s, has the residual)."""
+def _damped_step(name: str, resid: ca.Function, sx, least_squares: bool = False):
+    """(one step of Newton's method with backtracking: the longest of 1, 1/2, 1/4, ... that
+    decreases |r|^2 enough (Armijo), the shortest when none does; with ``least_squares`` the
+    same step from the least-squares step, else None; the Jacobian they use, in SX where
+    ``sx``, :func:`_sx_residual`'s, has the residual)."""
     z, par = ca.MX.sym("z", resid.size1_in(0)), ca.MX.sym("par", resid.size1_in(1))
     if sx is not None:
         zs, ps, rs = sx
@@ -998,15 +998,8 @@ def _damped_step(name: str, resid: ca.Function, sx, least_squares: bool = False)
     # infinite). Sparse QR is told not to refuse a pivot: its default failed the whole
     # evaluation (TanksWithOverflow's update had no value at all)
     J = jac(z, par)
-    newton = -_sparse_qr(J, r)
     # (the least-squares solution of J dz + r = 0 nearest dz = 0: already the step, downhill)
     nearest = _nearest(J, r, np.zeros(z.shape), _sparse_qr)
-    dz = ca.if_else(_all_finite(newton), newton, nearest)
-    if least_squares:
-        # (see _least_squares_step: where sparse QR's step, tiny pivots kept, is finite but runs
-        # off along the directions a singular J leaves free)
-        ls = _least_squares_step(J, r)
-        dz = ca.if_else(_all_finite(ls), ls, nearest)
     f0 = ca.dot(r, r)
 
     def alpha(j, z, dz, par, f0):
@@ -1018,10 +1011,16 @@ def _damped_step(name: str, resid: ca.Function, sx, least_squares: bool = False)
         ra = resid(z + a * dz, par)
         return _otherwise(ca.dot(ra, ra) <= (1 - 1e-4 * a) * f0, ca.MX(a),
                           lambda *args: alpha(j + 1, *args), z, dz, par, f0)
-    body = ca.Function(f"{name}_ls", [z, par], [ca.if_else(_all_finite(dz), z + alpha(0, z, dz, par, f0) * dz, z)])
-    r = resid(z, par)
     done = ca.dot(r, r) <= LOOP_TOL ** 2     # converged: the rest of the steps cost one residual
-    return ca.Function(f"{name}_step", [z, par], [ca.if_else(done, z, body(z, par), True)]), jac
+
+    def stepping(first, fname):
+        dz = ca.if_else(_all_finite(first), first, nearest)
+        body = ca.Function(f"{fname}_ls", [z, par], [ca.if_else(_all_finite(dz), z + alpha(0, z, dz, par, f0) * dz, z)])
+        return ca.Function(f"{fname}_step", [z, par], [ca.if_else(done, z, body(z, par), True)])
+    # (least squares: see _least_squares_step, where sparse QR's step, tiny pivots kept, is
+    # finite but runs off along the directions a singular J leaves free)
+    step_ls = stepping(_least_squares_step(J, r), f"{name}_lsq") if least_squares else None
+    return stepping(-_sparse_qr(J, r), name), step_ls, jac
 
 
 def build_ode(dae: Dae, name: str = "model") -> Ode:
