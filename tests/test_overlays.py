@@ -8,6 +8,8 @@ import pytest
 import mcl
 from mcl.data import TimeSeries
 
+from helpers import probed
+
 MSL = Path(__file__).resolve().parents[2] / "shared" / "msl"
 pytestmark = pytest.mark.skipif(not (MSL / "Modelica" / "package.mo").is_file(), reason=f"the MSL is not at {MSL}")
 
@@ -181,6 +183,36 @@ end Levels;
     np.testing.assert_allclose(total, rho * 2.5, rtol=1e-6)
     assert np.all(np.diff(state("full.m")) <= 1e-3)          # (it settles to 5e-8 of its mass)
     np.testing.assert_allclose([state("full.m")[-1], state("low.m")[-1]], rho * 1.25, rtol=1e-3)
+
+
+def test_a_heated_pipe_started_in_steady_state_stays_there(tmp_path, monkeypatch):
+    """A pipe's volumes started in steady state (``SteadyStateInitial``, set on the ``system``
+    as engineers set it): the library writes it der(mediums.T) = zeros(n), which rumoca refused
+    (and read as the defaults through the system); the overlay writes it element by element.
+    Water from 2 bar and 320 K to 1 bar, 2 kW into the second of two volumes: the flow and the
+    temperatures hold from the start, and the heat goes into the flow's enthalpy."""
+    model, res = _simulated(tmp_path, monkeypatch, """
+model HeatedPipe
+  import Modelica.Fluid.Types.Dynamics;
+  replaceable package Medium = Modelica.Media.CompressibleLiquids.LinearWater_pT_Ambient;
+  inner Modelica.Fluid.System system(energyDynamics = Dynamics.SteadyStateInitial);
+  Modelica.Fluid.Sources.Boundary_pT supply(redeclare package Medium = Medium, p = 2e5, T = 320, nPorts = 1);
+  Modelica.Fluid.Sources.Boundary_pT drain(redeclare package Medium = Medium, p = 1e5, T = 300, nPorts = 1);
+  Modelica.Fluid.Pipes.DynamicPipe pipe(redeclare package Medium = Medium, length = 5, diameter = 0.01,
+    nNodes = 2, use_HeatTransfer = true, T_start = 300);
+  Modelica.Thermal.HeatTransfer.Sources.FixedHeatFlow heater(Q_flow = 2000);
+equation
+  connect(supply.ports[1], pipe.port_a);
+  connect(pipe.port_b, drain.ports[1]);
+  connect(heater.port, pipe.heatPorts[2]);
+end HeatedPipe;
+""", "HeatedPipe", np.linspace(0.0, 20.0, 5))
+    v = probed(model, res)
+    np.testing.assert_allclose(res.states, res.states[:1].repeat(len(res.time), 0), rtol=1e-9)
+    m_flow = v["pipe.port_a.m_flow"]
+    assert np.all(m_flow > 0.1) and np.ptp(m_flow) < 1e-9 * m_flow[0]
+    np.testing.assert_allclose(v["pipe.mediums[1].T"], 320.0, rtol=1e-9)       # (the first volume is not heated)
+    np.testing.assert_allclose(m_flow * (v["pipe.mediums[2].h"] - v["pipe.mediums[1].h"]), 2000.0, rtol=1e-6)
 
 
 def test_a_battery_cell_with_one_rc_element_charges_it(tmp_path, monkeypatch):

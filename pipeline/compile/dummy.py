@@ -71,8 +71,11 @@ def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values
         if chosen is None:
             return None
         # (at the start and at the random point: a coefficient 0 at the start, y of a pendulum
-        # released level, hides a choice that is there)
-        ties += [(cand[d], cand[c]) for M in Ms for d, c in _tied(M, chosen, [w[0] for w in wants])]
+        # released level, hides a choice that is there; a dummy that an equation gives with a
+        # constant coefficient stays one wherever the run goes: its tie is no choice)
+        fixed = _explicit(jac, chosen, ca.vertcat(*var), Ms[0])
+        ties += [(cand[d], cand[c]) for M in Ms for d, c in _tied(M, chosen, [w[0] for w in wants])
+                 if d not in fixed]
         picked = [cand[k] for k in chosen]
         dummies.update(v for v in picked if parent_v[v] >= 0)
         H = [parent_e[e] for e in H if parent_e[parent_e[e]] >= 0]
@@ -134,6 +137,29 @@ def _aliases(var: list, eqs: list):
     return find
 
 
+def _explicit(jac: ca.SX, kept: list[int], V: ca.SX, M: np.ndarray) -> set[int]:
+    """The columns ``kept`` of ``jac`` that its rows give one after another, each from a row
+    where it is the only one of them not yet given and its coefficient a nonzero constant (of
+    no unknown; nonzero in ``M``, ``jac`` at the start): a volume's energy U = m*u beside its
+    mass m and specific energy u, never the coefficient x of a pendulum's x*x' + y*y' = 0."""
+    rows, cols = jac.sparsity().get_triplet()
+    open_in = {}
+    for r, c in zip(rows, cols):
+        if c in kept:
+            open_in.setdefault(r, set()).add(c)
+    given, progress = set(), True
+    while progress:
+        progress = False
+        for r, open_ in open_in.items():
+            rest = open_ - given
+            if len(rest) == 1:
+                (c,) = rest
+                if M[r, c] != 0 and np.isfinite(M[r, c]) and not ca.depends_on(jac[r, c], V):
+                    given.add(c)
+                    progress = True
+    return given
+
+
 def _point(var: list, nx: int, nz: int, start: np.ndarray) -> np.ndarray:
     """Values of every variable where the selection is made: the start values, derivatives 0."""
     values = np.zeros(len(var))
@@ -160,7 +186,8 @@ def _independent(jac: ca.SX, var: list, point: np.ndarray, want: list):
 
 
 def _rows_alike(M: np.ndarray) -> np.ndarray:
-    return M / np.maximum(np.max(np.abs(M), axis=1, keepdims=True, initial=0.0), 1e-300)
+    with np.errstate(invalid="ignore"):       # (a row holding inf: not finite, judged so later)
+        return M / np.maximum(np.max(np.abs(M), axis=1, keepdims=True, initial=0.0), 1e-300)
 
 
 def _tied(M: np.ndarray, kept: list[int], rank: list) -> list:

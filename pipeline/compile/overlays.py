@@ -419,7 +419,25 @@ _SOURCES_TRACE = [(f"    ports.C_outflow = fill({c}, nPorts);\n",
                    f"    for i in 1:nPorts loop ports[i].C_outflow = {c}; end for; // mcl: rumoca reads it per port\n", n)
                   for c, n in (("C", 1), ("C_in_internal", 4))]
 
+# Modelica.Fluid.Interfaces.PartialDistributedVolume: rumoca refuses der() of a member of a
+# component array (``der(mediums.h) = zeros(n)``: "der(...) must have exactly one argument"), and
+# under a Boolean's if-equation fails to flatten it ("non-uniform body row count"): every pipe
+# started in steady state (SteadyStateInitial, the usual setting of ``system``) was refused. The
+# same equations element by element, each under an if-equation: rumoca keeps a for-equation
+# whose body is equations alone as one family, and in it der(mediums[i].h) resolves to no
+# variable (the same refusal); with an if-equation in its body it unrolls the loop.
+_STEADY_START = [(f"{indent}der(mediums.{v}) = zeros(n);\n",
+                  f"{indent}for i in 1:n loop if true then der(mediums[i].{v}) = 0; end if; end for; // mcl: unrolled\n", times)
+                 for indent, v, times in (("       ", "h", 1), ("       ", "T", 1), ("      ", "p", 1))] + [
+    # (and the mass fractions and trace substances of each: of none, as in water, the family of
+    # equations on empty arrays is the "non-uniform" one)
+    ("      der(mediums[i].Xi) = zeros(Medium.nXi);\n",
+     "      for j in 1:Medium.nXi loop if true then der(mediums[i].Xi[j]) = 0; end if; end for; // mcl: unrolled\n"),
+    ("      der(mCs[i,:])      = zeros(Medium.nC);\n",
+     "      for j in 1:Medium.nC loop if true then der(mCs[i, j]) = 0; end if; end for; // mcl: unrolled\n")]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
+    ("Modelica", ("Fluid", "Interfaces.mo")): _STEADY_START,
     ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Functions", "activePower.mo")): [_ACTIVE_POWER],
     ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Basic", "MultiDelta.mo")): [_MULTI_DELTA_PRINT],
     ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Blocks", "SymmetricalComponents.mo")):
