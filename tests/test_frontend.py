@@ -730,6 +730,50 @@ def test_a_package_directory_keeps_the_modifiers_of_its_redeclared_classes(tmp_p
         compile_model([pkg], "P.C")
 
 
+@needs_msl()
+def test_a_loop_over_a_component_arrays_states_is_unrolled(tmp_path):
+    """rumoca keeps a for-equation on der(cells[i].T) as one family and refuses it ("der(...)
+    must have exactly one resolved variable-reference operand"); mcl compiles it again with the
+    loop's body under an if-equation, which rumoca unrolls. A rod of three cells, each
+    exchanging heat with its neighbours and started in steady state (der = 0 in a loop of
+    initial equations), 1 W into the first and the last held at 300 K: it starts on its
+    steady profile, 300 + (n - i)/G, and stays there."""
+    f = tmp_path / "Rod.mo"
+    f.write_text("""model Rod
+  import Modelica.Units.SI;
+  model Cell
+    SI.Temperature T(start = 300);
+    SI.HeatFlowRate Q_in;
+    parameter SI.HeatCapacity C = 10;
+  end Cell;
+  parameter Integer n = 3;
+  parameter SI.ThermalConductance G = 0.5;
+  parameter SI.HeatFlowRate P = 1;
+  Cell cells[n];
+equation
+  for i in 1:n loop
+    cells[i].C*der(cells[i].T) = cells[i].Q_in;
+  end for;
+  cells[1].Q_in = P - G*(cells[1].T - cells[2].T);
+  for i in 2:n - 1 loop
+    cells[i].Q_in = G*(cells[i - 1].T - cells[i].T) - G*(cells[i].T - cells[i + 1].T);
+  end for;
+  cells[n].Q_in = G*(cells[n - 1].T - cells[n].T) - 1e3*(cells[n].T - 300);
+initial equation
+  for i in 1:n loop
+    der(cells[i].T) = 0;
+  end for;
+end Rod;
+""")
+    model = compile_model([f], "Rod", libraries=[msl_path()])
+    t = np.linspace(0.0, 50.0, 6)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    T = res.states[:, [model.ode.x_names.index(f"cells[{i}].T") for i in (1, 2, 3)]]
+    steady = 300 + 1e-3 + np.array([2, 1, 0]) / 0.5     # (the last held by 1 kW/K: 1 mK above)
+    np.testing.assert_allclose(T, np.tile(steady, (len(t), 1)), rtol=1e-9)
+
+
 def test_restating_a_malformed_declaration_leaves_it_as_written():
     """The retry's rewrites read text rumoca refused, which may be malformed: an unclosed array
     size of thirty size() calls (which once took exponential time) comes back as it was."""

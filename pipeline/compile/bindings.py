@@ -24,7 +24,7 @@ from __future__ import annotations
 import re
 
 from .enums import enumerated
-from .loops import bounded
+from .loops import bounded, unrolled
 from .redeclares import defaults_lifted
 from .records import copied
 from .sources import KEYWORDS, arguments, closing, masked
@@ -40,8 +40,8 @@ _AFTER = re.compile(r"\s*(;|\"|annotation\b)")
 def restated(text: str) -> str:
     """``text`` with the restatements rumoca reads (:func:`called`, :func:`distributed`,
     :func:`unsized`, :func:`.loops.bounded`, :func:`.enums.enumerated`,
-    :func:`.redeclares.defaults_lifted`, :func:`.records.copied`)."""
-    return defaults_lifted(enumerated(bounded(unsized(distributed(called(copied(text)))))))
+    :func:`.redeclares.defaults_lifted`, :func:`.records.copied`, :func:`.loops.unrolled`)."""
+    return unrolled(defaults_lifted(enumerated(bounded(unsized(distributed(called(copied(text))))))))
 
 
 #: a bound parameter array sized by another's size: ``parameter Real head[size(q, 1)] = {...}``

@@ -7,6 +7,11 @@ cond then body end if; end for;`` followed by ``assert(not cond, ...)``: once th
 false the body no longer runs and nothing it reads changes, so the loop ends where the while
 loop ends; one that would run longer stops the simulation with that message instead of giving
 a wrong value. Lines are kept (a message naming a line still names the right one).
+
+rumoca also keeps a for-equation whose body is equations alone as one family, and there
+``der(volumes[i].T)`` (a member of a component array at the loop's index) resolves to no
+variable ("der(...) must have exactly one resolved variable-reference operand"): with an
+if-equation around its body it unrolls the loop and reads it. :func:`unrolled` writes that.
 """
 from __future__ import annotations
 
@@ -49,3 +54,29 @@ def _depth(text: str, a: int, b: int) -> int:
     """The parenthesis depth at ``b`` counted from ``a``."""
     part = text[a:b]
     return part.count("(") + part.count("[") + part.count("{") - part.count(")") - part.count("]") - part.count("}")
+
+
+#: a for-equation's head or end, for :func:`unrolled`
+_FOR = re.compile(r"\b(for|loop|end\s+for\s*;)")
+#: der() of a member of a component array at a subscript: der(volumes[i].T)
+_MEMBER_DER = re.compile(r"\bder\s*\(\s*[A-Za-z_]\w*\s*\[[^\]]*\]\s*\.")
+
+
+def unrolled(text: str) -> str:
+    """``text`` with the body of each for-loop that takes der() of a member of a component
+    array at a subscript written inside ``if true then ... end if;``."""
+    blank = masked(text)
+    loops, stack = [], []
+    for m in _FOR.finditer(blank):
+        word = m.group(1)
+        if word == "for":
+            stack.append([m.start(), None])
+        elif word == "loop" and stack and stack[-1][1] is None and _depth(blank, stack[-1][0], m.start()) == 0:
+            stack[-1][1] = m.end()
+        elif word.startswith("end") and stack:
+            _start, body = stack.pop()
+            if body is not None and not stack and _MEMBER_DER.search(blank, body, m.start()):
+                loops.append((body, m.start()))
+    for body, end in sorted(loops, reverse=True):
+        text = text[:body] + " if true then" + text[body:end] + "end if; " + text[end:]
+    return text

@@ -202,7 +202,8 @@ class _Front:
 
 #: rumoca's errors on the constructs :func:`.bindings.restated` writes in forms it reads
 _RESTATE_ON = re.compile(r"unbalanced model|expression shape mismatch|without a checked DAE owner|"
-                         r"unresolved Flat reference|function shape proof|found Enumeration|unknown modifier")
+                         r"unresolved Flat reference|function shape proof|found Enumeration|unknown modifier|"
+                         r"resolved variable-reference operand")
 #: the digest's mark of a document compiled restated (:func:`.bindings.restated`)
 _RESTATED = "+restated"
 #: the mark of a document compiled with its for-equations on arrays element by element
@@ -599,7 +600,8 @@ def _compile(prep: Prepared, roots: list[str], model: str, libs: dict[str, Path]
                 raise exc from None
             log.info("%s: compiled restated as rumoca reads it (bindings to calls as f(...) + 0, array "
                      "modifiers of component arrays element by element, while loops as bounded for loops, Integer() of "
-                     "an enumeration as comparisons, replaceable components' own modifiers in short classes)", model)
+                     "an enumeration as comparisons, replaceable components' own modifiers in short classes, loops on der() of "
+                     "a component array's members unrolled)", model)
             return compiled
         if _SCALAR_ON in str(exc):
             try:
