@@ -774,6 +774,30 @@ end Rod;
     np.testing.assert_allclose(T, np.tile(steady, (len(t), 1)), rtol=1e-9)
 
 
+def test_only_loops_on_der_of_a_component_arrays_members_are_unrolled():
+    """The restatement wraps the body of a for-equation that takes der(cells[i].T), and leaves a
+    loop on an array variable and a comprehension's iterator as written."""
+    from mcl.compile.loops import unrolled
+
+    text = """model R
+  Cell c[3];
+  Real y[3];
+  Real s = sum({c[i].T for i in 1:3});
+equation
+  for i in 1:3 loop
+    der(c[i].T) = -c[i].T;
+  end for;
+  for i in 1:3 loop
+    der(y[i]) = -y[i];
+  end for;
+end R;
+"""
+    out = unrolled(text)
+    assert out.count("if true then") == 1 and out.count("end if; end for;") == 1
+    assert "for i in 1:3 loop if true then\n    der(c[i].T)" in out
+    assert out.replace(" if true then", "").replace("end if; ", "") == text
+
+
 def test_restating_a_malformed_declaration_leaves_it_as_written():
     """The retry's rewrites read text rumoca refused, which may be malformed: an unclosed array
     size of thirty size() calls (which once took exponential time) comes back as it was."""

@@ -70,7 +70,8 @@ def unrolled(text: str) -> str:
     for m in _FOR.finditer(blank):
         word = m.group(1)
         if word == "for":
-            stack.append([m.start(), None])
+            if _depth(blank, 0, m.start()) == 0:       # (not a comprehension's iterator)
+                stack.append([m.start(), None])
         elif word == "loop" and stack and stack[-1][1] is None and _depth(blank, stack[-1][0], m.start()) == 0:
             stack[-1][1] = m.end()
         elif word.startswith("end") and stack:

@@ -420,17 +420,17 @@ _SOURCES_TRACE = [(f"    ports.C_outflow = fill({c}, nPorts);\n",
                   for c, n in (("C", 1), ("C_in_internal", 4))]
 
 # Modelica.Fluid.Interfaces.PartialDistributedVolume: rumoca refuses der() of a member of a
-# component array (``der(mediums.h) = zeros(n)``: "der(...) must have exactly one argument"), and
-# under a Boolean's if-equation fails to flatten it ("non-uniform body row count"): every pipe
-# started in steady state (SteadyStateInitial, the usual setting of ``system``) was refused. The
-# same equations element by element, each under an if-equation: rumoca keeps a for-equation
-# whose body is equations alone as one family, and in it der(mediums[i].h) resolves to no
-# variable (the same refusal); with an if-equation in its body it unrolls the loop.
+# component array (``der(mediums.h) = zeros(n)``: "der(...) must have exactly one resolved
+# variable-reference operand"): every pipe started in steady state (SteadyStateInitial, the
+# usual setting of ``system``) was refused. The same equations element by element, each under
+# an if-equation: rumoca keeps a for-equation whose body is equations alone as one family, and
+# there der(mediums[i].h) resolves to no variable either; with an if-equation in its body it
+# unrolls the loop.
 _STEADY_START = [(f"{indent}der(mediums.{v}) = zeros(n);\n",
                   f"{indent}for i in 1:n loop if true then der(mediums[i].{v}) = 0; end if; end for; // mcl: unrolled\n", times)
                  for indent, v, times in (("       ", "h", 1), ("       ", "T", 1), ("      ", "p", 1))] + [
-    # (and the mass fractions and trace substances of each: of none, as in water, the family of
-    # equations on empty arrays is the "non-uniform" one)
+    # (and the mass fractions and trace substances of each: of none, as in water, rumoca fails
+    # to flatten the family of equations on empty arrays, "non-uniform body row count")
     ("      der(mediums[i].Xi) = zeros(Medium.nXi);\n",
      "      for j in 1:Medium.nXi loop if true then der(mediums[i].Xi[j]) = 0; end if; end for; // mcl: unrolled\n"),
     ("      der(mCs[i,:])      = zeros(Medium.nC);\n",
