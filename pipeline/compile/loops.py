@@ -21,25 +21,12 @@ from .sources import masked
 
 #: passes a while loop may take
 PASSES = 100
-_WORD = re.compile(r"\b(while|loop|end\s+while\s*;)")
 
 
 def bounded(text: str) -> str:
     """``text`` with each while loop a for loop of :data:`PASSES` passes and an assert."""
-    blank = masked(text)
-    loops, stack = [], []
-    for m in _WORD.finditer(blank):
-        word = m.group(1)
-        if word == "while":
-            stack.append([m.start(), None])
-        elif word == "loop" and stack and stack[-1][1] is None and _depth(blank, stack[-1][0], m.start()) == 0:
-            stack[-1][1] = (m.start(), m.end())
-        elif word.startswith("end") and stack:
-            start, head = stack.pop()
-            if head is not None:
-                loops.append((start, head, (m.start(), m.end())))
     edits = []       # (start, end, new): the loops' heads and ends, none overlapping another
-    for n, (start, head, end) in enumerate(sorted(loops), 1):
+    for n, (start, head, end, _outer) in enumerate(sorted(_loops(masked(text), "while")), 1):
         cond = " ".join(text[start + len("while"):head[0]].split())
         breaks = "\n" * text.count("\n", start, head[1])
         edits.append((start, head[1], f"for mcl_w{n} in 1:{PASSES} loop if {cond} then{breaks}"))
@@ -50,14 +37,6 @@ def bounded(text: str) -> str:
     return text
 
 
-def _depth(text: str, a: int, b: int) -> int:
-    """The parenthesis depth at ``b`` counted from ``a``."""
-    part = text[a:b]
-    return part.count("(") + part.count("[") + part.count("{") - part.count(")") - part.count("]") - part.count("}")
-
-
-#: a for-equation's head or end, for :func:`unrolled`
-_FOR = re.compile(r"\b(for|loop|end\s+for\s*;)")
 #: der() of a member of a component array at a subscript: der(volumes[i].T)
 _MEMBER_DER = re.compile(r"\bder\s*\(\s*[A-Za-z_]\w*\s*\[[^\]]*\]\s*\.")
 
@@ -66,18 +45,34 @@ def unrolled(text: str) -> str:
     """``text`` with the body of each for-loop that takes der() of a member of a component
     array at a subscript written inside ``if true then ... end if;``."""
     blank = masked(text)
-    loops, stack = [], []
-    for m in _FOR.finditer(blank):
-        word = m.group(1)
-        if word == "for":
-            if _depth(blank, 0, m.start()) == 0:       # (not a comprehension's iterator)
-                stack.append([m.start(), None])
-        elif word == "loop" and stack and stack[-1][1] is None and _depth(blank, stack[-1][0], m.start()) == 0:
-            stack[-1][1] = m.end()
-        elif word.startswith("end") and stack:
-            _start, body = stack.pop()
-            if body is not None and not stack and _MEMBER_DER.search(blank, body, m.start()):
-                loops.append((body, m.start()))
-    for body, end in sorted(loops, reverse=True):
+    bodies = [(head[1], end[0]) for _start, head, end, outer in _loops(blank, "for")
+              if outer and _MEMBER_DER.search(blank, head[1], end[0])]
+    for body, end in sorted(bodies, reverse=True):
         text = text[:body] + " if true then" + text[body:end] + "end if; " + text[end:]
     return text
+
+
+def _loops(blank: str, keyword: str) -> list[tuple]:
+    """(start, head's span, end's span, outermost) of each ``keyword`` (while or for) loop in the
+    masked text ``blank``: from the keyword to its ``loop`` (the head) and its ``end keyword;``.
+    A keyword inside brackets (a comprehension's ``for``) opens none."""
+    word = re.compile(rf"\b({keyword}|loop|end\s+{keyword}\s*;)")
+    loops, stack, depth, at = [], [], 0, 0
+    for m in word.finditer(blank):
+        depth, at = depth + _depth(blank, at, m.start()), m.start()
+        if m.group(1) == keyword:
+            if depth == 0:
+                stack.append([m.start(), None])
+        elif m.group(1) == "loop" and stack and stack[-1][1] is None and _depth(blank, stack[-1][0], m.start()) == 0:
+            stack[-1][1] = (m.start(), m.end())
+        elif m.group(1) != "loop" and stack:
+            start, head = stack.pop()
+            if head is not None:
+                loops.append((start, head, (m.start(), m.end()), not stack))
+    return loops
+
+
+def _depth(text: str, a: int, b: int) -> int:
+    """The parenthesis depth at ``b`` counted from ``a``."""
+    part = text[a:b]
+    return part.count("(") + part.count("[") + part.count("{") - part.count(")") - part.count("]") - part.count("}")
