@@ -427,8 +427,8 @@ _SOURCES_TRACE = [(f"    ports.C_outflow = fill({c}, nPorts);\n",
 # there der(mediums[i].h) resolves to no variable either; with an if-equation in its body it
 # unrolls the loop.
 _STEADY_START = [(f"{indent}der(mediums.{v}) = zeros(n);\n",
-                  f"{indent}for i in 1:n loop if true then der(mediums[i].{v}) = 0; end if; end for; // mcl: unrolled\n", times)
-                 for indent, v, times in (("       ", "h", 1), ("       ", "T", 1), ("      ", "p", 1))] + [
+                  f"{indent}for i in 1:n loop if true then der(mediums[i].{v}) = 0; end if; end for; // mcl: unrolled\n")
+                 for indent, v in (("       ", "h"), ("       ", "T"), ("      ", "p"))] + [
     # (and the mass fractions and trace substances of each: of none, as in water, rumoca fails
     # to flatten the family of equations on empty arrays, "non-uniform body row count")
     ("      der(mediums[i].Xi) = zeros(Medium.nXi);\n",
