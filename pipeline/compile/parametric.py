@@ -81,7 +81,8 @@ def _made(ode) -> Split | None:
     if before < SMALL:
         return None
     split_exprs, symbols, parts = ca.extract_parametric(exprs, P)
-    if not symbols:
+    parts = _resolved(parts, symbols)
+    if not symbols or parts is None:
         return None
     Q = ca.vertcat(*[ca.vec(s) for s in symbols])
     args, names = [X, U, P, Q, T], ["x", "u", "p", "q", "t"]
@@ -95,6 +96,20 @@ def _made(ode) -> Split | None:
             ode.ode.n_instructions() + ode.out.n_instructions()):
         return None
     return made
+
+
+def _resolved(parts: list, symbols: list, rounds: int = 50) -> list | None:
+    """``parts`` in the parameters alone: CasADi's extract_parametric can give a part that reads
+    another part's symbol (water's density from IF97 at a parametric pressure: 'q' then had
+    free variables, an internal error); None where they do not resolve."""
+    if not symbols:
+        return parts
+    syms = ca.vertcat(*[ca.vec(s) for s in symbols])
+    for _ in range(rounds):
+        if not ca.depends_on(ca.vertcat(*[ca.vec(e) for e in parts]), syms):
+            return parts
+        parts = ca.substitute(parts, symbols, parts)
+    return None
 
 
 def split_functions(funcs: dict, p_at: dict, n_p: int) -> tuple[dict, ca.Function | None]:
@@ -127,7 +142,8 @@ def split_functions(funcs: dict, p_at: dict, n_p: int) -> tuple[dict, ca.Functio
         calls[name] = (args, g.call(args))
     flat = [e for _, outs in calls.values() for e in outs]
     exprs, symbols, parts = ca.extract_parametric(flat, P)
-    if not symbols:
+    parts = _resolved(parts, symbols)
+    if not symbols or parts is None:
         return funcs, None
     Q = ca.vertcat(*[ca.vec(s) for s in symbols])
     PQ = ca.SX.sym("p", n_p + Q.numel())

@@ -29,6 +29,7 @@ import scipy.linalg
 from .dae import CSE_MIN, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
 from . import dummy, homotopy
+from .branches import short_circuited
 from .hidden import revealed
 
 log = logging.getLogger(__name__)
@@ -392,7 +393,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             sol_sx = _linear_solution(gk, zk, A, b, z_guess[cols] if changing else None,
                                       MODED_SYMBOLIC_MAX if moded else SYMBOLIC_SOLVE_MAX)
             if sol_sx is not None:
-                f = ca.Function(f"blk{k}", [zprev, *args], [sol_sx])
+                f = short_circuited(ca.Function(f"blk{k}", [zprev, *args], [sol_sx]))
                 block = (lambda pv, f=f: f(pv, *mx_args))
                 sol_newton = f(prev_sx, *args) if newton is not None else None
             else:
@@ -407,7 +408,7 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
                 block = (lambda pv, fa=fa, how=how, g0=g0: _run_time_solve(*fa(pv, *mx_args), how, g0))
                 newton = None
         elif not torn:      # explicit in order (a step read an unknown known by then): no loop
-            f = ca.Function(f"blk{k}", [zprev, *args], [whole])
+            f = short_circuited(ca.Function(f"blk{k}", [zprev, *args], [whole]))
             block = (lambda pv, f=f: f(pv, *mx_args))
             sol_newton = f(prev_sx, *args) if newton is not None else None
         else:
@@ -419,9 +420,9 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
             resid = ca.Function(f"loop{k}", [tears, par], [residual])
             at = [cols[i] for i in torn]
             first = z_guess[at] if guess is None else mx_args[-1][at]      # Newton's first iterate
-            spread = ca.Function(f"torn{k}", [tears, zprev, *args], [whole])
+            spread = short_circuited(ca.Function(f"torn{k}", [tears, zprev, *args], [whole]))
 
-            def block(pv, resid=resid, first=first, spread=spread, name=f"loop{k}", extra=(), at=at):
+            def block(pv, resid=short_circuited(resid), first=first, spread=spread, name=f"loop{k}", extra=(), at=at):
                 t_sol = _loop_solve(name, resid, first, ca.vertcat(pv, *mx_args, *extra),
                                     start=None if guess is None else z_guess[at])
                 return spread(t_sol, pv, *mx_args, *extra), t_sol
@@ -554,6 +555,8 @@ def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None, match: list
     b in order, their crossing functions a - b, their operators), with the comparisons'
     values taken from ``held`` where it is given: the k-th comparison's from held[k], or with
     ``match`` (crossing functions) from the entry of the one it equals (none: not held)."""
+    if any(f.instruction_id(k) == ca.OP_CALL for k in range(f.n_instructions())):
+        return f.call(inputs), [], [], []      # (a branch short-circuited: its comparisons not seen)
     work, outs = {}, [[None] * f.nnz_out(i) for i in range(f.n_out())]
     cmps, cross, ops = [], [], []
     for k in range(f.n_instructions()):
@@ -1082,9 +1085,12 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
     UP = ca.vertcat(U, Pu)
     Z, z_free, cmp_now, branch = zfun(X, UP, T, G, H)
     nb = branch.numel() if ng else 0      # an event where a loop would change its branch
-    sx_fun = ca.Function("sx", [xs, zs, up, t],
-                         [semi["ode"], semi["alg"], invariants_in(invariants, dae, x_impl, z_orig)])
-    xdot, g, inv = sx_fun(X, Z, UP, T)
+    # (x' apart from the checks: an SX function computes all its outputs at every call, and the
+    # algebraic residual re-evaluates every equation: 386 000 instructions of IF97 in a pump's)
+    sx_fun = ca.Function("sx", [xs, zs, up, t], [semi["ode"]])
+    checks_fun = ca.Function("sx_checks", [xs, zs, up, t],
+                             [semi["alg"], invariants_in(invariants, dae, x_impl, z_orig)])
+    xdot, (g, inv) = sx_fun(X, Z, UP, T), checks_fun(X, Z, UP, T)
     zero = ca.DM.zeros(1, 1)
     absmax = (lambda v: ca.mmax(ca.fabs(v)) if v.numel() else zero)
 
@@ -1286,7 +1292,7 @@ def _newton_functions(newton, args, names, sx_fun, probe_at, U, P, G, H):
     UP = ca.vertcat(U, P)
     ZL = ca.MX.sym("zl", z_newton.size1_in(4))
     Zg = z_newton(X, UP, T, G, ZL)
-    xdot = sx_fun(X, Zg, UP, T)[0]
+    xdot = sx_fun(X, Zg, UP, T)
     loops = ca.Function("loops", args, [loops_fun(X, UP, T, G, H)], names, ["zl"])
     given = ca.Function("given", [*args, ZL], [xdot, probe_at(X, Zg, U, P, T)], [*names, "zl"], ["xdot", "probe"])
     return loops, expanded(given)

@@ -1,0 +1,210 @@
+"""Branches of if-expressions evaluated only when taken.
+
+CasADi's SX writes ``if c then a else b`` as ``(c ? a : 0) + (!c ? b : 0)`` and evaluates
+both ``a`` and ``b`` on every call. Where a branch is a large computation of its own (IF97's
+water properties compute each region's equations of state, tens of thousands of instructions,
+where one region is taken) this costs several times what is needed. :func:`short_circuited`
+moves each such branch into a function called through a CasADi switch: an SX call node whose
+branch runs only when its condition holds, and gives zeros otherwise, as the if-expression does.
+Derivatives, code generation and serialisation go through CasADi's own Switch.
+"""
+from __future__ import annotations
+
+import casadi as ca
+
+SMALLEST = 400          # instructions: a branch below this is left inline (a call costs about as much)
+_IEZ, _IN, _OUT, _CONST, _CALL = ca.OP_IF_ELSE_ZERO, ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_CALL
+
+
+def short_circuited(f: ca.Function, smallest: int = SMALLEST, depth: int = 0) -> ca.Function:
+    """``f`` (an SX function) with each branch of ``smallest`` instructions or more evaluated
+    only when taken; ``f`` itself where there is none (or it is not an SX function)."""
+    if not f.is_a("SXFunction") or f.n_instructions() < 2 * smallest or depth > 8 or \
+            not any(f.instruction_id(k) == _IEZ for k in range(f.n_instructions())):
+        return f
+    # (equal conditions made one node: each if-expression on ``region == 1`` writes its own)
+    g = ca.Function(f.name(), f.sx_in(), ca.cse(f.call(f.sx_in())), {"live_variables": False})
+    prog = _Program(g)
+    if prog.calls or not prog.cones(smallest):
+        return f
+    return prog.rebuilt(f.name(), smallest, depth, f.name_in(), f.name_out())
+
+
+class _Program:
+    """An SX function's instructions, each node named by the work slot it writes (one slot per
+    node, the function made without reusing slots)."""
+
+    def __init__(self, g: ca.Function):
+        self.g = g
+        n = g.n_instructions()
+        self.op = [g.instruction_id(k) for k in range(n)]
+        self.calls = _CALL in self.op
+        self.ins, self.slot, self.outputs, self.consts = {}, {}, [], {}
+        for k in range(n):
+            op = self.op[k]
+            if op == _OUT:
+                self.outputs.append((g.instruction_output(k), g.instruction_input(k)[0]))
+                continue
+            s = g.instruction_output(k)[0]
+            self.slot[s] = k
+            if op == _IN:
+                self.ins[s] = ("in", *g.instruction_input(k))
+            elif op == _CONST:
+                self.consts[s] = g.instruction_constant(k)
+            else:
+                self.ins[s] = tuple(g.instruction_input(k))
+        self.order = [g.instruction_output(k)[0] for k in range(n) if self.op[k] != _OUT]
+
+    def reads(self, s: int) -> tuple:
+        r = self.ins.get(s, ())
+        return () if r and r[0] == "in" else r
+
+    def cones(self, smallest: int) -> dict:
+        """condition slot -> (its branch's nodes, in order; its roots ``c ? x : 0``): the nodes
+        used only under that condition, outermost conditions first. Branches smaller than
+        ``smallest`` are left out."""
+        guard: dict[int, object] = {s: None for _, s in self.outputs}      # None: needed outside any branch
+        for s in reversed(self.order):
+            mine = guard.get(s, None)
+            guard[s] = mine
+            r = self.reads(s)
+            op = self.op[self.slot[s]]
+            for j, d in enumerate(r):
+                if op == _IEZ and j == 1 and d != r[0]:
+                    v = mine if mine is not None else ("c", r[0])
+                else:
+                    v = mine
+                guard[d] = v if d not in guard or guard[d] == v else None
+        nodes: dict[int, list] = {}
+        for s in self.order:
+            g = guard[s]
+            if g is not None and s not in self.consts and self.reads(s):
+                nodes.setdefault(g[1], []).append(s)
+        roots: dict[int, list] = {}
+        for s in self.order:
+            if guard[s] is None and self.op[self.slot[s]] == _IEZ:
+                c, x = self.ins[s]
+                if guard.get(x) == ("c", c):
+                    roots.setdefault(c, []).append(s)
+        self.guard = guard
+        self.big = {c: (nodes[c], roots[c]) for c in roots if len(nodes.get(c, ())) >= smallest}
+        self._acyclic()
+        return self.big
+
+    def _acyclic(self) -> None:
+        """Leave inline each branch whose inputs depend on its own or another branch's result
+        in a cycle (two if-expressions on one condition, the second reading the first)."""
+        while self.big:
+            bit = {c: 1 << i for i, c in enumerate(self.big)}
+            root_of = {r: c for c, (_, rs) in self.big.items() for r in rs}
+            dep: dict[int, int] = {}
+            for s in self.order:
+                m = 0
+                for d in self.reads(s):
+                    m |= dep.get(d, 0)
+                if s in root_of:
+                    m |= bit[root_of[s]]
+                dep[s] = m
+            needs = {c: dep.get(c, 0) for c in self.big}
+            for c, (nodes, roots) in self.big.items():
+                for d in _frontier(self, nodes, roots):
+                    needs[c] |= dep.get(d, 0)
+            cyclic = [c for c in self.big if _reaches(c, needs, bit)]
+            if not cyclic:
+                return
+            for c in cyclic:
+                del self.big[c]
+
+    def rebuilt(self, name: str, smallest: int, depth: int, names_in, names_out) -> ca.Function:
+        sx_in = self.g.sx_in()
+        root_of = {r: (c, i) for c, (_, rs) in self.big.items() for i, r in enumerate(rs)}
+        frontier = {c: _frontier(self, nodes, roots) for c, (nodes, roots) in self.big.items()}
+        w: dict[int, ca.SX] = {}
+        calls: dict[int, list] = {}
+
+        def deps(s):
+            if s in root_of:
+                c = root_of[s][0]
+                return [c, *frontier[c]]
+            return self.reads(s)
+
+        def make(s):
+            if s in root_of:
+                c, i = root_of[s]
+                if c not in calls:
+                    calls[c] = self._branch(f"{name}_b{len(calls)}", c, frontier[c], w, smallest, depth)
+                return calls[c][i]
+            return self._node(s, w, sx_in)
+
+        outs = []
+        for o in range(self.g.n_out()):
+            outs.append([ca.SX(0)] * self.g.sparsity_out(o).nnz())
+        for (o, nz), s in self.outputs:
+            outs[o][nz] = _built(s, w, deps, make)
+        res = [ca.SX(self.g.sparsity_out(o), ca.vertcat(*v) if v else ca.SX(0, 1)) for o, v in enumerate(outs)]
+        return ca.Function(name, sx_in, res, names_in, names_out)
+
+    def _node(self, s: int, w: dict, sx_in) -> ca.SX:
+        if s in self.consts:
+            return ca.SX(self.consts[s])
+        r = self.ins[s]
+        if r[0] == "in":
+            return sx_in[r[1]].nz[r[2]]
+        op = self.op[self.slot[s]]
+        return ca.SX.unary(op, w[r[0]]) if len(r) == 1 else ca.SX.binary(op, w[r[0]], w[r[1]])
+
+    def _branch(self, name: str, c: int, frontier: list, w: dict, smallest: int, depth: int) -> list:
+        """The branch under condition slot ``c``, called through a switch: its roots' values."""
+        nodes, roots = self.big[c]
+        f_in = ca.SX.sym("f", len(frontier))
+        local = {s: f_in[i] for i, s in enumerate(frontier)}
+        for s in nodes:
+            local[s] = self._node(s, local, None)
+        taken = ca.vertcat(*[local[self.ins[r][1]] for r in roots])
+        body = short_circuited(ca.Function(name, [f_in], [taken]), smallest, depth + 1)
+        zero = ca.Function(name + "_0", [f_in], [ca.SX.zeros(taken.sparsity())])
+        c_mx, f_mx = ca.MX.sym("c"), ca.MX.sym("f", len(frontier))
+        switch = ca.Function.if_else(name + "_if", body, zero)
+        call = ca.Function(name + "_call", [c_mx, f_mx], [switch(c_mx, f_mx)], {"never_inline": True})
+        got = call(w[c], ca.vertcat(*[w[s] for s in frontier]))
+        return ca.vertsplit(got)
+
+
+def _frontier(prog: _Program, nodes: list, roots: list) -> list:
+    """The nodes outside a branch that it reads (its values' included), in order."""
+    mine = set(nodes)
+    seen, out = set(), []
+    for s in [*nodes, *roots]:
+        for d in (prog.ins[s][1:] if s in roots else prog.reads(s)):
+            if d not in mine and d not in seen:
+                seen.add(d)
+                out.append(d)
+    return out
+
+
+def _reaches(c: int, needs: dict, bit: dict) -> bool:
+    """Does branch ``c`` need, through the branches it needs, its own result?"""
+    seen, todo = 0, needs[c]
+    while todo & ~seen:
+        seen |= todo
+        for d, b in bit.items():
+            if todo & b:
+                todo |= needs[d]
+    return bool(seen & bit[c])
+
+
+def _built(s: int, w: dict, deps, make) -> ca.SX:
+    """Node ``s``'s value, its inputs built first (iteratively: chains run deep)."""
+    stack = [s]
+    while stack:
+        k = stack[-1]
+        if k in w:
+            stack.pop()
+            continue
+        todo = [d for d in deps(k) if d not in w]
+        if todo:
+            stack.extend(todo)
+            continue
+        w[k] = make(k)
+        stack.pop()
+    return w[s]

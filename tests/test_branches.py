@@ -1,0 +1,122 @@
+"""Large branches of if-expressions are evaluated only when taken (:mod:`mcl.compile.branches`).
+
+IF97's water properties compute each region's equations inside one if-expression; as SX
+evaluates both sides of every if, a pump's right-hand side evaluated every region. The branches
+are moved into functions behind CasADi switches: the values and their first and second
+derivatives must stay those of the if-expression, on each side of it.
+"""
+import casadi as ca
+import numpy as np
+import pytest
+
+from helpers import msl_path, needs_msl, probed, unforced_run
+from mcl.compile.branches import short_circuited
+
+X = ca.SX.sym("x", 3)
+
+
+def _heavy(e, k, n=150):
+    """A smooth chain of ``n`` steps: a branch worth its own function."""
+    for _ in range(n):
+        e = e + 0.003 * ca.sin(e * e + k)
+    return e
+
+
+def _calls(f: ca.Function) -> int:
+    return sum(f.instruction_id(k) == ca.OP_CALL for k in range(f.n_instructions()))
+
+
+def _same(f, g, points):
+    """f and g agree at ``points`` in value, Jacobian and Hessian (SX and MX derivatives)."""
+    xm = ca.MX.sym("x", 3)
+    for F, sym in ((ca.Function("j", [X], [ca.jacobian(f(X), X)]), ca.Function("j", [X], [ca.jacobian(g(X), X)])),
+                   (ca.Function("h", [xm], [ca.jacobian(ca.jacobian(f(xm), xm), xm)]),
+                    ca.Function("h", [xm], [ca.jacobian(ca.jacobian(g(xm), xm), xm)]))):
+        for v in points:
+            np.testing.assert_allclose(np.array(F(v)), np.array(sym(v)), rtol=1e-12, atol=1e-14)
+    for v in points:
+        np.testing.assert_allclose(np.array(f(v)), np.array(g(v)), rtol=1e-14, atol=1e-15)
+
+
+def test_a_large_branch_runs_only_when_taken_and_keeps_its_values_and_derivatives():
+    r = X[2]
+    a = _heavy(X[0] * X[1], 0.1)
+    b = _heavy(X[1] - X[0], 0.2)
+    shared = ca.cos(X[0])           # read on both sides and outside: computed once, outside
+    y1 = ca.if_else(r > 1, a + shared, ca.if_else(r > 2, b, _heavy(X[0], 0.4) * shared))
+    y2 = ca.if_else(r > 1, 2 * a, shared)
+    f = ca.Function("f", [X], [ca.vertcat(y1, y2, shared)])
+    g = short_circuited(f, smallest=100)
+    assert _calls(g) >= 2 and g.n_instructions() < f.n_instructions() / 10
+    _same(f, g, [[0.3, 0.5, 1.5], [0.3, 0.5, 0.5], [-0.7, 0.2, 2.5]])
+    # saved and read back (the compile cache), it computes the same
+    back = ca.Function.deserialize(g.serialize())
+    np.testing.assert_array_equal(np.array(back([0.3, 0.5, 0.5])), np.array(f([0.3, 0.5, 0.5])))
+
+
+def test_a_branch_not_taken_leaves_no_nan_behind():
+    """The side not taken may be undefined there (a logarithm of a negative number), as in an
+    if-expression guarding it: the value and its derivative are those of the side taken."""
+    safe = X[0] > 0
+    f = ca.Function("f", [X], [ca.if_else(safe, _heavy(ca.log(X[0]) * X[1], 0.3), -X[0] * X[1])])
+    g = short_circuited(f, smallest=100)
+    assert _calls(g)
+    at = [-2.0, 0.5, 0.0]
+    assert np.isfinite(float(g(at))) and float(g(at)) == pytest.approx(1.0)
+    J = ca.Function("J", [X], [ca.jacobian(g(X), X)])
+    np.testing.assert_allclose(np.array(J(at)).ravel(), [-0.5, 2.0, 0.0])
+
+
+def test_two_ifs_on_one_condition_the_second_reading_the_first_stay_correct():
+    """A branch whose inputs need another branch's result on the same condition (an algorithm
+    assigning under ``if region == 1`` twice) is left inline: no call may need its own result."""
+    c = X[2] > 0
+    first = ca.if_else(c, _heavy(X[0], 0.1), X[1])
+    second = ca.if_else(c, _heavy(first * X[1], 0.2), first)
+    f = ca.Function("f", [X], [second])
+    g = short_circuited(f, smallest=100)
+    _same(f, g, [[0.4, 0.3, 1.0], [0.4, 0.3, -1.0]])
+
+
+def test_small_functions_are_left_as_they_are():
+    f = ca.Function("f", [X], [ca.if_else(X[0] > 0, ca.sin(X[1]), ca.cos(X[2]))])
+    assert short_circuited(f) is f
+
+
+BOILER = """
+model Boiler "A kilogram of water heated at 1 bar through boiling, losing heat to the room"
+  import Modelica.Units.SI;
+  package Medium = Modelica.Media.Water.StandardWater;
+  parameter SI.Pressure p = 1e5 "pressure";
+  parameter SI.Power Q = 2e3 "heater";
+  parameter SI.ThermalConductance G = 10 "loss to the room";
+  parameter SI.Temperature T_room = 293.15;
+  parameter SI.Mass m = 1 "mass of water";
+  SI.SpecificEnthalpy h(start = 84e3, fixed = true);
+  Modelica.Blocks.Interfaces.RealOutput T(unit = "K") "temperature";
+  Modelica.Blocks.Interfaces.RealOutput d(unit = "kg/m3") "density";
+equation
+  m*der(h) = Q - G*(T - T_room);
+  T = Medium.temperature_ph(p, h);
+  d = Medium.density_ph(p, h);
+end Boiler;
+"""
+
+
+@needs_msl()
+def test_water_heated_through_boiling_follows_the_steam_tables(tmp_path):
+    """IF97 in the right-hand side (the loss reads T(p, h)), its regions behind switches: liquid
+    at 20 C, the plateau at the saturation temperature of 1 bar, steam at T_room + Q/G."""
+    from mcl import compile_model
+
+    (tmp_path / "Boiler.mo").write_text(BOILER)
+    model = compile_model([tmp_path / "Boiler.mo"], "Boiler", libraries=[msl_path()])
+    assert any(f.class_name() == "Switch" for f in model.ode.ode.find_functions())
+    t, res = unforced_run(model, 6000.0, 601)
+    v = probed(model, res)
+    T, d = v["T"], v["d"]
+    assert d[0] == pytest.approx(998.21, abs=0.01)             # liquid water, 1 bar, 20 C
+    boiling = (t > 600) & (t < 1800)                              # h between h' and h'' at 1 bar
+    np.testing.assert_allclose(T[boiling], 372.756, atol=5e-3)    # T_sat(1 bar) = 99.606 C
+    assert T[-1] == pytest.approx(493.15, abs=0.01)               # steady: Q = G (T - T_room)
+    assert d[-1] == pytest.approx(1 / 2.2659, rel=2e-3)           # steam at 1 bar, 220 C: v = 2.266 m3/kg
