@@ -22,8 +22,10 @@ def short_circuited(f: ca.Function, smallest: int = SMALLEST, depth: int = 0) ->
     if not f.is_a("SXFunction") or f.n_instructions() < 2 * smallest or depth > 8 or \
             not any(f.instruction_id(k) == _IEZ for k in range(f.n_instructions())):
         return f
-    # (equal conditions made one node: each if-expression on ``region == 1`` writes its own)
-    g = ca.Function(f.name(), f.sx_in(), ca.cse(f.call(f.sx_in())), {"live_variables": False})
+    # (equal conditions made one node: each if-expression on ``region == 1`` writes its own;
+    # a branch is rebuilt from nodes made so, and needs it no more)
+    outs = f.call(f.sx_in())
+    g = ca.Function(f.name(), f.sx_in(), ca.cse(outs) if depth == 0 else outs, {"live_variables": False})
     prog = _Program(g)
     if prog.calls or not prog.cones(smallest):
         return f
@@ -37,56 +39,51 @@ class _Program:
     def __init__(self, g: ca.Function):
         self.g = g
         n = g.n_instructions()
-        self.op = [g.instruction_id(k) for k in range(n)]
-        self.calls = _CALL in self.op
-        self.ins, self.slot, self.outputs, self.consts = {}, {}, [], {}
-        for k in range(n):
-            op = self.op[k]
+        ops = [g.instruction_id(k) for k in range(n)]
+        self.calls = _CALL in ops
+        self.op, self.ins, self.outputs, self.consts, self.inputs, self.order = {}, {}, [], {}, {}, []
+        for k, op in enumerate(ops):
             if op == _OUT:
                 self.outputs.append((g.instruction_output(k), g.instruction_input(k)[0]))
                 continue
             s = g.instruction_output(k)[0]
-            self.slot[s] = k
+            self.op[s] = op
+            self.order.append(s)
             if op == _IN:
-                self.ins[s] = ("in", *g.instruction_input(k))
+                self.inputs[s] = g.instruction_input(k)
             elif op == _CONST:
                 self.consts[s] = g.instruction_constant(k)
             else:
                 self.ins[s] = tuple(g.instruction_input(k))
-        self.order = [g.instruction_output(k)[0] for k in range(n) if self.op[k] != _OUT]
 
     def reads(self, s: int) -> tuple:
-        r = self.ins.get(s, ())
-        return () if r and r[0] == "in" else r
+        return self.ins.get(s, ())
 
     def cones(self, smallest: int) -> dict:
         """condition slot -> (its branch's nodes, in order; its roots ``c ? x : 0``): the nodes
         used only under that condition, outermost conditions first. Branches smaller than
         ``smallest`` are left out."""
-        guard: dict[int, object] = {s: None for _, s in self.outputs}      # None: needed outside any branch
+        # guard: the outermost condition (its slot) that every use of a node is under; None:
+        # needed outside any branch. Set from the uses, which come later: in reverse order
+        guard: dict[int, int | None] = {s: None for _, s in self.outputs}
+        ins = self.ins
         for s in reversed(self.order):
-            mine = guard.get(s, None)
-            guard[s] = mine
-            r = self.reads(s)
-            op = self.op[self.slot[s]]
+            mine = guard.setdefault(s, None)
+            r = ins.get(s, ())
+            taken = self.op[s] == _IEZ and r[1] != r[0]     # c ? x : 0, x under c
             for j, d in enumerate(r):
-                if op == _IEZ and j == 1 and d != r[0]:
-                    v = mine if mine is not None else ("c", r[0])
-                else:
-                    v = mine
+                v = r[0] if taken and j == 1 and mine is None else mine
                 guard[d] = v if d not in guard or guard[d] == v else None
         nodes: dict[int, list] = {}
         for s in self.order:
-            g = guard[s]
-            if g is not None and s not in self.consts and self.reads(s):
-                nodes.setdefault(g[1], []).append(s)
+            if guard[s] is not None and self.reads(s):      # (inputs and constants: passed in)
+                nodes.setdefault(guard[s], []).append(s)
         roots: dict[int, list] = {}
         for s in self.order:
-            if guard[s] is None and self.op[self.slot[s]] == _IEZ:
+            if guard[s] is None and self.op[s] == _IEZ:
                 c, x = self.ins[s]
-                if guard.get(x) == ("c", c):
+                if guard.get(x) == c:
                     roots.setdefault(c, []).append(s)
-        self.guard = guard
         self.big = {c: (nodes[c], roots[c]) for c in roots if len(nodes.get(c, ())) >= smallest}
         self._acyclic()
         return self.big
@@ -147,10 +144,10 @@ class _Program:
     def _node(self, s: int, w: dict, sx_in) -> ca.SX:
         if s in self.consts:
             return ca.SX(self.consts[s])
-        r = self.ins[s]
-        if r[0] == "in":
-            return sx_in[r[1]].nz[r[2]]
-        op = self.op[self.slot[s]]
+        if s in self.inputs:
+            i, nz = self.inputs[s]
+            return sx_in[i].nz[nz]
+        r, op = self.ins[s], self.op[s]
         return ca.SX.unary(op, w[r[0]]) if len(r) == 1 else ca.SX.binary(op, w[r[0]], w[r[1]])
 
     def _branch(self, name: str, c: int, frontier: list, w: dict, smallest: int, depth: int) -> list:
@@ -166,16 +163,16 @@ class _Program:
         c_mx, f_mx = ca.MX.sym("c"), ca.MX.sym("f", len(frontier))
         switch = ca.Function.if_else(name + "_if", body, zero)
         call = ca.Function(name + "_call", [c_mx, f_mx], [switch(c_mx, f_mx)], {"never_inline": True})
-        got = call(w[c], ca.vertcat(*[w[s] for s in frontier]))
+        got = call(w[c], ca.vertcat(*[w[s] for s in frontier]) if frontier else ca.SX(0, 1))
         return ca.vertsplit(got)
 
 
 def _frontier(prog: _Program, nodes: list, roots: list) -> list:
     """The nodes outside a branch that it reads (its values' included), in order."""
-    mine = set(nodes)
+    mine, tops = set(nodes), set(roots)
     seen, out = set(), []
     for s in [*nodes, *roots]:
-        for d in (prog.ins[s][1:] if s in roots else prog.reads(s)):
+        for d in (prog.ins[s][1:] if s in tops else prog.reads(s)):
             if d not in mine and d not in seen:
                 seen.add(d)
                 out.append(d)
