@@ -102,9 +102,10 @@ class _Program:
                 if s in root_of:
                     m |= bit[root_of[s]]
                 dep[s] = m
+            self.frontier = {c: _frontier(self, nodes, roots) for c, (nodes, roots) in self.big.items()}
             needs = {c: dep.get(c, 0) for c in self.big}
-            for c, (nodes, roots) in self.big.items():
-                for d in _frontier(self, nodes, roots):
+            for c, reads in self.frontier.items():
+                for d in reads:
                     needs[c] |= dep.get(d, 0)
             cyclic = [c for c in self.big if _reaches(c, needs, bit)]
             if not cyclic:
@@ -115,7 +116,7 @@ class _Program:
     def rebuilt(self, name: str, smallest: int, depth: int, names_in, names_out) -> ca.Function:
         sx_in = self.g.sx_in()
         root_of = {r: (c, i) for c, (_, rs) in self.big.items() for i, r in enumerate(rs)}
-        frontier = {c: _frontier(self, nodes, roots) for c, (nodes, roots) in self.big.items()}
+        frontier = self.frontier        # (:meth:`_acyclic`'s, of the branches kept)
         w: dict[int, ca.SX] = {}
         calls: dict[int, list] = {}
 

@@ -303,7 +303,11 @@ def _blocks(sp: ca.Sparsity, nz: int):
 
 def _has_calls(g: ca.SX, z: ca.SX, args: list[ca.SX]) -> bool:
     """Whether ``g`` holds call nodes (the functions a model's FMU keeps as calls)."""
-    f = ca.Function("g", [z, *args], [g])
+    return _calls_in(ca.Function("g", [z, *args], [g]))
+
+
+def _calls_in(f: ca.Function) -> bool:
+    """Whether SX function ``f`` holds call nodes."""
     return any(f.instruction_id(k) == ca.OP_CALL for k in range(f.n_instructions()))
 
 
@@ -555,7 +559,7 @@ def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None, match: list
     b in order, their crossing functions a - b, their operators), with the comparisons'
     values taken from ``held`` where it is given: the k-th comparison's from held[k], or with
     ``match`` (crossing functions) from the entry of the one it equals (none: not held)."""
-    if any(f.instruction_id(k) == ca.OP_CALL for k in range(f.n_instructions())):
+    if _calls_in(f):
         return f.call(inputs), [], [], []      # (a branch short-circuited: its comparisons not seen)
     work, outs = {}, [[None] * f.nnz_out(i) for i in range(f.n_out())]
     cmps, cross, ops = [], [], []
