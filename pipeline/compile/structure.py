@@ -851,8 +851,12 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
         if strict:
             z = off
         else:
-            s = ca.sum1(ca.vec(jac(zf, par)))
-            z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), zf, off)
+            # ... and the unknowns no equation moves at the start (a column of zeros: two
+            # fittings in series started at rest, dp = k m_flow^2 at m_flow = 0) move off it alone
+            Jf = jac(zf, par)
+            s = ca.sum1(ca.vec(Jf))
+            dead = ca.sum1(ca.fabs(Jf)).T == 0
+            z = ca.if_else(ca.logic_and(s == s, ca.fabs(s) < np.inf), ca.if_else(dead, off, zf), off)
         for _ in range(DAMPED_ITERATIONS):
             z = step(z, par)
         z2 = polish(z, par)       # (which fails where the Jacobian is singular: then z as it is)
