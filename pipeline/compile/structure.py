@@ -842,17 +842,17 @@ def _loop_solve(name: str, resid: ca.Function, guess, par: ca.MX, strict: bool =
     def fallback(z0, par):
         # the initial system's fallback starts a hair off the start values: a start at a
         # singularity (a tank's T = H/(m*c) at m = 0) has no Newton step, the point next to it has.
-        # A run's loops move only off a start where the law has no finite derivative (|B|^n with
-        # n < 1 at B = 0); one where it is finite but singular (w2 v^2 + w3 v^3 = w1 i at v = 0,
-        # a cubic's double root) stays the model's to resolve
+        # A run's loops move all their unknowns off a start only where the law has no finite
+        # derivative (|B|^n with n < 1 at B = 0), and where it is finite, the unknowns no equation
+        # moves alone (a column of zeros: two fittings in series started at rest, dp = k m_flow^2
+        # at m_flow = 0, had no Newton step). A start singular otherwise (its columns dependent,
+        # none zero) stays the model's to resolve
         # (in a run, from the start values too: the fallback is then the one without a last solution)
         zf = z0 if start is None else ca.MX(ca.DM(start))
         off = zf + 1e-6 * (1 + ca.fabs(zf))
         if strict:
             z = off
         else:
-            # ... and the unknowns no equation moves at the start (a column of zeros: two
-            # fittings in series started at rest, dp = k m_flow^2 at m_flow = 0) move off it alone
             Jf = jac(zf, par)
             s = ca.sum1(ca.vec(Jf))
             dead = ca.sum1(ca.fabs(Jf)).T == 0
