@@ -324,7 +324,10 @@ def test_a_room_of_moist_air_holding_co2_starts_where_its_initial_equations_say(
     function's call in PartialMedium (what it computes written in place). The vessel's states,
     mass and energy, start at 0, where moist air's specific energy U/m is 0/0: its temperature,
     humidity and CO2 are still those its initial equations give, and it holds p V / (R T) of
-    air, R moist air's gas constant, which it keeps at rest."""
+    air, R moist air's gas constant, which it keeps at rest. Its port is open (its regularFlow
+    a tie, 0 >= 0, read as true: see the ventilated room below) and joined straight to the
+    boundary, so the boundary fixes its pressure: its mass is then no state of its own (index
+    reduction)."""
     t = np.linspace(0.0, 3600.0, 13)
     out = _simulated(tmp_path, monkeypatch, ROOM, "Room", t)[1].output
     R = 0.99 * 287.0512249529787 + 0.01 * 461.5233290850878
@@ -332,6 +335,56 @@ def test_a_room_of_moist_air_holding_co2_starts_where_its_initial_equations_say(
     np.testing.assert_allclose(out("Xw"), 0.01, rtol=1e-9)
     np.testing.assert_allclose(out("C"), 1.519e-3, rtol=1e-9)
     np.testing.assert_allclose(out("m"), 101325.0 * 100 / (R * 293.15), rtol=1e-6)
+
+
+VENTILATED = """
+model VentilatedRoom "a room of moist air ventilated by a fan bringing in CO2, the air leaving through a duct"
+  import Modelica.Fluid.Sources.{FixedBoundary, MassFlowSource_T};
+  import Modelica.Fluid.Vessels.ClosedVolume;
+  import Modelica.Fluid.Pipes.StaticPipe;
+  import Modelica.Fluid.Types.Dynamics;
+  package Medium = Modelica.Media.Air.MoistAir(extraPropertiesNames = {"CO2"}, C_nominal = {1.519e-3});
+  inner Modelica.Fluid.System system(energyDynamics = Dynamics.FixedInitial, massDynamics = Dynamics.FixedInitial);
+  MassFlowSource_T fan(redeclare package Medium = Medium, m_flow = 0.1, T = 293.15, X = {0.01, 0.99},
+    C = {3e-3}, nPorts = 1);
+  ClosedVolume room(redeclare package Medium = Medium, V = 100, nPorts = 2, use_portsData = false,
+    X_start = {0.01, 0.99}, C_start = {1.519e-3});
+  StaticPipe duct(redeclare package Medium = Medium, length = 2, diameter = 0.15);
+  FixedBoundary outside(redeclare package Medium = Medium, nPorts = 1);
+  output Real C = room.C[1];
+  output Real m = room.m;
+  output Real T = room.medium.T;
+  output Real m_flow = duct.port_a.m_flow;
+  output Real dp = room.medium.p - outside.p;
+equation
+  connect(fan.ports[1], room.ports[1]);
+  connect(room.ports[2], duct.port_a);
+  connect(duct.port_b, outside.ports[1]);
+end VentilatedRoom;
+"""
+
+
+def test_a_ventilated_room_fills_with_the_fans_co2_and_blows_it_out_through_its_duct(tmp_path, monkeypatch):
+    """A fan blows 0.1 kg/s of air carrying 3e-3 CO2 into a room of 100 m3 (its ports without
+    port data: both at the bottom, as the vessel's fluid level), and the air leaves through a
+    duct. The vessel's regularFlow = fluidLevel >= portsData_height is 0 >= 0: held from a start
+    of false, it shut the ports, the initial equations had no solution and the room started
+    empty; it is constant in time and now read as the parameters make it. The room is well
+    mixed: C = C_in + (C0 - C_in) exp(-m_flow t / m), its mass p V / (R T); the duct carries
+    the fan's flow and drops the pressure Darcy-Weisbach gives with Swamee and Jain's friction
+    factor (the MSL's Detailed wall friction in the turbulent regime; air's viscosity at 20 degC)."""
+    t = np.linspace(0.0, 3600.0, 13)
+    out = _simulated(tmp_path, monkeypatch, VENTILATED, "VentilatedRoom", t)[1].output
+    R = 0.99 * 287.0512249529787 + 0.01 * 461.5233290850878
+    m0 = 101325.0 * 100 / (R * 293.15)
+    np.testing.assert_allclose(out("m")[0], m0, rtol=1e-6)
+    np.testing.assert_allclose(out("C"), 3e-3 + (1.519e-3 - 3e-3) * np.exp(-0.1 * t / m0), rtol=1e-4)
+    np.testing.assert_allclose(out("T"), 293.15, atol=5e-3)          # (the fan's air, a little compressed)
+    np.testing.assert_allclose(out("m_flow")[-1], 0.1, rtol=1e-5)
+    rho, D, L, mu = 101325.0 / (R * 293.15), 0.15, 2.0, 1.82e-5
+    v = 0.1 / (rho * np.pi * D**2 / 4)
+    lam = 0.25 / np.log10(2.5e-5 / D / 3.7 + 5.74 / (rho * v * D / mu) ** 0.9) ** 2
+    np.testing.assert_allclose(out("dp")[-1], lam * L / D * rho * v**2 / 2, rtol=0.02)
 
 
 PROBE = """

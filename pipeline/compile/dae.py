@@ -279,10 +279,28 @@ def eliminate_aliases(dae: Dae) -> Dae:
     exprs = dict(zip(names, out[6:]))
     zs = ca.vertsplit(dae.z)
     z = ca.vertcat(*[zs[j] for j in keep]) if keep else ca.SX(0, 1)
+    z_start = _alias_starts(al, dae.z_start, nx)
     return dataclasses.replace(dae, z=z, residual=residual, init_residual=init_residual,
                                z_names=[dae.z_names[j] for j in keep],
-                               z_start=dae.z_start[keep] if keep else ca.SX(0, 1), exprs=exprs,
+                               z_start=z_start[keep] if keep else ca.SX(0, 1), exprs=exprs,
                                relations=relations, d_update=d_update, x_reinit=x_reinit, asserts=asserts)
+
+
+def _alias_starts(al: "_Aliases", z_start: ca.SX, nx: int) -> ca.SX:
+    """The algebraic unknowns' start values (the guesses of the loops' Newton methods) with an
+    unknown that stays and starts at 0 given the start value of one it stands for, as other
+    tools choose one start for a set of aliases: a source's medium pressure, started at 0, is
+    the room's it is joined to, started at p_start, and a loop torn at it began at 0 Pa."""
+    z_start = ca.SX(z_start)
+    starts = ca.vertsplit(z_start)
+    for e in sorted(al.defs):
+        alpha, root, beta = al.find(e)
+        if e < nx or root is None or root < nx or _is_zero(_num(alpha)):
+            continue
+        mine, theirs = starts[e - nx], starts[root - nx]
+        if theirs.is_zero() and not mine.is_zero():
+            starts[root - nx] = (mine - beta) / alpha
+    return ca.vertcat(*starts) if starts else z_start
 
 
 def fold_initial_parameters(dae: Dae) -> Dae:

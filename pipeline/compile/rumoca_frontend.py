@@ -2115,9 +2115,11 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     in_whens = {tr.held[j][0] for j in when_read}
     whole_values = ca.vertcat(*[flat(slot[i]) for i in index["d"] if st["value_types"][variables[i]["value_type"]].get(
         "scalar") in ("integer", "boolean", "enumeration")], d[len(names["d"]):], *[h for _, h, _, _, _ in tr.held])
-    keep = _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d], when_read,
-                 whole_values)
-    live = _Live(tr, keep)
+    # relations constant in time are read as the parameters make them (see _constant_in_time)
+    steady = _constant_in_time(tr, met, residual, z, ca.vertcat(x, dx, u, d, d_pre, t, x_pre, z_pre, flags))
+    keep = [k for k in _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d],
+                             when_read, whole_values) if k[0] not in steady]
+    live = _Live(tr, keep, stay={str(h) for k, h, _, _, _ in tr.held if k in steady})
     residual, init_residual, d_update, x_reinit, asserts = map(
         live, (residual, init_residual, d_update, x_reinit, asserts))
     if keep:
@@ -2150,13 +2152,14 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     p_names = [names["p"][j] for j in free]
     p_values = np.array([float(elements[j]) for j in free])
     p, resolved = resolve_parameters(values, p_all, free, model, names["p"], p_values)
+    settle = _settled(tr, steady, p_all, resolved, p, p_values)
 
     # between events pre(v) is v, initial() and terminal() are false (initial() true in the
     # initial equations) and no clock ticks
     held = ca.vertcat(d_pre, x_pre, z_pre, flags)
 
     def bind(e, initial=0.0):
-        e = ca.substitute(live(e), p_all, resolved)
+        e = settle(ca.substitute(live(e), p_all, resolved))
         if held.numel() > flags.numel():
             e = ca.substitute(e, held, ca.vertcat(d, x, z, ca.SX([initial] + [0.0] * (flags.numel() - 1))))
         return e
@@ -2203,7 +2206,8 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     # relations on the unknowns are state events; on time alone they are time events (above);
     # time against a discrete value (time >= pre(nextEvent): the MSL's tables) a state event too
     unknowns = ca.vertcat(x, dx, z, d, d_pre)
-    on = set(ca.jacobian_sparsity(ca.vertcat(*tr.relations), unknowns).get_triplet()[0]) if tr.relations else set()
+    on = set(ca.jacobian_sparsity(ca.vertcat(*tr.relations), unknowns).get_triplet()[0]) - set(steady) \
+        if tr.relations else set()
     # and a when-condition on time against a parameter a run may set (when time > t0): its
     # time event sits where the compiled t0 puts it, and with another t0 the clause waited for
     # the run's end; watched, its crossing is found where the run's t0 puts it (on time alone:
@@ -2246,7 +2250,7 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     at_start.update(later)
 
     def bind_event(e):            # pre(), initial() and the ticks stay symbols in the update
-        return ca.substitute(e, p_all, resolved)
+        return settle(ca.substitute(e, p_all, resolved))
 
     # asserts in the functions the model calls, where they read the model's values (not der())
     fn = _independent_of(tr.fn_asserts, ca.vertcat(dx, held))
@@ -2413,6 +2417,86 @@ def _hysteresis(op: str, lhs: ca.SX, rhs: ca.SX, held: ca.SX) -> tuple[ca.SX, ca
     return g > band, g - band
 
 
+def _constant_in_time(tr, met: int, residual: ca.SX, z: ca.SX, moving: ca.SX) -> dict:
+    """{relation index: its value in the parameters} for the relations of state events that are
+    constant in time: between algebraic variables that equations of parameters alone fix (a
+    vessel's fluidLevel = 0, its ports' heights), found by peeling rows of one such unknown,
+    each solved for it where it is linear (:func:`_solved_for`). Held, such a relation started
+    false (a ventilated room's regularFlow = fluidLevel >= portsData_height, the tie 0 >= 0,
+    shut its ports, and its initial equations had no solution); other tools evaluate it as a
+    parameter that fixes the structure, and so does mcl (:func:`_settled`). ``moving``:
+    everything else a row may read that changes in time."""
+    rels = [(k, h, tr.relations[k]) for k, h, _, _, _ in tr.held if k < met]
+    if not rels or not z.numel() or not residual.numel():
+        return {}
+    hs = ca.vertcat(*[h for _, h, _ in rels])
+    cols = ca.vertcat(z, hs, moving)
+    nz, nh = z.numel(), hs.numel()
+    # rows of an equation (its index) or a relation (-1 - its index) by the columns they read;
+    # a row that reads anything moving never becomes constant
+    rows = [(i, set(r)) for i, r in enumerate(_rows_of(ca.jacobian_sparsity(residual, cols)))]
+    rows += [(-1 - j, set(r)) for j, r in enumerate(_rows_of(ca.jacobian_sparsity(
+        ca.vertcat(*[g for _, _, g in rels]), cols)))]
+    rows = [(i, r) for i, r in rows if r and max(r) < nz + nh]
+    readers: dict = {}
+    for n, (_, r) in enumerate(rows):
+        for c in r:
+            readers.setdefault(c, []).append(n)
+    order: list = []          # (column, the row that fixes it), in the order found
+    fixed: set = set()
+    todo = list(range(len(rows)))
+    while todo:
+        i, r = rows[todo.pop()]
+        left = r - fixed
+        col = (nz + (-1 - i) if i < 0 and not left else
+               next(iter(left)) if i >= 0 and len(left) == 1 and next(iter(left)) < nz else None)
+        if col is not None and col not in fixed:
+            fixed.add(col)
+            order.append((col, i))
+            todo += readers.get(col, [])
+    # the values in the parameters, in that order (None where a row is not solved explicitly)
+    syms, values, out = [], [], {}
+    for col, i in order:
+        known = lambda e: ca.substitute(e, ca.vertcat(*syms), ca.vertcat(*values)) if syms else e
+        if i >= 0:
+            v = _solved_for(known(residual[i]), z[col])
+        else:
+            k, _, g = rels[-1 - i]
+            v = RELATION_TRUTH[tr.relation_ops[k]](known(g))
+        if v is None or ca.depends_on(v, cols):
+            continue
+        if i < 0:
+            out[k] = v
+        syms.append(cols[col])
+        values.append(v)
+    return out
+
+
+def _settled(tr, steady: dict, p_all: ca.SX, resolved: ca.SX, p: ca.SX, p_values: np.ndarray):
+    """e -> e with the relations constant in time at their values at the compiled parameter
+    values, as other tools evaluate a parameter that fixes the structure: the branch they pick
+    is then the equations' only one, which index reduction sees (a room whose port is joined
+    straight to a boundary of fixed pressure: its pressure fixed, its mass is not a state)."""
+    syms, values = [], []
+    for k, h, live, _, _ in tr.held:
+        if k in steady:
+            v = ca.evalf(ca.substitute(ca.substitute(steady[k], p_all, resolved), p, ca.DM(p_values)))
+            syms.append(h)      # (where not finite, read where it is evaluated, as before)
+            values.append(float(v) if np.isfinite(float(v)) else ca.substitute(live, p_all, resolved))
+    if not syms:
+        return lambda e: e
+    syms, values = ca.vertcat(*syms), ca.vertcat(*map(ca.SX, values))
+    return lambda e: ca.substitute(e, syms, values) if e.numel() and ca.depends_on(e, syms) else e
+
+
+def _rows_of(sp: ca.Sparsity) -> list[list[int]]:
+    """The columns each row of a sparsity pattern reads."""
+    rows = [[] for _ in range(sp.size1())]
+    for r, c in zip(*sp.get_triplet()):
+        rows[r].append(c)
+    return rows
+
+
 def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX, discrete: ca.SX,
           when_read: set, whole: ca.SX) -> list:
     """(index, symbol, value at an event, crossing) of the relations held between events: those
@@ -2470,10 +2554,11 @@ def _integral(e: ca.SX, ints: set) -> bool:
 
 class _Live:
     """An expression with every relation that is not held read where it is evaluated (nested
-    relations too)."""
+    relations too); ``stay``: the names of those left as symbols (constant in time: settled
+    later, :func:`_settled`)."""
 
-    def __init__(self, tr, keep: list):
-        self.tr, self.kept = tr, {str(h) for _, h, _, _ in keep}
+    def __init__(self, tr, keep: list, stay: set = frozenset()):
+        self.tr, self.kept = tr, {str(h) for _, h, _, _ in keep} | stay
         self.seen, self.drop = -1, None      # (translating more nodes may meet more relations)
 
     def __call__(self, e):
