@@ -333,7 +333,7 @@ def test_laws_of_one_component_the_data_do_not_choose_between_are_named_together
 def test_screening_keeps_laws_predicted_as_a_tie_with_the_last_one_kept():
     """The screening's linearised prediction cannot part two laws predicted within a few percent
     (a drive's two bearings, one seen through a gear): the one just past the limit is fitted
-    too, where one predicted far behind is not."""
+    too, where one predicted far behind is not, and where many tie, the first of them only."""
     from mcl.discovery.search import promising
 
     predicted = [("motorBearing", 3130.8), ("bearing", 3152.9), ("motorBearing", 3270.7), ("bearing", 3307.8),
@@ -342,3 +342,6 @@ def test_screening_keeps_laws_predicted_as_a_tie_with_the_last_one_kept():
     assert sorted(promising(screening, 3)) == [0, 1, 2, 3]
     apart = [{"component": c, "predicted_rss": rss, "n_params": 7} for c, rss in [("a", 100), ("b", 101), ("a", 112)]]
     assert sorted(promising(apart, 2)) == [0, 1]
+    # many alike (a ladder's sections): the first past the limit only
+    alike = [{"component": f"R{j}", "predicted_rss": 100 + 0.1 * j, "n_params": 3} for j in range(8)]
+    assert sorted(promising(alike, 3)) == [0, 1, 2, 3]

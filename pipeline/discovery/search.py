@@ -91,8 +91,9 @@ def promising(screening: list[dict], limit: int, ratio: float = 10.0, score=None
     prediction (a candidate predicted 10x worse loses by n ln 10 in any criterion unless the
     linearisation is badly wrong). ``score(rss, k)``, the criterion of a law with ``k`` free
     terms, orders them: a small law predicted a little behind a large one in RSS may well be
-    ahead in the criterion (default: by RSS alone). Laws predicted within :data:`TIE` of the
-    last one kept are kept too, and laws that could not be screened are always fitted."""
+    ahead in the criterion (default: by RSS alone). The first law past the limit predicted
+    within :data:`TIE` of the last one kept is kept too, and laws that could not be screened
+    are always fitted."""
     rank = score or (lambda rss, k: rss)
     ok = sorted((rank(s["predicted_rss"], s.get("n_params", 1) - 1), s["predicted_rss"], k)
                 for k, s in enumerate(screening) if s.get("predicted_rss") is not None)
@@ -103,8 +104,10 @@ def promising(screening: list[dict], limit: int, ratio: float = 10.0, score=None
     kept = [(pred, k) for _, pred, k in ok[:limit] if pred <= ratio * floor]
     last = max((pred for pred, _ in kept), default=floor)
     # a prediction within TIE of one kept is a tie the linearised prediction cannot part (two
-    # bearings of a drive, one reflected through a gear): it is fitted too
-    ties = [k for _, pred, k in ok[limit:] if pred <= (1 + TIE) * last and pred <= ratio * floor]
+    # bearings of a drive, one reflected through a gear): the first of them is fitted too. Only
+    # the first: where many tie, the prediction finds them alike (a ladder's sections, whose
+    # resistors' storage laws tied five ways, each fit a minute of a 16-section ladder's 5)
+    ties = [k for _, pred, k in ok[limit:limit + 1] if pred <= (1 + TIE) * last and pred <= ratio * floor]
     return [k for _, k in kept] + ties + unscreened
 
 
