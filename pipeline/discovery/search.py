@@ -417,14 +417,15 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     return out + plainer(fit, _ranked(cands + out)[0])
 
 
-def distilled(fit: Batch, component: str, law: dict, index: int, keep: tuple = (), size: int = 3) -> list[dict]:
+def distilled(fit: Batch, component: str, law: dict, index: int, keep: tuple = (), size: int = 3,
+              plain: bool = False) -> list[dict]:
     """The sparse readable laws (:func:`families.distillations`) of ``law``'s curve over the
     range its variable visited, of up to ``size`` terms beside the basis terms ``keep``, fitted
-    at ``component`` (items from ``index`` on)."""
+    at ``component`` (items from ``index`` on); ``plain``: the polynomial ones too."""
     xs, curve = law_curve(law)
     if curve is None:
         return []
-    laws = distillations(xs, curve, law["law_variable"], max_terms=size, keep=keep,
+    laws = distillations(xs, curve, law["law_variable"], max_terms=size, keep=keep, plain=plain,
                          sensor=fit.ctx.base.structure.components[component].sensor)
     return fit([Item(component, index + k,
                      {"name": "polynomial", "lhs": ["i"], "rhs": d["terms"], "scales": d["scales"],
@@ -472,7 +473,8 @@ def plainer(fit: Batch, best: dict) -> list[dict]:
              len(kept_terms(best)))
     var = best["law_variable"]
     keep = tuple(t for t in ("1", "{x}") if t.format(x=var) in kept_terms(best))
-    return distilled(fit, best["component"], best, TIDY_INDEX, keep=keep, size=READABLE - ("{x}" in keep))
+    return distilled(fit, best["component"], best, TIDY_INDEX, keep=keep, size=READABLE - ("{x}" in keep),
+                     plain=True)
 
 
 # -- a round ------------------------------------------------------------------------------------
