@@ -575,6 +575,14 @@ _STEPS = {getattr(ca, f"OP_{n}") for n in ("FLOOR", "CEIL", "SIGN", "FMOD", "REM
                                            "LT", "LE", "EQ", "NE", "NOT", "AND", "OR")}
 
 
+def rows_reading(sp: ca.Sparsity) -> list[list[int]]:
+    """The columns each row of a sparsity pattern reads."""
+    rows: list[list[int]] = [[] for _ in range(sp.size1())]
+    for r, c in zip(*sp.get_triplet()):
+        rows[r].append(c)
+    return rows
+
+
 def read_through_steps(rows: ca.SX, v: ca.SX) -> set[int]:
     """The rows of ``rows`` that read ``v`` through a step (floor(x), x > 1, mod's quotient):
     ``x - floor(x)`` has the Jacobian of ``x`` and must not be solved as if it were ``x``."""

@@ -25,6 +25,7 @@ import casadi as ca
 import numpy as np
 
 from .components import Component, Connector, Structure, split_name
+from .dae import rows_reading
 
 
 def user_instances(dae, structure: Structure, classes_of) -> set[str]:
@@ -55,10 +56,7 @@ def with_equations(structure: Structure, dae, own: set[str] = frozenset()) -> St
     rows = ca.vertsplit(dae.residual) if dae.residual.numel() else []
     if not rows:
         return structure
-    sp = ca.jacobian_sparsity(dae.residual, ca.vertcat(dae.x, dae.dx, dae.z, dae.u))
-    reads: list[list[int]] = [[] for _ in rows]
-    for r, c in zip(*sp.get_triplet()):
-        reads[r].append(c)
+    reads = rows_reading(ca.jacobian_sparsity(dae.residual, ca.vertcat(dae.x, dae.dx, dae.z, dae.u)))
     plain = [*dae.x_names, *dae.x_names, *dae.z_names, *dae.u_names]      # (der(x) as x)
     # the model's own variables are its top-level ones and those of its instances of the user's
     # own classes; a part's (a PI controller's state, a tank's level inside a Tank with

@@ -30,7 +30,8 @@ from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
 from .redeclares import lifted, lifted_tree, tree_copy
 from .scalarloops import scalarised
-from .dae import RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters
+from .dae import (RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters,
+                  rows_reading)
 from .sources import KEYWORDS, first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
 
@@ -2117,8 +2118,8 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
         "scalar") in ("integer", "boolean", "enumeration")], d[len(names["d"]):], *[h for _, h, _, _, _ in tr.held])
     # relations constant in time are read as the parameters make them (see _constant_in_time)
     steady = _constant_in_time(tr, met, residual, z, ca.vertcat(x, dx, u, d, d_pre, t, x_pre, z_pre, flags))
-    keep = [k for k in _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d],
-                             when_read, whole_values) if k[0] not in steady]
+    keep = [rel for rel in _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d],
+                                 when_read, whole_values) if rel[0] not in steady]
     live = _Live(tr, keep, stay={str(h) for k, h, _, _, _ in tr.held if k in steady})
     residual, init_residual, d_update, x_reinit, asserts = map(
         live, (residual, init_residual, d_update, x_reinit, asserts))
@@ -2434,8 +2435,8 @@ def _constant_in_time(tr, met: int, residual: ca.SX, z: ca.SX, moving: ca.SX) ->
     nz, nh = z.numel(), hs.numel()
     # rows of an equation (its index) or a relation (-1 - its index) by the columns they read;
     # a row that reads anything moving never becomes constant
-    rows = [(i, set(r)) for i, r in enumerate(_rows_of(ca.jacobian_sparsity(residual, cols)))]
-    rows += [(-1 - j, set(r)) for j, r in enumerate(_rows_of(ca.jacobian_sparsity(
+    rows = [(i, set(r)) for i, r in enumerate(rows_reading(ca.jacobian_sparsity(residual, cols)))]
+    rows += [(-1 - j, set(r)) for j, r in enumerate(rows_reading(ca.jacobian_sparsity(
         ca.vertcat(*[g for _, _, g in rels]), cols)))]
     rows = [(i, r) for i, r in rows if r and max(r) < nz + nh]
     readers: dict = {}
@@ -2487,14 +2488,6 @@ def _settled(tr, steady: dict, p_all: ca.SX, resolved: ca.SX, p: ca.SX, p_values
         return lambda e: e
     syms, values = ca.vertcat(*syms), ca.vertcat(*map(ca.SX, values))
     return lambda e: ca.substitute(e, syms, values) if e.numel() and ca.depends_on(e, syms) else e
-
-
-def _rows_of(sp: ca.Sparsity) -> list[list[int]]:
-    """The columns each row of a sparsity pattern reads."""
-    rows = [[] for _ in range(sp.size1())]
-    for r, c in zip(*sp.get_triplet()):
-        rows[r].append(c)
-    return rows
 
 
 def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX, discrete: ca.SX,

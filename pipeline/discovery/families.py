@@ -380,7 +380,7 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
     away; a damper's viscous term, without which a sharp step and a line came as a step, a dead
     zone and a correction). ``plain``: the best law of each size made of the polynomial terms
     alone too, where it is not the best (the curve of a law that fitted noise with shapes
-    favours shapes: a damper's v + v^3, which the data prefer by 11 BIC, lost on the curve
+    favours shapes: a damper's v + v^3, which the data prefer by 16 BIC, lost on the curve
     of a law that kept three tanh instead of the line)."""
     import heapq
     from itertools import combinations
@@ -415,8 +415,8 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
                 best = (score, _law(chosen, name, scales, c, err))
         if best[1] is not None:
             out.append(best[1])
-        polynomial = [e for e in errs if all(terms[k][1] is None for k in e[1])]
-        if plain and polynomial and best[1] is not None:
+        polynomial = [e for e in errs if all(terms[k][1] is None for k in e[1])] if plain else []
+        if polynomial and best[1] is not None:
             chosen = [terms[k] for k in min(polynomial)[1]]
             err, scales, c = _fit_scales(chosen, x, f, name)
             law = _law(chosen, name, scales, c, err)
