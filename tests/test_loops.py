@@ -341,6 +341,26 @@ def test_a_loop_whose_jacobian_is_singular_everywhere_is_solved_not_refused():
         assert abs(sol[0] ** 3 + sol[1] - q_value) < 1e-9
 
 
+def test_the_derivative_of_a_singular_loops_solution_is_a_value_not_a_failure():
+    """An initial system's fallback takes damped Newton steps on it, so it differentiates the
+    algebraic loops inside it; CasADi gives a loop's derivative (the implicit function's) by
+    CSparse's LU, which fails the whole evaluation where the loop's Jacobian is singular. The
+    MSL's HeatingSystem then stopped its compile with CasADi's "Evaluation failed". Now the
+    derivative is a number (where the Jacobian is regular, the implicit function's)."""
+    import casadi as ca
+    from mcl.compile import structure
+
+    z, q = ca.SX.sym("z", 2), ca.SX.sym("q")
+    singular = ca.Function("r", [z, q], [ca.vertcat(z[0] ** 3 + z[1] - q, 2 * (z[0] ** 3 + z[1] - q))])
+    regular = ca.Function("g", [z, q], [ca.vertcat(z[0] + z[1] - q, z[0] - z[1] - 3 * q)])
+    Q = ca.MX.sym("q")
+    for resid in (singular, regular):
+        sol = structure._loop_solve("l", resid, np.array([0.5, 0.2]), Q)
+        d = np.array(ca.Function("d", [Q], [ca.jacobian(sol, Q)])(2.0)).ravel()    # (raised before)
+        if resid is regular:
+            assert np.allclose(d, [2.0, -1.0])            # z = (2q, -q)
+
+
 SERIES = """
 model Series "two sudden area changes in series between two reservoirs, no volume between them"
   import Modelica.Fluid;

@@ -54,7 +54,11 @@ _dense_qr = "lapackqr"
 #: a block whose coefficients change with the model's mode is solved symbolically only this
 #: small (by minors; see causalise)
 MODED_SYMBOLIC_MAX = 3
-NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50}
+#: Newton's method on a loop; its derivative (the implicit function's) by sparse QR told not to
+#: refuse a pivot, as elsewhere: CasADi's default (CSparse's LU) fails the whole evaluation where
+#: the loop's Jacobian is singular (HeatingSystem's initial system, differentiated in its
+#: fallback's damped steps, had no value at all)
+NEWTON_OPTS = {"abstol": 1e-12, "max_iter": 50, "linear_solver": "qr", "linear_solver_options": {"eps": -1.0}}
 #: an algebraic loop's residual accepted from Newton's method without the fallback
 LOOP_TOL = 1e-9
 #: a preferred variable's pin whose row (the states' columns scaled to 1) is below this moves no state
@@ -958,6 +962,14 @@ def _met(name: str, resid: ca.Function, sx):
     return met
 
 
+def _evaluates(f: ca.Function, *args) -> bool:
+    """Whether ``f(*args)`` is finite: a solve inside it that fails (CasADi raises) is not."""
+    try:
+        return bool(np.all(np.isfinite(np.array(f(*args)))))
+    except RuntimeError:
+        return False
+
+
 def _sx_residual(resid: ca.Function):
     """(z, p, resid(z, p)) on SX symbols, or None where ``resid`` holds solves (MX only) or its
     calls would expand past EXPAND_TRY_MAX instructions: each call of a function is inlined whole,
@@ -1147,7 +1159,7 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
     start, init_start = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
                                      joint[2].numel() - wish_sx.numel(), x_names, joint)
     init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
-    if semi.get("selected") and not np.all(np.isfinite(np.array(init(u0, p0, 0.0)))):
+    if semi.get("selected") and not _evaluates(init, u0, p0, 0.0):
         # no consistent start in the selected states (six coordinates of point masses that
         # make one rigid body, its rotation found from them by Newton's method): every
         # differentiated variable a state, the constraints checked as invariants
