@@ -322,6 +322,49 @@ def test_a_component_array_modified_by_an_array_expression_takes_its_elements(tm
     assert {f: f.read_text() for f in tmp_path.rglob("*.mo")} == text       # the user's files untouched
 
 
+HEATED = """model Heated "heaters sized by the wall they heat, one per layer"
+  import Modelica.Thermal.HeatTransfer;
+  model Wall "layers, as many as n"
+    parameter Integer n = 3;
+    final parameter Real share[n] = fill(1 / n, n) "each layer's share of the heat";
+    HeatTransfer.Components.HeatCapacitor layer[n](each C = 2, each T(start = 300, fixed = true));
+    HeatTransfer.Interfaces.HeatPort_a ports[n];
+  equation
+    connect(ports, layer.port);
+  end Wall;
+  Wall wall;
+  HeatTransfer.Sources.FixedHeatFlow heater[wall.n](Q_flow = 60 * wall.share, each T_ref = 300);
+  HeatTransfer.Sources.FixedHeatFlow loss[wall.n](each Q_flow = -4);
+equation
+  connect(heater.port, wall.ports);
+  connect(loss.port, wall.ports);
+end Heated;
+"""
+
+
+@needs_msl()
+@pytest.mark.parametrize("wall,heater", [
+    ("Wall wall;", "each T_ref = 300"),                         # the size known only from Wall's default
+    ("Wall wall(n = 3);", "T_ref = fill(300, 3), alpha = zeros(3)"),    # set where wall is declared
+], ids=["default-size", "set-size"])
+def test_component_arrays_sized_by_another_components_parameter_take_every_elements_value(tmp_path, wall, heater):
+    """rumoca gives a component array sized by another component's parameter (``heat[pipe.nNodes]``,
+    as the MSL's fluid examples heat their pipes) only its first element's value of an ``each``
+    modifier or of an array expression, or of every array value where it has two: the model was
+    refused as one equation short per other element. mcl compiles it again with those values as
+    rumoca reads them (or with the size where the model sets it). Every layer gets 60/3 W from
+    its heater and loses 4 W: it warms at 16 W / 2 J/K = 8 K/s."""
+    text = HEATED.replace("Wall wall;", wall).replace("each T_ref = 300", heater)
+    (tmp_path / "Heated.mo").write_text(text)
+    model = compile_model([tmp_path / "Heated.mo"], "Heated", libraries=[msl_path()])
+    t = np.linspace(0.0, 2.0, 5)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    assert res.states.shape[1] == 3
+    assert np.allclose(res.states, 300 + 8 * t[:, None], rtol=1e-9)
+    assert (tmp_path / "Heated.mo").read_text() == text        # the user's file untouched
+
+
 STACK = """model Stack "RC elements discharging, as many as the cell's record says"
   import Modelica.Electrical.Analog.Basic;
   parameter Cell cellData = Cell() "the cell";

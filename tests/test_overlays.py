@@ -407,3 +407,46 @@ def test_a_trace_substance_sensor_finds_its_substance_by_name(tmp_path, monkeypa
     Strings.isEqual (compared at compile time: both are constant strings) and reads that one."""
     out = _simulated(tmp_path, monkeypatch, PROBE, "Probe", np.linspace(0.0, 1.0, 3))[1].output
     np.testing.assert_allclose(out("C"), 7e-3, rtol=1e-12)
+
+
+def test_a_head_curve_fitted_through_four_points_is_numpys_least_squares_fit(tmp_path, monkeypatch):
+    """Polynomials.fitting builds its Vandermonde matrix column by column, which rumoca refuses,
+    and solves by LAPACK's least squares; the overlay builds it as one comprehension and solves
+    the normal equations. A quadratic head curve through four measured points (more points than
+    coefficients) is NumPy's polyfit, along a flow ramp."""
+    t = np.linspace(0.0, 2.0, 9)
+    q_points, h_points = [0.0, 0.4, 0.8, 1.2], [10.0, 9.1, 6.9, 2.8]
+    state = _run(tmp_path, monkeypatch, """
+model HeadCurve "a pump's head curve fitted from four operating points"
+  import Modelica.Math.Polynomials;
+  parameter Real V_flow[4] = {0, 0.4, 0.8, 1.2} "measured flows";
+  parameter Real head[4] = {10, 9.1, 6.9, 2.8} "measured heads";
+  final parameter Real c[3] = Polynomials.fitting(V_flow, head, 2);
+  Real q(start = 0, fixed = true) "flow";
+  Real h(start = 10, fixed = true) "head, integrated along the ramp";
+equation
+  der(q) = 0.5;
+  der(h) = 0.5 * Polynomials.derivativeValue(c, q);
+end HeadCurve;
+""", "HeadCurve", t)
+    c = np.polyfit(q_points, h_points, 2)
+    assert np.allclose(state("h"), np.polyval(c, 0.5 * t) - np.polyval(c, 0.0) + 10.0, atol=1e-6)
+
+
+def test_the_msls_fmu_adaptors_example_moves_two_coupled_inertias_as_one(monkeypatch):
+    """Rotational.Examples.GenerationOfFMUs: its angle adaptor holds two protected functions
+    named ``position`` (of 2 and of 3 values); rumoca called the wrong one ("axis 1 requires
+    extent 2 but the call site proves 3"), and the overlay renames one. The example's first
+    part drives an inertia (1.1 kg m²) by 10 sin(4 pi t) N m, a second (2.2) moved with it
+    through the adaptors: together one inertia of 3.3, whose angle is
+    10/(3.3 (4 pi)) (t - sin(4 pi t)/(4 pi))."""
+    monkeypatch.setenv("MODELICAPATH", str(MSL))
+    model = mcl.compile_model([], "Modelica.Mechanics.Rotational.Examples.GenerationOfFMUs")
+    t = np.linspace(0.0, 1.0, 11)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    w = 4 * np.pi
+    truth = 10 / (3.3 * w) * (t - np.sin(w * t) / w)
+    v = probed(model, res)
+    np.testing.assert_allclose(v["directInertia.phi"], truth, atol=1e-6 * truth.max())
+    np.testing.assert_allclose(v["inverseInertia.phi"], truth, atol=1e-6 * truth.max())

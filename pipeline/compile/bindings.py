@@ -107,8 +107,16 @@ _ARGUMENT = re.compile(r"\s*(?P<prefix>(?:final\s+)*)(?P<path>[A-Za-z_][\w.]*)\s
 def distributed(text: str) -> str:
     """``text`` with each modifier value of a component array that is an array expression
     written element by element (``{(e)[i] for i in 1:n}``); ``each`` and ``redeclare``
-    arguments, literals, fill(...) and references as they were."""
-    blank, edits = masked(text), []
+    arguments, literals, fill(...) and references as they were.
+
+    A component array sized by another component's parameter (``heat[pipe.nNodes]``) takes
+    its size from its one array-valued modifier (rumoca 0.10): with none (``each`` values
+    only), or with an expression (even written element by element), it loses all but its first
+    element's values, one equation short per element. There the first ``each`` value of a
+    modification with no array value is written ``fill(v, dims)``, and an array expression is
+    bound to a parameter array declared after the component (``mcl_heat_Q_flow``), which the
+    modifier names. (Two array values stay as they are: rumoca reads neither.)"""
+    blank, edits, after = masked(text), [], []
     for m in _ARRAY_MODIFIED.finditer(blank):
         name = m["name"] or m["tname"]
         if name in KEYWORDS:
@@ -117,33 +125,111 @@ def distributed(text: str) -> str:
         if any(not d or d == ":" for d in dims):
             continue
         end = closing(blank, m.end() - 1)
-        if end is not None:
-            edits += [(a, b, dims) for a, b in _values(blank, m.end(), end - 1)]
-    for a, b, dims in sorted(edits, reverse=True):
-        text = text[:a] + _elementwise(text[a:b], dims) + text[b:]
+        if end is None:
+            continue
+        literal = _literal_dims(blank, dims)
+        if literal != dims:
+            span = m.span("dims") if m["dims"] is not None else m.span("tdims")
+            edits.append((*span, ", ".join(literal) + "\n" * text[span[0]:span[1]].count("\n")))   # (lines kept)
+            dims = literal
+        if not any(_of_component(blank, d) for d in dims):
+            edits += [(a, b, _elementwise(text[a:b], dims)) for a, b, _, each, as_is in _values(blank, m.end(), end - 1)
+                      if each is None and not as_is]
+            continue
+        stop = _declaration_end(blank, end)
+        values = _values(blank, m.end(), end - 1, each=True)
+        arrays = [v for v in values if v[3] is None]
+        if not arrays and values:      # (one each value as the array)
+            a, b, _, each, _ = values[0]
+            edits.append((each, b, f"{text[each:a].replace('each', '', 1).lstrip()}fill({text[a:b]}, {', '.join(dims)})"))
+        for a, b, path, _, as_is in arrays:
+            if stop is not None and not as_is:
+                hoisted = "mcl_" + "_".join([name, *path])
+                edits.append((a, b, hoisted))
+                after.append(f" final parameter Real {hoisted}[{', '.join([':'] * len(dims))}] = {text[a:b]};")
+        if stop is not None and after:
+            edits.append((stop, stop, "".join(after)))
+            after = []
+    for a, b, new in sorted(edits, key=lambda e: (e[0], e[1]), reverse=True):
+        text = text[:a] + new + text[b:]
     return text
 
 
-def _values(masked: str, start: int, stop: int) -> list[tuple[int, int]]:
-    """The spans of the values to write element by element in the modification
-    ``masked[start:stop]`` (inside its parentheses), its nested modifications' included."""
+def _of_component(masked: str, dim: str) -> bool:
+    """Whether array dimension ``dim`` reads a parameter of a component the text declares
+    (``pipe.nNodes``, ``DynamicPipe pipe(...)``); a record parameter's field (``cellData.nRC``)
+    rumoca reads as any other size."""
+    ref = re.match(r"\s*([A-Za-z_]\w*)\s*\.\s*[A-Za-z_]", dim)
+    if ref is None:
+        return False
+    for decl in re.finditer(rf"(?<![\w.])[A-Za-z_][\w.]*\s+{ref[1]}\s*[(;\[\"]", masked):
+        if decl[0].split()[0] not in KEYWORDS and not re.search(
+                r"\b(parameter|constant|redeclare)\b[\w\s]*$", masked[max(0, decl.start() - 80):decl.start()]):
+            return True
+    return False
+
+
+def _literal_dims(masked: str, dims: list[str]) -> list[str]:
+    """``dims`` with each ``c.p`` that the text's one declaration of component ``c`` modifies
+    to a whole number (``DynamicPipe pipe2(nNodes = 5, ...)``) written as that number: a
+    component array sized so is read as any other."""
+    out = []
+    for d in dims:
+        ref = re.fullmatch(r"([A-Za-z_]\w*)\s*\.\s*([A-Za-z_]\w*)", d)
+        decls = list(re.finditer(rf"(?<![\w.])[A-Za-z_][\w.]*\s+{ref[1]}\s*\(", masked)) if ref else []
+        end = closing(masked, decls[0].end() - 1) if len(decls) == 1 else None
+        value = None
+        for a, b in arguments(masked, decls[0].end(), end - 1) if end is not None else []:
+            arg = re.fullmatch(rf"\s*(?:final\s+)?{ref[2]}\s*=\s*(\d+)\s*", masked[a:b])
+            value = arg[1] if arg else value
+        out.append(value or d)
+    return out
+
+
+def _declaration_end(masked: str, k: int) -> int | None:
+    """The index just past the ``;`` that ends the declaration whose modification ends at ``k``
+    (its condition and annotation skipped), or None."""
+    depth = 0
+    for i in range(k, len(masked)):
+        c = masked[i]
+        if c in "([{":
+            depth += 1
+        elif c in ")]}":
+            depth -= 1
+        elif c == ";" and depth == 0:
+            return i + 1
+    return None
+
+
+def _values(masked: str, start: int, stop: int, each: bool = False, path: tuple = ()) -> list[tuple]:
+    """The values of the modification ``masked[start:stop]`` (inside its parentheses), its
+    nested modifications' included: (start, end, the member's path, where its ``each`` starts
+    or None, whether rumoca reads it for a component array as it is). ``each``: values of
+    ``each`` modifiers too."""
     edits = []
     for a, b in arguments(masked, start, stop):
         arg = _ARGUMENT.match(masked, a, b)
-        if arg is None or re.match(r"\s*(each|redeclare|replaceable|extends)\b", masked[a:b]):
+        skip = re.match(r"\s*(each|redeclare|replaceable|extends)\b", masked[a:b])
+        if arg is None or (skip and not (each and skip[1] == "each")):
             continue
+        if skip:           # each: the argument after it
+            arg = _ARGUMENT.match(masked, a + skip.end(), b)
+            if arg is None:
+                continue
+        member = (*path, *arg["path"].split("."))
         k = arg.end()
         if masked.startswith("(", k):
             inner = closing(masked, k)
             if inner is None or inner > b:
                 continue
-            edits += _values(masked, k + 1, inner - 1)
+            if not skip:      # (an each on the outer applies to all inside: left as it is)
+                edits += _values(masked, k + 1, inner - 1, each, member)
             k = _skip_space(masked, inner)
         if masked.startswith("=", k) or masked.startswith(":=", k):
             k = _skip_space(masked, k + (1 if masked[k] == "=" else 2))
             value = _DESCRIBED.sub("", masked[k:b].rstrip())
-            if value and not _as_is(value):
-                edits.append((k, k + len(value)))
+            if value:
+                edits.append((k, k + len(value), member, a + skip.start(1) if skip else None, _as_is(value)))
     return edits
 
 

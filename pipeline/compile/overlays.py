@@ -436,6 +436,49 @@ _STEADY_START = [(f"{indent}der(mediums.{v}) = zeros(n);\n",
     ("      der(mCs[i,:])      = zeros(Medium.nC);\n",
      "      for j in 1:Medium.nC loop if true then der(mCs[i, j]) = 0; end if; end for; // mcl: unrolled\n")]
 
+# Modelica.Math.Polynomials.fitting: rumoca refuses the Vandermonde matrix built column by
+# column ("reads elements of `V` that do not all have a definition"), and its least-squares
+# solve is LAPACK's dgelsy. The matrix as one comprehension, and the least-squares solution
+# from the normal equations (the same for the full-rank V of distinct abscissae; the MSL's
+# pump and valve curves fit a few points), keep the function's lines.
+_FITTING = (
+    """        V[:, n + 1] := ones(size(u, 1));
+        for j in n:-1:1 loop
+          V[:, j] := {u[i] * V[i, j + 1] for i in 1:size(u,1)};
+        end for;
+
+        // Solve least squares problem
+        p :=Modelica.Math.Matrices.leastSquares(V, y);
+""",
+    """        V := {{u[i]^(n + 1 - j) for j in 1:n + 1} for i in 1:size(u, 1)}; // mcl: one comprehension
+        //
+        //
+        //
+
+        // Solve least squares problem (mcl: by the normal equations)
+        p :=Modelica.Math.Matrices.solve(transpose(V)*V, transpose(V)*y);
+""")
+
+# Modelica.Media.Incompressible's BaseProperties asserts the package's constant hasDensity,
+# which rumoca does not resolve from the model that extends it ("unresolved Flat reference
+# `source.medium.hasDensity`"); the same condition written from the table it is defined by.
+_HAS_DENSITY = (
+    """      assert(hasDensity,"Medium " + mediumName +""",
+    """      assert(size(tableDensity, 1) > 0,"Medium " + mediumName + // mcl: hasDensity, written out""")
+
+# Rotational.Components.AngleToTorqueAdaptor: its Move_w has a protected function `position`
+# (q_qd[2]) as Sources.Move, in the same adaptor, has one (q_qd_qdd[3]); rumoca calls Move's
+# from Move_w ("`q_qd`: axis 1 requires extent 2 but the call site proves 3"). Move_w's pair
+# renamed position_w and position_w_der.
+_POSITION_W = [
+    ("    function position\n", "    function position_w\n"),
+    ("    end position;\n", "    end position_w;\n"),
+    ("    function position_der\n", "    function position_w_der\n"),
+    ("    end position_der;\n", "    end position_w_der;\n"),
+    ("derivative(noDerivative=q_qd) = position_der,", "derivative(noDerivative=q_qd) = position_w_der,"),
+    ("    phi = position(u, time);\n", "    phi = position_w(u, time);\n"),
+]
+
 REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Fluid", "Interfaces.mo")): _STEADY_START,
     ("Modelica", ("Electrical", "QuasiStatic", "Polyphase", "Functions", "activePower.mo")): [_ACTIVE_POWER],
@@ -450,10 +493,13 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
     ("Modelica", ("Math", "package.mo")): [_INTERPOLATE_SEARCH],
     ("Modelica", ("Math", "BooleanVectors.mo")): [_FIRST_TRUE],
     ("Modelica", ("Math", "Nonlinear.mo")): _SOLVE_ONE,
+    ("Modelica", ("Math", "Polynomials.mo")): [_FITTING],
+    ("Modelica", ("Media", "Incompressible.mo")): [_HAS_DENSITY],
     ("Modelica", ("Math", "Random.mo")): [_IMPURE_INIT, *_STATE_SLICES],
     ("Modelica", ("Blocks", "Interfaces.mo")): _NOISE,
     ("Modelica", ("Blocks", "Continuous.mo")): [_FIND_INTERVAL, *_BRENT, *_FILTER_BASE],
     ("Modelica", ("Mechanics", "Rotational", "Components", "LossyGear.mo")): _LOSSY_GEAR,
+    ("Modelica", ("Mechanics", "Rotational", "Components", "AngleToTorqueAdaptor.mo")): _POSITION_W,
     ("Modelica", ("Mechanics", "Translational", "Components", "MassWithStopAndFriction.mo")): _FRICTION_WITH_STOP,
     ("Modelica", ("Magnetic", "FluxTubes", "BaseClasses", "GenericHysteresisTellinen.mo")): _TELLINEN,
     ("Modelica", ("Electrical", "Machines", "Examples", "ControlledDCDrives", "Utilities",
@@ -466,8 +512,11 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
 
 #: files whose component arrays rumoca reads only with their array modifiers written element by
 #: element (:func:`.bindings.distributed`): the RC elements of a battery cell take their R and C
-#: from the cell's record array
-DISTRIBUTED = {("Modelica", ("Electrical", "Batteries", "BatteryStacks", "CellRCStack.mo"))}
+#: from the cell's record array; and fluid examples that heat their pipes through heat sources
+#: sized by the pipe's nNodes (``heat[pipe.nNodes](Q_flow = 16e3*pipe.dxs)``)
+DISTRIBUTED = {("Modelica", ("Electrical", "Batteries", "BatteryStacks", "CellRCStack.mo")),
+               ("Modelica", ("Fluid", "Examples", "IncompressibleFluidNetwork.mo")),
+               ("Modelica", ("Fluid", "Examples", "BranchingDynamicPipes.mo"))}
 
 
 #: files that pass a record whole to a component whose record's size parameter comes from an
