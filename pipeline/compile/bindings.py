@@ -27,7 +27,7 @@ from .enums import enumerated
 from .loops import bounded, unrolled
 from .redeclares import defaults_lifted
 from .records import copied
-from .sources import KEYWORDS, arguments, closing, masked
+from .sources import KEYWORDS, arguments, closing, masked, statement_end
 
 #: a scalar Real or Integer parameter's declaration, up to its name (a Complex-valued SI type is
 #: a record: a call there is its constructor, and a record plus 0 is no Modelica)
@@ -136,7 +136,7 @@ def distributed(text: str) -> str:
             edits += [(a, b, _elementwise(text[a:b], dims)) for a, b, _, each, as_is in _values(blank, m.end(), end - 1)
                       if each is None and not as_is]
             continue
-        stop = _declaration_end(blank, end)
+        stop = statement_end(blank, end)
         values = _values(blank, m.end(), end - 1, each=True)
         arrays = [v for v in values if v[3] is None]
         if not arrays and values:      # (one each value as the array)
@@ -184,21 +184,6 @@ def _literal_dims(masked: str, dims: list[str]) -> list[str]:
             value = arg[1] if arg else value
         out.append(value or d)
     return out
-
-
-def _declaration_end(masked: str, k: int) -> int | None:
-    """The index just past the ``;`` that ends the declaration whose modification ends at ``k``
-    (its condition and annotation skipped), or None."""
-    depth = 0
-    for i in range(k, len(masked)):
-        c = masked[i]
-        if c in "([{":
-            depth += 1
-        elif c in ")]}":
-            depth -= 1
-        elif c == ";" and depth == 0:
-            return i + 1
-    return None
 
 
 def _values(masked: str, start: int, stop: int, each: bool = False, path: tuple = ()) -> list[tuple]:

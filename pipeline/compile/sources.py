@@ -105,6 +105,26 @@ def closing(text: str, k: int) -> int | None:
     return None
 
 
+def statement_end(text: str, start: int) -> int | None:
+    """The index just past the ``;`` that ends the statement starting at ``start`` (strings and
+    brackets skipped), or None where the text ends first."""
+    depth, k, n = 0, start, len(text)
+    while k < n:
+        ch = text[k]
+        if ch == '"':
+            k += 1
+            while k < n and text[k] != '"':
+                k += 2 if text[k] == "\\" else 1
+        elif ch in "([{":
+            depth += 1
+        elif ch in ")]}":
+            depth -= 1
+        elif ch == ";" and depth == 0:
+            return k + 1
+        k += 1
+    return None
+
+
 def arguments(masked: str, start: int, stop: int) -> list[tuple[int, int]]:
     """The spans of the comma-separated arguments of ``masked[start:stop]`` (nesting kept)."""
     spans, depth, a = [], 0, start

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from ..compile.components import top_level_parts
+from ..compile.sources import statement_end
 
 LEARNED_PACKAGE = "Learned"
 
@@ -385,7 +386,7 @@ def rewritten(text: str, model_short: str, comp, new_class: str, unknowns) -> st
     for sec in (m for m in sections if not m.group(1)):
         start = sec.end()
         while start < body_end:
-            stop = min(_statement_end(text, start), body_end)
+            stop = min(statement_end(text, start) or len(text), body_end)
             statement = re.sub(r'"(?:\\.|[^"\\])*"|//[^\n]*|/\*.*?\*/', " ", text[start:stop], flags=re.S)
             if re.match(r"\s*(?:initial\s+)?(?:equation|algorithm|protected|public)\b", statement):
                 break
@@ -500,26 +501,6 @@ def _quoted(text: str):
     return inside
 
 
-def _statement_end(text: str, start: int) -> int:
-    """Index just past the ';' that ends the statement starting at ``start`` (strings and
-    parentheses skipped)."""
-    depth, k, n = 0, start, len(text)
-    while k < n:
-        ch = text[k]
-        if ch == '"':
-            k += 1
-            while k < n and text[k] != '"':
-                k += 2 if text[k] == "\\" else 1
-        elif ch in "([{":
-            depth += 1
-        elif ch in ")]}":
-            depth -= 1
-        elif ch == ";" and depth == 0:
-            return k + 1
-        k += 1
-    return n
-
-
 #: a declaration's start: its line, indent, prefixes, type and the space before its names
 _DECLARATION = r"(?m)(^|;|\n)([ \t]*)((?:(?:inner|outer|final|replaceable|redeclare)\s+)*)([A-Za-z_][\w.]*)(\s+)"
 _NOT_DECLARED = ("connect", "end", "equation", "import", "extends", "parameter", "constant")
@@ -536,7 +517,7 @@ def retyped(text: str, model_short: str, inst: str, new_class: str) -> str | Non
     for m in re.compile(_DECLARATION).finditer(text, head.end(), body_end):
         if m.group(4) in _NOT_DECLARED or quoted(m.start(4)):
             continue
-        stop = _statement_end(text, m.end())
+        stop = statement_end(text, m.end()) or len(text)
         items = top_level_parts(text[m.end():stop - 1])
         k = next((j for j, a in enumerate(items) if re.match(rf"\s*{re.escape(inst)}\b(?!\.)", a)), None)
         if k is None:
@@ -588,7 +569,7 @@ def redeclared(text: str, model_short: str, component: str, new_class: str, keep
             continue
         if quoted(m.start(4)):      # (a class's description: "... a counter reads ...")
             continue
-        stop = _statement_end(text, m.end())
+        stop = statement_end(text, m.end()) or len(text)
         rest = text[m.end():stop]
         if rest.lstrip().startswith("("):          # the modification, nested parentheses and all
             k0, depth = rest.index("("), 0
