@@ -962,14 +962,6 @@ def _met(name: str, resid: ca.Function, sx):
     return met
 
 
-def _evaluates(f: ca.Function, *args) -> bool:
-    """Whether ``f(*args)`` is finite: a solve inside it that fails (CasADi raises) is not."""
-    try:
-        return bool(np.all(np.isfinite(np.array(f(*args)))))
-    except RuntimeError:
-        return False
-
-
 def _sx_residual(resid: ca.Function):
     """(z, p, resid(z, p)) on SX symbols, or None where ``resid`` holds solves (MX only) or its
     calls would expand past EXPAND_TRY_MAX instructions: each call of a function is inlined whole,
@@ -1159,7 +1151,7 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
     start, init_start = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
                                      joint[2].numel() - wish_sx.numel(), x_names, joint)
     init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
-    if semi.get("selected") and not _evaluates(init, u0, p0, 0.0):
+    if semi.get("selected") and _finite(lambda u: init(u, p0, 0.0), u0) is None:
         # no consistent start in the selected states (six coordinates of point masses that
         # make one rigid body, its rotation found from them by Newton's method): every
         # differentiated variable a state, the constraints checked as invariants
