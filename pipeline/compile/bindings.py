@@ -116,7 +116,7 @@ def distributed(text: str) -> str:
     modification with no array value is written ``fill(v, dims)``, and an array expression is
     bound to a parameter array declared after the component (``mcl_heat_Q_flow``), which the
     modifier names. (Two array values stay as they are: rumoca reads neither.)"""
-    blank, edits, after = masked(text), [], []
+    blank, edits = masked(text), []
     for m in _ARRAY_MODIFIED.finditer(blank):
         name = m["name"] or m["tname"]
         if name in KEYWORDS:
@@ -142,14 +142,11 @@ def distributed(text: str) -> str:
         if not arrays and values:      # (one each value as the array)
             a, b, _, each, _ = values[0]
             edits.append((each, b, f"{text[each:a].replace('each', '', 1).lstrip()}fill({text[a:b]}, {', '.join(dims)})"))
-        for a, b, path, _, as_is in arrays:
-            if stop is not None and not as_is:
-                hoisted = "mcl_" + "_".join([name, *path])
-                edits.append((a, b, hoisted))
-                after.append(f" final parameter Real {hoisted}[{', '.join([':'] * len(dims))}] = {text[a:b]};")
-        if stop is not None and after:
-            edits.append((stop, stop, "".join(after)))
-            after = []
+        hoisted = [(a, b, "mcl_" + "_".join([name, *path])) for a, b, path, _, as_is in arrays if not as_is]
+        if stop is not None and hoisted:
+            edits += hoisted
+            edits.append((stop, stop, "".join(f" final parameter Real {h}[{', '.join([':'] * len(dims))}] = {text[a:b]};"
+                                              for a, b, h in hoisted)))
     for a, b, new in sorted(edits, key=lambda e: (e[0], e[1]), reverse=True):
         text = text[:a] + new + text[b:]
     return text
