@@ -1310,3 +1310,45 @@ def test_an_axis_started_at_rest_with_its_bearing_stuck_holds_its_load(tmp_path)
     assert np.max(np.abs(at["pi.x"][still])) < 1e-12 and np.max(np.abs(at["arm.w"][still])) < 1e-12
     assert np.max(np.abs(np.abs(at["friction.tau"][still]) - 20 / 50)) < 1e-9
     assert at["friction.locked"][-1] == 0 and abs(at["arm.w"][-1] - 1) < 0.01
+
+
+WEIR = """
+model WeirTank "a tank that spills over a weir, started in steady state"
+  import Modelica.Units.SI;
+  parameter SI.Area A = 0.5 "cross-section";
+  parameter SI.Height h_weir = 0.2 "crest of the weir";
+  parameter Real k(unit = "m2/s") = 0.4 "weir coefficient, linearised";
+  parameter SI.VolumeFlowRate q_in = 0.1 "inflow";
+  SI.Height h(start = 1) "level";
+  output SI.VolumeFlowRate q_out "spill";
+initial equation
+  der(h) = 0;
+equation
+  A*der(h) = q_in - q_out;
+  q_out = if h >= h_weir then k*(h - h_weir) else 0;
+end WeirTank;
+"""
+
+
+@needs_msl()
+def test_a_relation_held_between_events_starts_as_the_start_values_make_it(tmp_path):
+    """Steady in- and outflow: h = h_weir + q_in/k = 0.45. The relation h >= h_weir, held false
+    at the start, shut the weir: no steady state (q_in = 0), h stayed at its start value 1 and
+    drained to 0.45 after the first event. As the start value makes it (1 >= 0.2, spilling),
+    the steady state is found and kept."""
+    (tmp_path / "Weir.mo").write_text(WEIR)
+    model = compile_model([tmp_path / "Weir.mo"], "WeirTank", libraries=[msl_path()])
+    assert model.ode.init_unmet <= 1e-9
+    t = np.linspace(0, 5, 6)
+    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
+    assert res.ok, res.reason
+    assert np.max(np.abs(res.states[:, 0] - 0.45)) < 1e-9
+    assert np.max(np.abs(res.output("q_out") - 0.1)) < 1e-9
+    # the FMU starts there too (its discrete starts are the same expressions)
+    from fmpy import simulate_fmu
+
+    from mcl.compile.fmu.export import build_fmu
+
+    fmu = build_fmu(model, tmp_path / "weir.fmu")
+    out = simulate_fmu(str(fmu), stop_time=5.0, output=["h", "q_out"])
+    assert np.max(np.abs(out["h"] - 0.45)) < 1e-9 and np.max(np.abs(out["q_out"] - 0.1)) < 1e-9

@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from .dae import CSE_MIN, Dae, steps_read
+from .dae import CSE_MIN, RELATION_TRUTH, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
 from . import dummy, homotopy
 from .branches import short_circuited
@@ -134,6 +134,9 @@ class Ode:
     solved: ca.Function | None = None      # -> the algebraic unknowns: the next guesses
     guess0: np.ndarray | None = None       # the start values, the guesses before a run's first solve
     warm: "Ode | None" = None              # this model with the guesses an argument
+    #: the largest residual of the initial equations at the initial state found (the model's
+    #: parameter values; inf where no initial state is found)
+    init_unmet: float = 0.0
 
 
 def reduce_index(dae: Dae, select: bool = True):
@@ -1042,7 +1045,11 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     """Index reduction + causalisation + initialisation: the model's explicit ODE (a pure
     function of ``dae``; a hybrid model's discrete part included)."""
     dae, homotopic = homotopy.split(revealed(dae))
-    return with_start_guesses(_hybrid(dae, name, homotopic) if dae.hybrid else _build(dae, name, homotopic))
+    ode = with_start_guesses(_hybrid(dae, name, homotopic) if dae.hybrid else _build(dae, name, homotopic))
+    if ode.init_unmet > INIT_TOL:
+        log.warning("the initial equations are not all met at the initial state found (largest "
+                    "residual %.3g at the model's parameter values)", ode.init_unmet)
+    return ode
 
 
 def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -> Ode:
@@ -1148,7 +1155,7 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
              xs, up, t)
     # (the initial system's loops from the start values)
     zargs = [X, ca.vertcat(U, P0), T, *((ca.DM(z_guess), -ca.DM.ones(nh)) if ng else (G, H))]
-    start, init_start = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
+    start, init_start, unmet = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
                                      joint[2].numel() - wish_sx.numel(), x_names, joint)
     init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
     if semi.get("selected") and _finite(lambda u: init(u, p0, 0.0), u0) is None:
@@ -1173,6 +1180,7 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
         ode=ode, out=out, alg_res=alg_res, drift=drift, init=init, probe=probe, checks=checks,
         probe_names=probe_names, index=index, nonlinear_blocks=n_nl,
         time_events=tuple(dae.time_events), zero=crossings, start=start, init_start=init_start,
+        init_unmet=unmet,
         events=({"relation_ops": [*dae.relation_ops, *cross_ops], **({"branches": nb} if nb else {})}
                 if dae.relation_ops or nb else None),
         loops=loops, given=given,
@@ -1327,13 +1335,12 @@ def _demoted_read(dae: Dae, kept: list[str]) -> bool:
                or dae.x_pre[k].element_hash() in read for k in gone)
 
 
-def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
+def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
     """A hybrid model's ODE: the discrete variables (and pre(), the flags) are parameters of the
     continuous model while it is causalised; its functions then take them from the end of the
     state vector. The update at an event and the asserts are read through the same solve of the
-    algebraic equations as every other variable (hidden entries of ``exprs``)."""
-    import dataclasses
-
+    algebraic equations as every other variable (hidden entries of ``exprs``). ``retried``: the
+    held relations already start as the start values make them (:func:`_relations_at_start`)."""
     nd, nx0, nf, nzp = dae.d.numel(), dae.x.numel(), dae.flags.numel(), dae.z_pre.numel()
     extra = ca.vertcat(dae.d, dae.d_pre, dae.x_pre, dae.flags, dae.z_pre)
     exprs = dict(dae.exprs)
@@ -1356,6 +1363,15 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
     inner = _build(aug, name, homotopic)
     if _demoted_read(dae, inner.x_names):
         inner = _build(aug, name, homotopic, select=False)
+    if nd and not retried and not inner.init_unmet <= INIT_TOL:
+        # the relations held false leave the initial equations unmet or without a solution:
+        # held as the start values make them instead, where that does better
+        seen = _relations_at_start(dae)
+        other = _hybrid(seen, name, homotopic, retried=True) if seen is not None else None
+        log.debug("%s: initial residual %.3g with the relations held false, %s as the start values "
+                  "make them", name, inner.init_unmet, "-" if other is None else f"{other.init_unmet:.3g}")
+        if other is not None and other.init_unmet < inner.init_unmet:
+            return other
     nx = len(inner.x_names)
     pos = {n: j for j, n in enumerate(inner.x_names)}
     # reinit() and pre(x) of an original state: its place among the semi-explicit states
@@ -1467,7 +1483,38 @@ def _hybrid(dae: Dae, name: str, homotopic=None) -> Ode:
                 **({"branches": nb} if nb else {})},
         loops=loops, given=given,
         solved=mk("solved", [inner.solved(X, U, PA, T)]) if ng else None, guess0=inner.guess0,
+        init_unmet=inner.init_unmet,
     )
+
+
+def _relations_at_start(dae: Dae) -> Dae | None:
+    """``dae`` with its held relations started as the start values make them, where that
+    differs from their default start (false); None where it does not. Held false, a vessel's
+    regularFlow = fluidLevel >= portsData_height shut its ports, and a heating loop's steady
+    initial system, chosen for shut ports, had no solution; other tools evaluate a relation
+    from the values during the initialisation. Tried only where false leaves them unmet."""
+    from .rumoca_frontend import HELD_PREFIX
+
+    held = [(j, int(n[len(HELD_PREFIX):])) for j, n in enumerate(dae.d_names) if n.startswith(HELD_PREFIX)]
+    held = [(j, k) for j, k in held if k < dae.relations.numel() and dae.relation_ops[k] in RELATION_TRUTH]
+    if not held:
+        return None
+    nf = dae.flags.numel()
+    # (in the parameters, inputs and time, as the discrete starts are: taken at each run's start)
+    values = ca.vertcat(dae.x_start, dae.z_start, ca.SX.zeros(dae.dx.numel()), dae.d_start, dae.d_start,
+                        dae.x_start, ca.SX.zeros(dae.z_pre.numel()), ca.DM([1.0] + [0.0] * (nf - 1)) if nf else ca.SX(0, 1))
+    syms = ca.vertcat(dae.x, dae.z, dae.dx, dae.d, dae.d_pre, dae.x_pre, dae.z_pre, dae.flags)
+    g = ca.substitute(ca.vertcat(*[dae.relations[k] for _, k in held]), syms, values)
+    truth = ca.vertcat(*[RELATION_TRUTH[dae.relation_ops[k]](g[n]) for n, (_, k) in enumerate(held)])
+    new = ca.vertsplit(dae.d_start)
+    for n, (j, _) in enumerate(held):
+        new[j] = truth[n]
+    new = ca.vertcat(*new)
+    at = ca.Function("d0", [dae.p, dae.u, dae.t], [dae.d_start, new])
+    old_v, new_v = (np.array(v).ravel() for v in at(dae.p_values, dae.u_start, 0.0))
+    if not np.all(np.isfinite(new_v)) or np.array_equal(old_v, new_v):
+        return None
+    return dataclasses.replace(dae, d_start=new)
 
 
 def _held(v: ca.MX) -> ca.MX:
@@ -1816,10 +1863,7 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
                 (start, init_start, _), worst = other, better
             if worst <= INIT_TOL:
                 break
-    if worst > INIT_TOL:
-        log.warning("the initial equations are not all met at the initial state found (largest "
-                    "residual %.3g at the model's parameter values)", worst)
-    return start, init_start
+    return start, init_start, worst
 
 
 def _linear_start(A: ca.MX, b: ca.MX, S: ca.MX) -> ca.MX:
