@@ -1363,7 +1363,7 @@ def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
     inner = _build(aug, name, homotopic)
     if _demoted_read(dae, inner.x_names):
         inner = _build(aug, name, homotopic, select=False)
-    if nd and not retried and not inner.init_unmet <= INIT_TOL:
+    if nd and not retried and inner.init_unmet > INIT_TOL:
         # the relations held false leave the initial equations unmet or without a solution:
         # held as the start values make them instead, where that does better
         seen = _relations_at_start(dae)
@@ -1499,10 +1499,10 @@ def _relations_at_start(dae: Dae) -> Dae | None:
     held = [(j, k) for j, k in held if k < dae.relations.numel() and dae.relation_ops[k] in RELATION_TRUTH]
     if not held:
         return None
-    nf = dae.flags.numel()
-    # (in the parameters, inputs and time, as the discrete starts are: taken at each run's start)
+    # (in the parameters, inputs and time, as the discrete starts are: taken at each run's start;
+    # initial() true, as in the initial system's parameters)
     values = ca.vertcat(dae.x_start, dae.z_start, ca.SX.zeros(dae.dx.numel()), dae.d_start, dae.d_start,
-                        dae.x_start, ca.SX.zeros(dae.z_pre.numel()), ca.DM([1.0] + [0.0] * (nf - 1)) if nf else ca.SX(0, 1))
+                        dae.x_start, ca.SX.zeros(dae.z_pre.numel()), ca.DM(np.eye(1, dae.flags.numel()).ravel()))
     syms = ca.vertcat(dae.x, dae.z, dae.dx, dae.d, dae.d_pre, dae.x_pre, dae.z_pre, dae.flags)
     g = ca.substitute(ca.vertcat(*[dae.relations[k] for _, k in held]), syms, values)
     truth = ca.vertcat(*[RELATION_TRUTH[dae.relation_ops[k]](g[n]) for n, (_, k) in enumerate(held)])
