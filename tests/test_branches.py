@@ -11,6 +11,7 @@ import pytest
 
 from helpers import msl_path, needs_msl, probed, unforced_run
 from mcl.compile.branches import short_circuited
+from mcl.compile.guards import guarded
 
 X = ca.SX.sym("x", 3)
 
@@ -76,6 +77,23 @@ def test_two_ifs_on_one_condition_the_second_reading_the_first_stay_correct():
     f = ca.Function("f", [X], [second])
     g = short_circuited(f, smallest=100)
     _same(f, g, [[0.4, 0.3, 1.0], [0.4, 0.3, -1.0]])
+
+
+def test_guarded_branches_keep_their_values_and_derivatives_where_taken():
+    """A singular operation only an if-branch uses gets a safe operand where the branch is not
+    taken (:mod:`mcl.compile.guards`); where it is taken, nothing changes, nested branches
+    included, and expressions without one are returned as they are."""
+    speed = ca.fabs(X[0])
+    friction = ca.if_else(speed > 0.5, ca.if_else(X[2] > 1, X[1] / speed + ca.log(speed), ca.sqrt(speed) * X[1]),
+                          X[0] * X[1])
+    shared = X[1] / (X[0] + 3)              # (needed outside any branch: left as it is)
+    e = ca.vertcat(friction + shared, ca.if_else(X[2] > 0, shared ** 0.5, 0))
+    g = guarded([e])[0]
+    assert ca.n_nodes(g) > ca.n_nodes(e)
+    _same(ca.Function("f", [X], [e]), ca.Function("g", [X], [g]),
+          [[0.7, 0.4, 1.5], [-0.9, 0.4, 0.5], [0.2, 0.4, 1.5], [-0.6, 1.3, -1.0]])
+    plain = ca.vertcat(ca.if_else(X[0] > 0, X[1] * X[2], X[0] + 1), X[1] / X[2])
+    assert guarded([plain])[0] is plain
 
 
 def test_small_functions_are_left_as_they_are():

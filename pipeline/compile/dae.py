@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from ..errors import ModelicaError
+from .guards import guarded
 
 #: a relation's value from lhs - rhs, by its operator (numbers or symbols)
 RELATION_TRUTH = {"greater": lambda g: g > 0, "greater_equal": lambda g: g >= 0,
@@ -380,13 +381,24 @@ CSE_MIN = 20000
 
 def merge_common(dae: Dae) -> Dae:
     """``dae`` with each repeated subexpression computed once, across all its expressions."""
+    return _rewritten(dae, lambda parts: ca.cse(parts) if sum(ca.n_nodes(e) for e in parts) >= CSE_MIN else parts)
+
+
+def guard_branches(dae: Dae) -> Dae:
+    """``dae`` with the singular operations of its if-branches finite where not taken (see
+    :mod:`guards`: their derivatives are then not NaN there)."""
+    return _rewritten(dae, guarded)
+
+
+def _rewritten(dae: Dae, rewrite) -> Dae:
+    """``dae`` with all its expressions passed through ``rewrite`` together (list -> list)."""
     names = list(dae.exprs)
     fields = ("residual", "init_residual", "relations", "d_update", "x_reinit", "asserts", "x_start",
               "z_start", "d_start")
     parts = [getattr(dae, f) for f in fields] + [dae.exprs[n] for n in names]
-    if sum(ca.n_nodes(e) for e in parts) < CSE_MIN:
+    out = rewrite(parts)
+    if out is parts:
         return dae
-    out = ca.cse(parts)
     return dataclasses.replace(dae, **dict(zip(fields, out)), exprs=dict(zip(names, out[len(fields):])))
 
 

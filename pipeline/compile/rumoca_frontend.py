@@ -30,7 +30,7 @@ from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
 from .redeclares import lifted, lifted_tree, tree_copy
 from .scalarloops import scalarised
-from .dae import (RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, merge_common, resolve_parameters,
+from .dae import (RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, guard_branches, merge_common, resolve_parameters,
                   rows_reading)
 from .sources import KEYWORDS, first_line
 from ..errors import ConfigError, ModelicaError, UnsupportedConstruct
@@ -2284,7 +2284,7 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
                                 *[ca.vec(ca.SX(e)) for e in exprs.values()]), homotopy.SYMBOL):
         p, p_names, p_values = ca.vertcat(p, homotopy.SYMBOL), [*p_names, homotopy.NAME], np.append(p_values, 0.0)
 
-    return merge_common(_started_discretes(fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
+    return guard_branches(merge_common(_started_discretes(fold_initial_parameters(Dae(x=x, dx=dx, z=z, u=u, p=p, t=t, residual=residual, init_residual=init_residual,
                x_names=names["x"], z_names=names["z"], u_names=names["u"], p_names=p_names,
                p_values=p_values, x_start=starts("x"), x_fixed=x_fixed, z_start=starts("z"), u_start=u_start,
                outputs=outputs, exprs=exprs, units=units, descriptions=descriptions,
@@ -2293,7 +2293,7 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
                d_start=d_start,
                d_pre=d_pre, x_pre=x_pre, z_pre=z_pre, flags=flags, d_update=d_update, x_reinit=x_reinit,
                clocks=clocks, asserts=bind(asserts) if asserts.numel() else ca.SX(0, 1),
-               assert_info=assert_info, preferred=preferred, state_select=state_select))))
+               assert_info=assert_info, preferred=preferred, state_select=state_select)))))
 
 
 def _discrete_starts(d: ca.SX, d_start: ca.SX, init: ca.SX, given: set, continuous: ca.SX, dx: ca.SX):
