@@ -132,7 +132,7 @@ class _Program:
                 if c not in calls:
                     calls[c] = self._branch(f"{name}_b{len(calls)}", c, frontier[c], w, smallest, depth)
                 return calls[c][i]
-            return self._node(s, w, sx_in)
+            return self.node(s, w, sx_in)
 
         outs = []
         for o in range(self.g.n_out()):
@@ -142,7 +142,8 @@ class _Program:
         res = [ca.SX(self.g.sparsity_out(o), ca.vertcat(*v) if v else ca.SX(0, 1)) for o, v in enumerate(outs)]
         return ca.Function(name, sx_in, res, names_in, names_out)
 
-    def _node(self, s: int, w: dict, sx_in) -> ca.SX:
+    def node(self, s: int, w: dict, sx_in) -> ca.SX:
+        """Node ``s`` built from the nodes it reads, ``w`` (an input from ``sx_in``)."""
         if s in self.consts:
             return ca.SX(self.consts[s])
         if s in self.inputs:
@@ -157,7 +158,7 @@ class _Program:
         f_in = ca.SX.sym("f", len(frontier))
         local = {s: f_in[i] for i, s in enumerate(frontier)}
         for s in nodes:
-            local[s] = self._node(s, local, None)
+            local[s] = self.node(s, local, None)
         taken = ca.vertcat(*[local[self.ins[r][1]] for r in roots])
         body = short_circuited(ca.Function(name, [f_in], [taken]), smallest, depth + 1)
         zero = ca.Function(name + "_0", [f_in], [ca.SX.zeros(taken.sparsity())])

@@ -79,22 +79,26 @@ def _rebuilt(prog: _Program, guard: dict, g: ca.Function) -> list[ca.SX]:
     w: dict[int, ca.SX] = {}
     taken: dict[frozenset, ca.SX] = {}          # the conditions together
     other: dict[tuple, ca.SX] = {}              # (conditions, value): the value where they fail
+    made: dict[tuple, ca.SX] = {}               # (conditions, operand, value): the operand guarded
     for s in prog.order:
         op, r = prog.op[s], prog.reads(s)
         # (only conditions computed before the node: a condition that reads it guards nothing)
         conds = frozenset(c for c in guard.get(s, _EMPTY) if c in w)
         safe = _singular(prog, s) if conds else {}
         if not safe:
-            w[s] = prog._node(s, w, sx_in)
+            w[s] = prog.node(s, w, sx_in)
             continue
         if conds not in taken:
             taken[conds] = _all([w[c] for c in sorted(conds)])
         for v in safe.values():
             if (conds, v) not in other:
                 other[conds, v] = ca.SX.binary(_IEZ, ca.logic_not(taken[conds]), ca.SX(v)) if v else ca.SX(0)
-        # (c ? x : 0) + (!c ? safe : 0), the second term shared by every operand so guarded
-        args = [ca.SX.binary(_IEZ, taken[conds], w[d]) + other[conds, safe[j]] if j in safe else w[d]
-                for j, d in enumerate(r)]
+        # (c ? x : 0) + (!c ? safe : 0), each made once (a branch divides by |m_flow| often)
+        for j in safe:
+            key = conds, r[j], safe[j]
+            if key not in made:
+                made[key] = ca.SX.binary(_IEZ, taken[conds], w[r[j]]) + other[conds, safe[j]]
+        args = [made[conds, d, safe[j]] if j in safe else w[d] for j, d in enumerate(r)]
         w[s] = ca.SX.unary(op, args[0]) if len(args) == 1 else ca.SX.binary(op, args[0], args[1])
     outs = [[ca.SX(0)] * g.sparsity_out(o).nnz() for o in range(g.n_out())]
     for (o, nz), s in prog.outputs:
