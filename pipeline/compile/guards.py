@@ -10,7 +10,7 @@ a NaN Jacobian in every row of its initial system, its finite differences finite
 
 :func:`guarded` gives each such operation, where every use of it is under some conditions, the
 operand ``if conds then operand else safe``: the same value and derivatives where the branch is
-taken, a finite operation (division by 1, sqrt(1), log(1), exp(0)) where it is not.
+taken, a finite operation (division by 1, sqrt(1), log(1), asin(0)) where it is not.
 """
 from __future__ import annotations
 
@@ -42,9 +42,10 @@ def guarded(parts: list[ca.SX]) -> list[ca.SX]:
     if prog.calls:
         return parts
     guard = _guards(prog)
-    if not any(_singular(prog, s) and guard.get(s) for s in prog.order):
+    singular = {s: safe for s in prog.order if guard.get(s) and (safe := _singular(prog, s))}
+    if not singular:
         return parts
-    return _rebuilt(prog, guard, g)
+    return _rebuilt(prog, guard, singular, g)
 
 
 def _singular(prog: _Program, s: int) -> dict:
@@ -74,7 +75,9 @@ def _guards(prog: _Program) -> dict[int, frozenset]:
     return guard
 
 
-def _rebuilt(prog: _Program, guard: dict, g: ca.Function) -> list[ca.SX]:
+def _rebuilt(prog: _Program, guard: dict, singular: dict, g: ca.Function) -> list[ca.SX]:
+    """``g``'s outputs rebuilt, each node of ``singular`` (slot -> {operand: safe value}) with
+    its operands guarded by the conditions ``guard`` gives it."""
     sx_in = g.sx_in()
     w: dict[int, ca.SX] = {}
     taken: dict[frozenset, ca.SX] = {}          # the conditions together
@@ -84,7 +87,7 @@ def _rebuilt(prog: _Program, guard: dict, g: ca.Function) -> list[ca.SX]:
         op, r = prog.op[s], prog.reads(s)
         # (only conditions computed before the node: a condition that reads it guards nothing)
         conds = frozenset(c for c in guard.get(s, _EMPTY) if c in w)
-        safe = _singular(prog, s) if conds else {}
+        safe = singular.get(s) if conds else None
         if not safe:
             w[s] = prog.node(s, w, sx_in)
             continue
