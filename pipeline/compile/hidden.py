@@ -41,9 +41,7 @@ def revealed(dae: Dae) -> Dae:
     if n < 2:
         return dae
     sp = ca.jacobian_sparsity(dae.residual, w)
-    nb, rp, cp, rb, cb, *_ = sp.btf()
-    blocks = [(rp[rb[b]:rb[b + 1]], cp[cb[b]:cb[b + 1]]) for b in range(nb)
-              if 2 <= rb[b + 1] - rb[b] == cb[b + 1] - cb[b] <= BLOCK_MAX]
+    blocks = [(R, C) for R, C in _blocks(sp) if 2 <= len(R) <= min(len(C), BLOCK_MAX) and len(C) <= 2 * BLOCK_MAX]
     if not blocks:
         return dae
     residual = ca.vertsplit(dae.residual)
@@ -73,6 +71,36 @@ def revealed(dae: Dae) -> Dae:
     return dataclasses.replace(dae, residual=ca.vertcat(*residual))
 
 
+def _blocks(sp: ca.Sparsity) -> list[tuple[list, list]]:
+    """(rows, unknowns) of the square blocks of ``sp``'s block triangular form, and of the part
+    with more unknowns than rows (where the model's index is above 1; its rows still independent
+    on paper: a polyphase machine's zero-sequence inductor, m i0 = sum(i), beside its star
+    point's sum(i) = 0, hides i0 = 0 there), that part split into its unconnected pieces (a
+    model's machines, each its own)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    nb, rp, cp, rb, cb, *_ = sp.btf()
+    all_rows, all_cols = (np.asarray(v) for v in sp.get_triplet())
+    out = []
+    for b in range(nb):
+        R, C = list(rp[rb[b]:rb[b + 1]]), list(cp[cb[b]:cb[b + 1]])
+        if len(R) >= len(C):
+            out.append((R, C))
+            continue
+        m = len(R)
+        row_at, col_at = np.full(sp.size1(), -1), np.full(sp.size2(), -1)
+        row_at[R], col_at[C] = np.arange(m), m + np.arange(len(C))
+        inside = (row_at[all_rows] >= 0) & (col_at[all_cols] >= 0)
+        graph = coo_matrix((np.ones(int(inside.sum())), (row_at[all_rows[inside]], col_at[all_cols[inside]])),
+                           shape=(m + len(C),) * 2)
+        _, label = connected_components(graph, directed=False)
+        for piece in np.unique(label):
+            out.append(([R[i] for i in range(m) if label[i] == piece],
+                        [C[j] for j in range(len(C)) if label[m + j] == piece]))
+    return out
+
+
 def _points(dae: Dae, n_hybrid: int) -> list:
     """Random points around the start values (the first two with every mode 0, then every mode
     1; then random modes): states, unknowns and parameters perturbed by 30 % (a block singular
@@ -99,7 +127,8 @@ def _points(dae: Dae, n_hybrid: int) -> list:
 
 def _combinations(dae, residual, w, R, C, mats, args, points):
     """(row, its new equation) for each hidden constraint of the block of rows ``R`` in the
-    unknowns ``C`` (its matrices ``mats`` at ``points``): none where the block is regular at
+    unknowns ``C`` (its matrices ``mats`` at ``points``; as many unknowns as rows or more): none
+    where the block's rows are independent at
     any point, or its null vectors differ between points (a mode's singularity: a clutch
     locked at rest), or their sum reads no variable (redundant, not a constraint)."""
     mats = [B for B in mats if np.all(np.isfinite(B))]
