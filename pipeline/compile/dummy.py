@@ -26,6 +26,9 @@ log = logging.getLogger(__name__)
 
 #: rank of each stateSelect: the higher, the later a derivative of it is made a dummy
 RANK = {"Never": -2, "Avoid": -1, "Default": 0, "Prefer": 1, "Always": 2}
+#: points (and their seed) where a choice of dummies the declarations leave open is checked to
+#: keep its determinant's sign (:func:`_one_sign`)
+SIGN_POINTS, SIGN_SEED = 40, 1
 
 
 def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values: np.ndarray,
@@ -74,8 +77,10 @@ def select(impl: dict, names: list[str], rank: dict, start: np.ndarray, p_values
         # released level, hides a choice that is there; a dummy that an equation gives with a
         # constant coefficient stays one wherever the run goes: its tie is no choice)
         fixed = _explicit(jac, chosen, ca.vertcat(*var), Ms[0])
-        ties += [(cand[d], cand[c]) for M in Ms for d, c in _tied(M, chosen, [w[0] for w in wants])
-                 if d not in fixed]
+        tied = [(cand[d], cand[c]) for M in Ms for d, c in _tied(M, chosen, [w[0] for w in wants])
+                if d not in fixed]
+        if tied and not _one_sign(jac[:, chosen], var_p, point):
+            ties += tied
         picked = [cand[k] for k in chosen]
         dummies.update(v for v in picked if parent_v[v] >= 0)
         H = [parent_e[e] for e in H if parent_e[parent_e[e]] >= 0]
@@ -183,6 +188,29 @@ def _independent(jac: ca.SX, var: list, point: np.ndarray, want: list):
         if kept is not None:
             return kept, Ms
     return None, Ms
+
+
+def _one_sign(jac: ca.SX, var: list, point: np.ndarray) -> bool:
+    """Whether the determinant of ``jac`` (the differentiated equations in the dummies chosen)
+    keeps one sign at :data:`SIGN_POINTS` points spread widely around ``point``: a choice that
+    no run can make singular, though the declarations leave it open. A machine's air-gap flux
+    in the rotor's frame, R(phi) times the stator's: a dummy whatever angle the rotor turns
+    to. A pendulum's x x' + y y' = 0 changes sign with x (the bottom of its swing): no."""
+    J = ca.Function("dummies", [ca.vertcat(*var)], [jac])
+    rng = np.random.default_rng(SIGN_SEED)
+    signs = set()
+    finite = 0
+    for _ in range(SIGN_POINTS):
+        at = point * rng.uniform(-3.0, 3.0, point.size) + rng.uniform(-10.0, 10.0, point.size)
+        M = np.array(J(at), float)
+        if not np.all(np.isfinite(M)):
+            continue
+        sign, logdet = np.linalg.slogdet(_rows_alike(M))
+        if sign == 0 or logdet < np.log(1e-12):
+            return False
+        signs.add(sign)
+        finite += 1
+    return len(signs) == 1 and finite >= SIGN_POINTS // 2
 
 
 def _rows_alike(M: np.ndarray) -> np.ndarray:
