@@ -95,9 +95,8 @@ def _blocks(sp: ca.Sparsity) -> list[tuple[list, list]]:
         graph = coo_matrix((np.ones(int(inside.sum())), (row_at[all_rows[inside]], col_at[all_cols[inside]])),
                            shape=(m + len(C),) * 2)
         _, label = connected_components(graph, directed=False)
-        for piece in np.unique(label):
-            out.append(([R[i] for i in range(m) if label[i] == piece],
-                        [C[j] for j in range(len(C)) if label[m + j] == piece]))
+        rows_in, cols_in = np.asarray(R), np.asarray(C)
+        out += [(rows_in[label[:m] == piece].tolist(), cols_in[label[m:] == piece].tolist()) for piece in np.unique(label)]
     return out
 
 
@@ -128,9 +127,9 @@ def _points(dae: Dae, n_hybrid: int) -> list:
 def _combinations(dae, residual, w, R, C, mats, args, points):
     """(row, its new equation) for each hidden constraint of the block of rows ``R`` in the
     unknowns ``C`` (its matrices ``mats`` at ``points``; as many unknowns as rows or more): none
-    where the block's rows are independent at
-    any point, or its null vectors differ between points (a mode's singularity: a clutch
-    locked at rest), or their sum reads no variable (redundant, not a constraint)."""
+    where the block's rows are independent at any point, or its null vectors differ between
+    points (a mode's singularity: a clutch locked at rest), or their sum reads no variable
+    (redundant, not a constraint)."""
     mats = [B for B in mats if np.all(np.isfinite(B))]
     if len(mats) < POINTS - 2:
         return []
