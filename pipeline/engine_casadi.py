@@ -674,7 +674,7 @@ class _Plan:
         ode, t_out, N = self.ode, self.t_out, len(self.t_out)
         npu = len(p)
         p = np.concatenate([np.asarray(p, float), ode.guess0]) if self.ng else p
-        self.method, self.gave_up = "bdf", False
+        self.method, self.gave_up, self.tight = "bdf", False, 1.0     # (a failed run's retry left behind)
         self.followed_points = FOLLOW_FIRST if self.ng else None      # (see :meth:`advance`)
         budget = _Budget(opts, clock)
         self.opts_max_steps = opts.max_steps
