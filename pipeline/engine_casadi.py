@@ -339,7 +339,6 @@ class _Plan:
         self.iopts = {"reltol": opts.rtol, "abstol": opts.atol,
                       "disable_internal_warnings": True, "show_eval_warnings": False}
         self.method = "bdf"       # this run's (:meth:`method_for`)
-        self.tight = 1.0          # the tolerances' factor: TIGHTER for a call retried (:meth:`advance`)
         self._integrators: OrderedDict = OrderedDict()
         t0, h = ca.MX.sym("t0"), ca.MX.sym("h")
         PH = ca.vertcat(P, t0, h)
@@ -418,29 +417,30 @@ class _Plan:
         self.zero_maps: dict = {}
 
     # -- integrators -----------------------------------------------------------------------
-    def integrator(self, t0: float, grid: np.ndarray, steps: int):
-        key = (float(t0), grid.tobytes(), steps, self.method, self.tight)
+    def integrator(self, t0: float, grid: np.ndarray, steps: int, tight: float = 1.0):
+        key = (float(t0), grid.tobytes(), steps, self.method, tight)
         if key not in self._integrators:
             self._integrators[key] = ca.integrator("I", "cvodes", self.oracle, self.tau(t0), self.tau(grid).tolist(),
-                                                   self.options(steps))
+                                                   self.options(steps, tight))
             if len(self._integrators) > _INTEGRATORS:
                 self._integrators.popitem(last=False)
         self._integrators.move_to_end(key)
         return self._integrators[key]
 
-    def hop_integrator(self, steps: int, points: int, to_end: bool):
+    def hop_integrator(self, steps: int, points: int, to_end: bool, tight: float = 1.0):
         """An integrator in time scaled to its call (parameters: its start and length), its
         output times :func:`hop_grid`'s: one serves every call of that many points, where one
         created for each call's times costs 0.6 ms (a rectifier's 1 300 calls a second)."""
-        key = ("hop", steps, points, to_end, self.method, self.tight)
+        key = ("hop", steps, points, to_end, self.method, tight)
         if key not in self._integrators:
             self._integrators[key] = ca.integrator("hop", "cvodes", self.hop_oracle, 0.0, hop_grid(points, to_end).tolist(),
-                                                   self.options(steps))
+                                                   self.options(steps, tight))
         self._integrators.move_to_end(key)
         return self._integrators[key]
 
-    def options(self, steps: int) -> dict:
-        return {**self.iopts, "reltol": self.iopts["reltol"] * self.tight, "abstol": self.iopts["abstol"] * self.tight,
+    def options(self, steps: int, tight: float = 1.0) -> dict:
+        """The solver's options for calls of ``steps`` steps, its tolerances times ``tight``."""
+        return {**self.iopts, "reltol": self.iopts["reltol"] * tight, "abstol": self.iopts["abstol"] * tight,
                 "max_num_steps": steps, "linear_multistep_method": self.method}
 
     def method_for(self, x, p, t) -> str:
@@ -457,15 +457,15 @@ class _Plan:
             return "bdf"
         return "adams" if np.max(np.abs(np.linalg.eigvals(J))) * self.spacing <= ADAMS_REACH else "bdf"
 
-    def call_for(self, t0: float, sub, steps: int):
+    def call_for(self, t0: float, sub, steps: int, tight: float = 1.0):
         """(integrator, the parameters it takes after the model's) over the grid points ``sub``
         from ``t0``: a hop's where they are equally spaced from ``t0`` in a model with events
         or loops (each event a call from its own instant, a loop's calls as long as its
         guesses lead: a new integrator each, otherwise)."""
         times = self.t_int[sub]
         if (self.hybrid is not None or self.ng) and _even(t0, times):
-            return self.hop_integrator(steps, len(sub), False), [t0, times[-1] - t0]
-        return self.integrator(t0, times, steps), []
+            return self.hop_integrator(steps, len(sub), False, tight), [t0, times[-1] - t0]
+        return self.integrator(t0, times, steps, tight), []
 
     def refresh(self, x, t, p) -> None:
         """The loops' guesses, the tail of ``p`` (changed in place: the event handling holds
@@ -519,7 +519,7 @@ class _Plan:
         ``one_call``: return after the first call that succeeds (the loops' guesses are
         renewed at each call, and the relations read along it must be read with its own).
         Returns the number of points filled."""
-        pos, failed = 0, None
+        pos, failed, tight = 0, None, 1.0       # (tight: the tolerances' factor of a call retried)
         while pos < len(idx) and not (one_call and pos):
             budget.check(t0)
             # after a call that ran out of its reduced steps: again with more steps, sized with
@@ -539,7 +539,7 @@ class _Plan:
             if self.hybrid is not None and len(sub) > 1 and not _even(t0, self.t_int[sub]) and _even(
                     self.t_int[sub[0]], self.t_int[sub[1:]]):
                 sub = sub[:1]        # (from an event's instant: to the next point, then evenly on)
-            integ, extra = self.call_for(t0, sub, steps)
+            integ, extra = self.call_for(t0, sub, steps, tight)
             self.refresh(x, t0, p)
             clock = Stopwatch(0, cpu=True)
             try:
@@ -549,15 +549,15 @@ class _Plan:
                 if bound is not None and "TOO_MUCH_WORK" in str(exc):
                     failed = steps
                     continue
-                if self.tight == 1.0 and _TEST_FAILURES in str(exc):
+                if tight == 1.0 and _TEST_FAILURES in str(exc):
                     # the error test failing over and over where the step cannot shrink: once
                     # more with tighter tolerances (an induction machine started through a
                     # transformer failed so on one output grid and ran on others; at rtol/10 it
                     # runs on each)
-                    self.tight = TIGHTER
+                    tight = TIGHTER
                     continue
                 raise _SolverFailed(f"solver error before t = {self.t_int[sub[-1]]:g}: {_last_line(exc)}") from None
-            failed, self.tight = None, 1.0
+            failed, tight = None, 1.0
             budget.record(_nsteps(integ), clock.elapsed, len(sub))
             traj[:, sub] = xf
             if not np.all(np.isfinite(xf)):
@@ -674,7 +674,7 @@ class _Plan:
         ode, t_out, N = self.ode, self.t_out, len(self.t_out)
         npu = len(p)
         p = np.concatenate([np.asarray(p, float), ode.guess0]) if self.ng else p
-        self.method, self.gave_up, self.tight = "bdf", False, 1.0     # (a failed run's retry left behind)
+        self.method, self.gave_up = "bdf", False
         self.followed_points = FOLLOW_FIRST if self.ng else None      # (see :meth:`advance`)
         budget = _Budget(opts, clock)
         self.opts_max_steps = opts.max_steps
