@@ -50,6 +50,77 @@ def test_missing_component_type_names_the_line(tmp_path):
     assert err.value.where == f"{f.resolve()}:{line_of(f, 'P.Gone')}"
 
 
+PORTS = """  connector Port
+    Real T;
+    flow Real Q;
+  end Port;
+  model Wall
+    parameter Boolean insulated = false;
+    Port inner_face;
+    Port outer_face if not insulated;
+    Real T(start = 300, fixed = true);
+  protected
+    Port outside "the outer face inside the wall: no heat flows where there is none";
+  equation
+    der(T) = inner_face.Q + outside.Q;
+    inner_face.T = T;
+    outside.T = T;
+    connect(outer_face, outside);
+  end Wall;
+  model Room
+    replaceable model Walls = Wall;
+    Walls walls(insulated = insulated);
+    parameter Boolean insulated = false;
+  end Room;
+  model Heater
+    Port port;
+  equation
+    port.Q = -1;
+  end Heater;
+  model Stove
+    Port port;
+  equation
+    port.T = 350;
+  end Stove;
+"""
+
+
+def test_a_connect_into_a_replaceable_components_missing_member_names_the_line(tmp_path):
+    """rumoca drops a connection to a member a replaceable model's component does not have
+    (``walls.outerface`` for ``outer_face``), and then calls the model unbalanced, or compiles
+    it with the stove's port open; mcl names the connect, the class, and the member meant. A
+    connector switched off (the wall insulated) is no error: its connections go with it."""
+    f = write(tmp_path, PORTS + """  model House
+    Room room;
+    Heater heater;
+  equation
+    connect(heater.port, room.walls.outerface);
+  end House;
+  model Kitchen
+    Room room;
+    Stove stove;
+  equation
+    connect(stove.port, room.walls.outer_face);
+    connect(stove.port, room.walls.innerface);
+  end Kitchen;
+  model Insulated
+    Room room(insulated = true);
+    Heater heater;
+  equation
+    connect(heater.port, room.walls.outer_face);
+    connect(heater.port, room.walls.inner_face);
+  end Insulated;
+""")
+    with pytest.raises(ModelicaError, match=r"connect\(heater.port, room.walls.outerface\): room.walls \(P.Wall\) "
+                                            r"has no member outerface \(did you mean outer_face\?\)") as err:
+        compile_model([f], "P.House")
+    assert err.value.where == f"{f.resolve()}:{line_of(f, 'room.walls.outerface')}"
+    with pytest.raises(ModelicaError, match=r"room.walls \(P.Wall\) has no member innerface \(did you mean inner_face") as err:
+        compile_model([f], "P.Kitchen")
+    assert err.value.where == f"{f.resolve()}:{line_of(f, 'room.walls.innerface')}"
+    assert "heater.port.T" in compile_model([f], "P.Insulated").ode.probe_names
+
+
 def test_unbalanced_model_is_refused(tmp_path):
     f = write(tmp_path, "  model M\n    Real x(start=1);\n    Real y;\n  equation\n"
                         "    der(x) = -x;\n  end M;\n")

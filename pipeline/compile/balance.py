@@ -107,3 +107,99 @@ def unfound_class(model: str, instance: str, docs: dict[Path, tuple[str, set]], 
                 return f"{f}:{text.count(chr(10), 0, m.start()) + 1}", type_name, _absent_library(text, lib)
         return None
     return None
+
+
+#: a connect statement's two references (subscripts, for-loop indices included)
+_CONNECT = re.compile(r"\bconnect\s*\(\s*([A-Za-z_][\w.\[\]\s,:+\-*]*?)\s*,\s*([A-Za-z_][\w.\[\]\s:+\-*]*?)\s*\)\s*;")
+#: a redeclared component or model class (not a package: a medium changes no member)
+_REDECLARED = re.compile(r"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*(\w+)")
+
+
+def dangling_connect(model: str, docs: dict[Path, tuple[str, set]], search, names=None) -> tuple[str, str] | None:
+    """(``file:line``, message) of the first ``connect`` of ``model``'s own text that names a
+    member its component's class does not declare (``tank.heatTransfer.heatPort``, where the
+    class has ``heatPorts``); else None. rumoca drops such a connection without a word where the
+    component's class is a replaceable one (the fluid library's heat transfer and flow models),
+    and the model compiles with a connector left open. ``names``: the compiled variables; only
+    references none of them lies under are looked up, and only classes found whole are judged
+    (a member of a conditional component switched off is declared, and is no error); None:
+    the model did not compile, every reference is looked up."""
+    from .library import available
+
+    flat = {re.sub(r"\[[^\]]*\]", "", n) for n in names or ()}
+    under = {".".join(n.split(".")[:k]) for n in flat for k in range(1, n.count(".") + 2)} if names is not None else None
+    found = _model_text(model, docs)
+    if found is None:
+        return None
+    path, text, start, body = found
+    if any(m.group(1) not in ("package", "function", "type") for m in _REDECLARED.finditer(body)):
+        return None
+    lib = None
+    for m in _CONNECT.finditer(body):
+        for ref in (m.group(1), m.group(2)):
+            parts = re.sub(r"\s+", "", re.sub(r"\[[^\]]*\]", "", ref)).split(".")
+            if len(parts) < 2 or (under is not None and ".".join(parts) in under):
+                continue
+            lib = lib or LibraryClasses.with_user(available(search), docs)
+            why = _no_member(lib, model, parts, under)
+            if why:
+                line = text.count("\n", 0, start + m.start()) + 1
+                return f"{path}:{line}", f"connect({m.group(1).strip()}, {m.group(2).strip()}): {why}"
+    return None
+
+
+def _model_text(model: str, docs) -> tuple[Path, str, int, str] | None:
+    """(file, its masked text, where the class body begins, the body) of ``model`` in the user's files."""
+    short = model.rsplit(".", 1)[-1]
+    head = re.compile(rf"(?:^|[\s;])(?:model|block|class)\s+{re.escape(short)}\b(?!\s*=)")
+    for f in _user_files(docs):
+        text = masked(f.read_text(encoding="utf-8", errors="replace"))
+        m = head.search(text)
+        if m:
+            end = re.search(rf"\bend\s+{re.escape(short)}\s*;", text[m.end():])
+            return f, text, m.end(), text[m.end(): m.end() + end.start()] if end else text[m.end():]
+    return None
+
+
+def _no_member(lib: LibraryClasses, model: str, parts: list[str], under: set | None) -> str | None:
+    """Why ``parts`` (a reference into a component of ``model``) names nothing: the first part
+    its component's class does not declare, with the closest member it does; None where a class
+    on the way is not found whole (a base class unresolved, a short class not followed) or the
+    part before is not compiled (``under``: the compiled names' prefixes; None: not known)."""
+    import difflib
+
+    info = lib.find(model)
+    for k, part in enumerate(parts):
+        if info is None or not _whole(lib, info):
+            return None
+        members = {name: cls for _, cls, _, name, _ in lib.members(info)}
+        if part not in members:
+            if not k or (under is not None and ".".join(parts[:k]) not in under) or info.kind == "connector":
+                return None     # (the model's own: rumoca's to name; an expandable connector's members are its connections)
+            close = difflib.get_close_matches(part, members, n=1)
+            hint = f" (did you mean {close[0]}?)" if close else ""
+            return f"{'.'.join(parts[:k])} ({info.name}) has no member {part}{hint}"
+        info = _followed(lib, members[part])
+    return None
+
+
+def _whole(lib: LibraryClasses, info, seen=None) -> bool:
+    """Whether every class ``info`` extends, and they in turn, is found."""
+    seen = seen if seen is not None else set()
+    if info.name in seen:
+        return True
+    seen.add(info.name)
+    bases = lib.bases(info)
+    return len(bases) == len(info.extends) and all(_whole(lib, b, seen) for b in bases)
+
+
+def _followed(lib: LibraryClasses, info):
+    """A short class definition (``replaceable model HeatTransfer = Ideal... constrainedby ...``)
+    followed to the class it names; None where it names a built-in type or is not found."""
+    for _ in range(8):
+        if info is None or info.short is None:
+            return info
+        target = re.match(r"(?:(?:input|output|replaceable)\s+)*([A-Za-z_][\w.]*)", info.short)
+        scope = info.name.rsplit(".", 1)[0]
+        info = lib.resolve(target.group(1), scope) if target else None
+    return None

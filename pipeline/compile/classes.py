@@ -69,17 +69,32 @@ def _strip(text: str) -> str:
 
 
 def _block(text: str, name: str) -> tuple[str, str] | None:
-    """(kind, body) of class ``name`` defined in ``text`` (the outermost such definition)."""
-    head = re.search(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|"
-                     rf"operator|pure|impure)\s+)*({_KEYWORDS})\s+{re.escape(name)}\b", text)
-    if not head:
+    """(kind, body) of class ``name`` defined in ``text``: the one defined at its top level,
+    else the first (a package's ``HeatTransfer`` beside a model's ``replaceable model
+    HeatTransfer = ...`` written before it)."""
+    heads = list(re.finditer(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|"
+                             rf"operator|pure|impure)\s+)*({_KEYWORDS})\s+{re.escape(name)}\b", text))
+    if not heads:
         return None
+    head = next((h for h in heads if _top_level(text, h.start())), heads[0]) if len(heads) > 1 else heads[0]
     rest = text[head.end():]
     short = re.match(r"\s*=\s*([^;]*);", rest)
     if short:
         return head.group(1), "=" + short.group(1)
     end = re.search(rf"\bend\s+{re.escape(name)}\s*;", rest)
     return head.group(1), rest[: end.start()] if end else rest
+
+
+#: a class definition that opens a body (not ``X = Y``), and the end of one (not of an if or a loop)
+_OPENS = re.compile(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator|pure|impure)"
+                    rf"\s+)*{_KEYWORDS}\s+(\w+)\b(?!\s*=)")
+_ENDS = re.compile(r"\bend\s+(?!(?:if|for|when|while)\b)\w+\s*;")
+
+
+def _top_level(text: str, at: int) -> bool:
+    """Whether position ``at`` of ``text`` lies outside every class ``text`` defines before it."""
+    before = text[:at]
+    return len(_OPENS.findall(before)) <= len(_ENDS.findall(before))
 
 
 _NESTED = re.compile(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator)\s+)*"

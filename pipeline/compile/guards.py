@@ -11,10 +11,20 @@ a NaN Jacobian in every row of its initial system, its finite differences finite
 :func:`guarded` gives each such operation, where every use of it is under some conditions, the
 operand ``if conds then operand else safe``: the same value and derivatives where the branch is
 taken, a finite operation (division by 1, sqrt(1), log(1), asin(0)) where it is not.
+
+The same 0 x inf comes from values that comparisons read outside any branch, and only branches
+differentiate: IF97 water picks its region by comparing the temperature with
+``572.5 + sqrt((p/1e6 - 13.92)/0.00102)``, NaN below 13.9 MPa (and the comparison false, as
+meant). Such an operation (whose value the branch guard would change) is given its operand where that lies inside its
+domain and, outside, the value it takes there as a constant (NaN, or at the domain's edge 0, inf,
+asin(1)): every value and comparison as before, and an adjoint of 0 stays 0 (an open tank of
+IF97 water draining through a pipe had a NaN Jacobian in every row, its directional
+derivatives finite).
 """
 from __future__ import annotations
 
 import casadi as ca
+import numpy as np
 
 from .branches import _IEZ, _Program
 
@@ -41,11 +51,13 @@ def guarded(parts: list[ca.SX]) -> list[ca.SX]:
     prog = _Program(g)
     if prog.calls:
         return parts
-    guard = _guards(prog)
-    singular = {s: safe for s in prog.order if guard.get(s) and (safe := _singular(prog, s))}
+    guard, need = _guards(prog), _derivative_guards(prog)
+    # (where no branch guards the value, but the derivative is needed only in branches, or never)
+    detached = {s for s in prog.order if not guard.get(s) and need.get(s) != _EMPTY}
+    singular = {s: safe for s in prog.order if (guard.get(s) or s in detached) and (safe := _singular(prog, s))}
     if not singular:
         return parts
-    return _rebuilt(prog, guard, singular, g)
+    return _rebuilt(prog, guard, singular, g, detached)
 
 
 def _singular(prog: _Program, s: int) -> dict:
@@ -75,9 +87,67 @@ def _guards(prog: _Program) -> dict[int, frozenset]:
     return guard
 
 
-def _rebuilt(prog: _Program, guard: dict, singular: dict, g: ca.Function) -> list[ca.SX]:
+#: comparisons and logic: their results have no derivative, and neither do their operands' uses
+_LOGIC = {ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_NOT, ca.OP_AND, ca.OP_OR}
+
+
+def _derivative_guards(prog: _Program) -> dict[int, frozenset]:
+    """slot -> the conditions every use of the node that differentiates it is under; a node
+    absent is never differentiated (only comparisons, logic and if-conditions read it, however
+    indirectly). As :func:`_guards`, but those uses left out."""
+    need: dict[int, frozenset] = {s: _EMPTY for _, s in prog.outputs}
+    for s in reversed(prog.order):
+        if s not in need or prog.op[s] in _LOGIC:
+            continue
+        mine, r = need[s], prog.reads(s)
+        iez = prog.op[s] == _IEZ
+        for j, d in enumerate(r):
+            if iez and j == 0 and r[1] != r[0]:
+                continue                # the condition: no derivative
+            v = mine | {r[0]} if iez and j == 1 and r[1] != r[0] else mine
+            need[d] = v if d not in need else need[d] & v
+    return need
+
+
+#: unary operation -> (its operand's open domain, where values and derivatives are finite; a point
+#: inside it; [(operand at an edge, the value there)]; elsewhere the value is NaN)
+_DOMAIN = {ca.OP_SQRT: (lambda x: x > 0, 1.0, [(0.0, 0.0)]),
+           ca.OP_LOG: (lambda x: x > 0, 1.0, [(0.0, -np.inf)]),
+           ca.OP_ASIN: (lambda x: ca.fabs(x) < 1, 0.0, [(1.0, np.pi / 2), (-1.0, -np.pi / 2)]),
+           ca.OP_ACOS: (lambda x: ca.fabs(x) < 1, 0.0, [(1.0, 0.0), (-1.0, np.pi)]),
+           ca.OP_ATANH: (lambda x: ca.fabs(x) < 1, 0.0, [(1.0, np.inf), (-1.0, -np.inf)]),
+           ca.OP_ACOSH: (lambda x: x > 1, 2.0, [(1.0, 0.0)])}
+
+
+def _detached(op: int, x: ca.SX, n=None) -> ca.SX | None:
+    """``op(x)`` (``x^n`` for a constant ``n``) with the same value everywhere, computed from a
+    finite operand outside the operation's domain: None where ``op`` is not one of those."""
+    if op == ca.OP_CONSTPOW:
+        if n is None:
+            return None
+        n = float(n)
+        whole = n == int(n)          # (a negative whole power: finite for x < 0, inf at 0)
+        inside = x != 0 if whole else x > 0
+        edges = [(0.0, np.inf if n < 0 else 0.0 if n > 0 else 1.0)]
+        f = lambda a: ca.constpow(a, n)        # noqa: E731
+    elif op in _DOMAIN:
+        domain, _, edges = _DOMAIN[op]
+        inside = domain(x)
+        f = lambda a: ca.SX.unary(op, a)       # noqa: E731
+    else:
+        return None
+    safe = _DOMAIN[op][1] if op in _DOMAIN else 1.0
+    outside = ca.SX(np.nan)
+    for at, value in edges:
+        outside = ca.if_else(x == at, value, outside)
+    return ca.SX.binary(_IEZ, inside, f(ca.if_else(inside, x, safe))) + ca.SX.binary(_IEZ, ca.logic_not(inside), outside)
+
+
+def _rebuilt(prog: _Program, guard: dict, singular: dict, g: ca.Function, detached: set = frozenset()) -> list[ca.SX]:
     """``g``'s outputs rebuilt, each node of ``singular`` (slot -> {operand: safe value}) with
-    its operands guarded by the conditions ``guard`` gives it."""
+    its operands guarded by the conditions ``guard`` gives it, or, where its value is read
+    outside them and its derivative only inside or never (``detached``), computed from an
+    operand inside its domain (:func:`_detached`)."""
     sx_in = g.sx_in()
     w: dict[int, ca.SX] = {}
     taken: dict[frozenset, ca.SX] = {}          # the conditions together
@@ -85,6 +155,11 @@ def _rebuilt(prog: _Program, guard: dict, singular: dict, g: ca.Function) -> lis
     made: dict[tuple, ca.SX] = {}               # (conditions, operand, value): the operand guarded
     for s in prog.order:
         op, r = prog.op[s], prog.reads(s)
+        if s in detached and s in singular:
+            alone = _detached(op, w[r[0]], prog.consts.get(r[1]) if op == ca.OP_CONSTPOW else None)
+            if alone is not None:
+                w[s] = alone
+                continue
         # (only conditions computed before the node: a condition that reads it guards nothing)
         conds = frozenset(c for c in guard.get(s, _EMPTY) if c in w)
         safe = singular.get(s) if conds else None

@@ -24,7 +24,7 @@ import numpy as np
 
 from . import complexops, homotopy, overlays, scalarloops, tables, xorshift
 from .arrays import alike, array_of, as_int, dims_of, flat, grown, modelica_size, multiply, repeated, shaped
-from .balance import unconnected_inputs, unfound_class
+from .balance import dangling_connect, unconnected_inputs, unfound_class
 from .bindings import restated
 from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
@@ -557,6 +557,9 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
         raise UnsupportedConstruct(f"cannot compile {model}: the Modelica front end (rumoca) stopped on an "
                                    f"internal error ({exc}); a construct of the model it cannot translate",
                                    where=str(prep.files[0]) if prep.files else None) from None
+    dangling = dangling_connect(model, prep.docs, prep.search, ir["flat"].get("variables", {}))
+    if dangling:
+        raise ModelicaError(f"cannot compile {model}: {dangling[1]}", where=dangling[0])
     roots = str(roots_dir())
     located = Located({f[0]: (real.get(f[1]) or _real(f[1], roots), f[2]) for f in ir.get("source_map", {}).get("files", [])})
     return ir, located
@@ -829,6 +832,13 @@ def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> Model
         if found:
             return type(err)(f"cannot compile {model}: class {found[1]} of {ref[1]} is not found{found[2]}", where=found[0])
     counts = re.search(r"unbalanced model: (\d+) equations, (\d+) unknowns", str(exc))
+    if counts is not None:      # (a connection rumoca dropped leaves its connectors unbalanced)
+        try:
+            dangling = dangling_connect(model, prep.docs, prep.search)
+        except Exception:      # noqa: BLE001 - a hint only: rumoca's message stands
+            dangling = None
+        if dangling:
+            return type(err)(f"cannot compile {model}: {dangling[1]}", where=dangling[0])
     if counts is None or int(counts[1]) >= int(counts[2]):
         return err
     try:
