@@ -13,13 +13,14 @@ operand ``if conds then operand else safe``: the same value and derivatives wher
 taken, a finite operation (division by 1, sqrt(1), log(1), asin(0)) where it is not.
 
 The same 0 x inf comes from values that comparisons read outside any branch, and only branches
-differentiate: IF97 water picks its region by comparing the temperature with
+differentiate (or nothing does): IF97 water picks its region by comparing the temperature with
 ``572.5 + sqrt((p/1e6 - 13.92)/0.00102)``, NaN below 13.9 MPa (and the comparison false, as
-meant). Such an operation (whose value the branch guard would change) is given its operand where that lies inside its
-domain and, outside, the value it takes there as a constant (NaN, or at the domain's edge 0, inf,
-asin(1)): every value and comparison as before, and an adjoint of 0 stays 0 (an open tank of
-IF97 water draining through a pipe had a NaN Jacobian in every row, its directional
-derivatives finite).
+meant). A branch's guard would change the value the comparison reads; such an operation is
+instead given its operand where that lies inside its domain and, outside, the value it takes
+there as a constant (NaN, or at the domain's edge 0, inf, asin(1)): every value and comparison
+as before, and an adjoint of 0 stays 0 (an open tank of IF97 water draining through a pipe had
+a NaN Jacobian in every row, its directional derivatives finite). At the edge, in a branch
+taken, the derivative is then 0 where it was infinite.
 """
 from __future__ import annotations
 
