@@ -16,6 +16,8 @@ from pathlib import Path
 from .sources import COMMENT_OR_STRING, closing
 
 _KEYWORDS = r"(?:model|block|connector|record|package|class|type|function|operator)"
+#: the prefixes a class definition may carry before its keyword
+_CLASS_PREFIXES = r"(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator|pure|impure)\s+)*"
 _PREFIXES = {"parameter", "constant", "input", "output", "flow", "stream", "discrete", "final", "inner",
              "outer", "replaceable", "redeclare", "each", "public", "protected", "expandable"}
 
@@ -72,8 +74,7 @@ def _block(text: str, name: str) -> tuple[str, str] | None:
     """(kind, body) of class ``name`` defined in ``text``: the one defined at its top level,
     else the first (a package's ``HeatTransfer`` beside a model's ``replaceable model
     HeatTransfer = ...`` written before it)."""
-    heads = list(re.finditer(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|"
-                             rf"operator|pure|impure)\s+)*({_KEYWORDS})\s+{re.escape(name)}\b", text))
+    heads = list(re.finditer(rf"(?:^|[\s;]){_CLASS_PREFIXES}({_KEYWORDS})\s+{re.escape(name)}\b", text))
     if not heads:
         return None
     head = next((h for h in heads if _top_level(text, h.start())), heads[0]) if len(heads) > 1 else heads[0]
@@ -86,8 +87,7 @@ def _block(text: str, name: str) -> tuple[str, str] | None:
 
 
 #: a class definition that opens a body (not ``X = Y``), and the end of one (not of an if or a loop)
-_OPENS = re.compile(rf"(?:^|[\s;])(?:(?:partial|encapsulated|final|replaceable|redeclare|expandable|operator|pure|impure)"
-                    rf"\s+)*{_KEYWORDS}\s+(\w+)\b(?!\s*=)")
+_OPENS = re.compile(rf"(?:^|[\s;]){_CLASS_PREFIXES}{_KEYWORDS}\s+(\w+)\b(?!\s*=)")
 _ENDS = re.compile(r"\bend\s+(?!(?:if|for|when|while)\b)\w+\s*;")
 
 

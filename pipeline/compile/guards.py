@@ -52,13 +52,13 @@ def guarded(parts: list[ca.SX]) -> list[ca.SX]:
     prog = _Program(g)
     if prog.calls:
         return parts
-    guard, need = _guards(prog), _derivative_guards(prog)
-    # (where no branch guards the value, but the derivative is needed only in branches, or never)
-    detached = {s for s in prog.order if not guard.get(s) and need.get(s) != _EMPTY}
-    singular = {s: safe for s in prog.order if (guard.get(s) or s in detached) and (safe := _singular(prog, s))}
+    guard, need = _guards(prog), _guards(prog, differentiated=True)
+    singular = {s: safe for s in prog.order
+                if (guard.get(s) or need.get(s) != _EMPTY) and (safe := _singular(prog, s))}
     if not singular:
         return parts
-    return _rebuilt(prog, guard, singular, g, detached)
+    # (where no branch guards the value, but the derivative is needed only in branches, or never)
+    return _rebuilt(prog, guard, singular, g, {s for s in singular if not guard.get(s)})
 
 
 def _singular(prog: _Program, s: int) -> dict:
@@ -74,40 +74,28 @@ def _singular(prog: _Program, s: int) -> dict:
     return {j: v for j, v in safe.items() if r[j] not in prog.consts}
 
 
-def _guards(prog: _Program) -> dict[int, frozenset]:
-    """slot -> the conditions (their slots) every use of the node is under (empty: needed
-    unconditionally). Set from the uses, which come later: in reverse order."""
-    guard: dict[int, frozenset] = {s: _EMPTY for _, s in prog.outputs}
-    for s in reversed(prog.order):
-        mine = guard.setdefault(s, _EMPTY)
-        r = prog.reads(s)
-        taken = prog.op[s] == _IEZ and r[1] != r[0]     # c ? x : 0, x under c
-        for j, d in enumerate(r):
-            v = mine | {r[0]} if taken and j == 1 else mine
-            guard[d] = v if d not in guard else guard[d] & v
-    return guard
-
-
 #: comparisons and logic: their results have no derivative, and neither do their operands' uses
 _LOGIC = {ca.OP_LT, ca.OP_LE, ca.OP_EQ, ca.OP_NE, ca.OP_NOT, ca.OP_AND, ca.OP_OR}
 
 
-def _derivative_guards(prog: _Program) -> dict[int, frozenset]:
-    """slot -> the conditions every use of the node that differentiates it is under; a node
-    absent is never differentiated (only comparisons, logic and if-conditions read it, however
-    indirectly). As :func:`_guards`, but those uses left out."""
-    need: dict[int, frozenset] = {s: _EMPTY for _, s in prog.outputs}
+def _guards(prog: _Program, differentiated: bool = False) -> dict[int, frozenset]:
+    """slot -> the conditions (their slots) every use of the node is under (empty: needed
+    unconditionally). Set from the uses, which come later: in reverse order. ``differentiated``:
+    only the uses that differentiate it count (not comparisons, logic, if-conditions); a node
+    then absent is never differentiated."""
+    guard: dict[int, frozenset] = {s: _EMPTY for _, s in prog.outputs}
     for s in reversed(prog.order):
-        if s not in need or prog.op[s] in _LOGIC:
+        if differentiated and (s not in guard or prog.op[s] in _LOGIC):
             continue
-        mine, r = need[s], prog.reads(s)
-        iez = prog.op[s] == _IEZ
+        mine = guard.setdefault(s, _EMPTY)
+        r = prog.reads(s)
+        taken = prog.op[s] == _IEZ and r[1] != r[0]     # c ? x : 0, x under c
         for j, d in enumerate(r):
-            if iez and j == 0 and r[1] != r[0]:
+            if differentiated and taken and j == 0:
                 continue                # the condition: no derivative
-            v = mine | {r[0]} if iez and j == 1 and r[1] != r[0] else mine
-            need[d] = v if d not in need else need[d] & v
-    return need
+            v = mine | {r[0]} if taken and j == 1 else mine
+            guard[d] = v if d not in guard else guard[d] & v
+    return guard
 
 
 #: unary operation -> (its operand's open domain, where values and derivatives are finite; a point
@@ -131,13 +119,13 @@ def _detached(op: int, x: ca.SX, n=None) -> ca.SX | None:
         inside = x != 0 if whole else x > 0
         edges = [(0.0, np.inf if n < 0 else 0.0 if n > 0 else 1.0)]
         f = lambda a: ca.constpow(a, n)        # noqa: E731
+        safe = 1.0
     elif op in _DOMAIN:
-        domain, _, edges = _DOMAIN[op]
+        domain, safe, edges = _DOMAIN[op]
         inside = domain(x)
         f = lambda a: ca.SX.unary(op, a)       # noqa: E731
     else:
         return None
-    safe = _DOMAIN[op][1] if op in _DOMAIN else 1.0
     outside = ca.SX(np.nan)
     for at, value in edges:
         outside = ca.if_else(x == at, value, outside)
@@ -156,7 +144,7 @@ def _rebuilt(prog: _Program, guard: dict, singular: dict, g: ca.Function, detach
     made: dict[tuple, ca.SX] = {}               # (conditions, operand, value): the operand guarded
     for s in prog.order:
         op, r = prog.op[s], prog.reads(s)
-        if s in detached and s in singular:
+        if s in detached:
             alone = _detached(op, w[r[0]], prog.consts.get(r[1]) if op == ca.OP_CONSTPOW else None)
             if alone is not None:
                 w[s] = alone

@@ -557,11 +557,7 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
         raise UnsupportedConstruct(f"cannot compile {model}: the Modelica front end (rumoca) stopped on an "
                                    f"internal error ({exc}); a construct of the model it cannot translate",
                                    where=str(prep.files[0]) if prep.files else None) from None
-    try:
-        dangling = dangling_connect(model, prep.docs, prep.search, ir["flat"].get("variables", {}))
-    except Exception:      # noqa: BLE001 - a check of text mcl did not parse: the compile stands
-        log.warning("%s: the connections were not checked against the classes", model, exc_info=True)
-        dangling = None
+    dangling = _dangling(model, prep, ir["flat"].get("variables", {}))
     if dangling:
         raise ModelicaError(f"cannot compile {model}: {dangling[1]}", where=dangling[0])
     roots = str(roots_dir())
@@ -836,13 +832,10 @@ def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> Model
         if found:
             return type(err)(f"cannot compile {model}: class {found[1]} of {ref[1]} is not found{found[2]}", where=found[0])
     counts = re.search(r"unbalanced model: (\d+) equations, (\d+) unknowns", str(exc))
-    if counts is not None:      # (a connection rumoca dropped leaves its connectors unbalanced)
-        try:
-            dangling = dangling_connect(model, prep.docs, prep.search)
-        except Exception:      # noqa: BLE001 - a hint only: rumoca's message stands
-            dangling = None
-        if dangling:
-            return type(err)(f"cannot compile {model}: {dangling[1]}", where=dangling[0])
+    # (a connection rumoca dropped leaves its connectors unbalanced)
+    dangling = _dangling(model, prep) if counts is not None else None
+    if dangling:
+        return type(err)(f"cannot compile {model}: {dangling[1]}", where=dangling[0])
     if counts is None or int(counts[1]) >= int(counts[2]):
         return err
     try:
@@ -859,6 +852,16 @@ def _with_suspects(err: ModelicaError, exc, model: str, prep: Prepared) -> Model
 _COMPLEX_HINT = ("; rumoca 0.10 translates an operator on Complex values (a + b, 2*a) as one equation short, "
                  "and mcl writes it as a call (Complex.'+'(a, b)) only in the statements it reads (not through "
                  "an array of arrays, nor in a function it cannot find): write the others with the calls")
+
+
+def _dangling(model: str, prep: Prepared, names=None) -> tuple[str, str] | None:
+    """:func:`.balance.dangling_connect`'s finding, or None where the check itself fails on
+    text mcl did not parse (the compile, or rumoca's message, stands)."""
+    try:
+        return dangling_connect(model, prep.docs, prep.search, names)
+    except Exception:      # noqa: BLE001 - a check only
+        log.warning("%s: the connections were not checked against the classes", model, exc_info=True)
+        return None
 
 
 def _in_complex(model: str, prep: Prepared) -> bool:
