@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 from .classes import LibraryClasses
-from .sources import masked
+from .sources import CONNECT, class_body, masked
 
 
 def unconnected_inputs(model: str, docs: dict[Path, tuple[str, set]], search) -> list[str]:
@@ -109,8 +109,6 @@ def unfound_class(model: str, instance: str, docs: dict[Path, tuple[str, set]], 
     return None
 
 
-#: a connect statement's two references (subscripts, for-loop indices included)
-_CONNECT = re.compile(r"\bconnect\s*\(\s*([A-Za-z_][\w.\[\]\s,:+\-*]*?)\s*,\s*([A-Za-z_][\w.\[\]\s:+\-*]*?)\s*\)\s*;")
 #: a redeclared component or model class (not a package: a medium changes no member)
 _REDECLARED = re.compile(r"\bredeclare\s+(?:(?:replaceable|final|each)\s+)*(\w+)")
 
@@ -135,7 +133,7 @@ def dangling_connect(model: str, docs: dict[Path, tuple[str, set]], search, name
     if any(m.group(1) not in ("package", "function", "type") for m in _REDECLARED.finditer(body)):
         return None
     lib = None
-    for m in _CONNECT.finditer(body):
+    for m in CONNECT.finditer(body):
         for ref in (m.group(1), m.group(2)):
             parts = re.sub(r"\s+", "", re.sub(r"\[[^\]]*\]", "", ref)).split(".")
             if len(parts) < 2 or (under is not None and ".".join(parts) in under):
@@ -150,14 +148,11 @@ def dangling_connect(model: str, docs: dict[Path, tuple[str, set]], search, name
 
 def _model_text(model: str, docs) -> tuple[Path, str, int, str] | None:
     """(file, its masked text, where the class body begins, the body) of ``model`` in the user's files."""
-    short = model.rsplit(".", 1)[-1]
-    head = re.compile(rf"(?:^|[\s;])(?:model|block|class)\s+{re.escape(short)}\b(?!\s*=)")
     for f in _user_files(docs):
         text = masked(f.read_text(encoding="utf-8", errors="replace"))
-        m = head.search(text)
-        if m:
-            end = re.search(rf"\bend\s+{re.escape(short)}\s*;", text[m.end():])
-            return f, text, m.end(), text[m.end(): m.end() + end.start()] if end else text[m.end():]
+        found = class_body(text, model.rsplit(".", 1)[-1])
+        if found:
+            return f, text, found[1], text[found[1]:found[2]]
     return None
 
 
@@ -179,7 +174,7 @@ def _no_member(lib: LibraryClasses, model: str, parts: list[str], under: set | N
             close = difflib.get_close_matches(part, members, n=1)
             hint = f" (did you mean {close[0]}?)" if close else ""
             return f"{'.'.join(parts[:k])} ({info.name}) has no member {part}{hint}"
-        info = _followed(lib, members[part])
+        info = lib.followed(members[part])
     return None
 
 
@@ -191,15 +186,3 @@ def _whole(lib: LibraryClasses, info, seen=None) -> bool:
     seen.add(info.name)
     bases = lib.bases(info)
     return len(bases) == len(info.extends) and all(_whole(lib, b, seen) for b in bases)
-
-
-def _followed(lib: LibraryClasses, info):
-    """A short class definition (``replaceable model HeatTransfer = Ideal... constrainedby ...``)
-    followed to the class it names; None where it names a built-in type or is not found."""
-    for _ in range(8):
-        if info is None or info.short is None:
-            return info
-        target = re.match(r"(?:(?:input|output|replaceable)\s+)*([A-Za-z_][\w.]*)", info.short)
-        scope = info.name.rsplit(".", 1)[0]
-        info = lib.resolve(target.group(1), scope) if target else None
-    return None

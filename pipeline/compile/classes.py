@@ -306,6 +306,17 @@ class LibraryClasses:
                 return self.resolve(name, scope, outer)
         return None
 
+    def followed(self, info: ClassInfo | None) -> ClassInfo | None:
+        """A short class definition (``record B = A(...)``, ``replaceable model HeatTransfer =
+        Ideal... constrainedby ...``) followed to the long class it names; None where it names a
+        built-in type or is not found."""
+        for _ in range(8):
+            if info is None or info.short is None:
+                return info
+            target = re.match(r"(?:(?:input|output|replaceable)\s+)*([A-Za-z_][\w.]*)", info.short)
+            info = target and self.resolve(target.group(1), info.name.rsplit(".", 1)[0])
+        return None
+
     def members(self, info: ClassInfo, seen=None):
         """Declarations of ``info`` and of what it extends: [(prefixes, ClassInfo|None, type, name, conditional)]."""
         seen = seen or set()

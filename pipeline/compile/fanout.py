@@ -17,10 +17,8 @@ import re
 
 from .classes import LibraryClasses, _strip
 from .components import _declared_type, _qualified
-from .sources import COMMENT_OR_STRING
+from .sources import COMMENT_OR_STRING, CONNECT, class_body
 
-_REF = r"[A-Za-z_][\w.]*(?:\[[^\]]*\])?(?:\.[A-Za-z_]\w*(?:\[[^\]]*\])?)*"
-_CONNECT = re.compile(rf"\bconnect\s*\(\s*({_REF})\s*,\s*({_REF})\s*\)")
 _SIGNAL = re.compile(r"^(input|output)\s+(Boolean|Integer)\b")
 
 
@@ -28,13 +26,10 @@ def rewritten_entry(model: str, text: str, entry: str, lib: LibraryClasses) -> s
     """The source of class ``entry`` in ``model``'s package: ``model``'s class (from ``text``,
     the file defining it) with its fanned-out discrete connections written as equations; None
     when it has none or its class is not found."""
-    short = model.split(".")[-1]
-    head = re.search(rf"(?:^|[\s;])((?:(?:partial|encapsulated|final)\s+)*)(model|block|class)\s+{short}\b(?!\s*=)",
-                     text)
-    end = head and re.search(rf"\bend\s+{short}\s*;", text[head.end():])
-    if not end:
+    found = class_body(text, model.split(".")[-1])
+    if found is None:
         return None
-    body = text[head.end(): head.end() + end.start()]
+    head, body = found[0], text[found[1]:found[2]]
     stripped = _strip(body)
     edits = _edits(body, stripped, model, lib)
     if not edits:
@@ -48,7 +43,7 @@ def rewritten_entry(model: str, text: str, entry: str, lib: LibraryClasses) -> s
 def _edits(body: str, stripped: str, model: str, lib: LibraryClasses) -> list[tuple[int, int, str]]:
     """(start, stop, equation) replacing each connect statement of a fanned-out signal set."""
     statements = [(m.group(1).replace(" ", ""), m.group(2).replace(" ", ""), m.start(), _statement_end(body, m.end()))
-                  for m in _CONNECT.finditer(body) if "//" not in body[body.rfind("\n", 0, m.start()) + 1: m.start()]]
+                  for m in CONNECT.finditer(body) if "//" not in body[body.rfind("\n", 0, m.start()) + 1: m.start()]]
     parent: dict[str, str] = {}
 
     def root(x):

@@ -163,9 +163,7 @@ def _member(lib, cls, name: str):
 def _fields(lib, cls) -> tuple[str, ...]:
     """The members a modification may set of ``cls`` (a class of ``lib``) where it is a record;
     none otherwise."""
-    while cls is not None and cls.short is not None:        # record B = A(...)
-        written = re.match(r"[\w.]+", cls.short)
-        cls = written and lib.resolve(written[0], cls.name.rpartition(".")[0])
+    cls = lib.followed(cls)         # record B = A(...)
     if cls is None or cls.kind != "record":
         return ()
     members = [n for prefixes, _, _, n, _ in lib.members(cls) if not prefixes & {"protected", "final", "constant"}]

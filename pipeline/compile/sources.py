@@ -105,6 +105,21 @@ def closing(text: str, k: int) -> int | None:
     return None
 
 
+#: a component reference as a connect statement writes it (subscripts kept)
+REFERENCE = r"[A-Za-z_][\w.]*(?:\[[^\]]*\])?(?:\.[A-Za-z_]\w*(?:\[[^\]]*\])?)*"
+#: a connect statement's two references
+CONNECT = re.compile(rf"\bconnect\s*\(\s*({REFERENCE})\s*,\s*({REFERENCE})\s*\)")
+
+
+def class_body(text: str, short: str) -> tuple[re.Match, int, int] | None:
+    """(its head, where its body starts, where it ends) of the first long definition of a
+    model, block or class named ``short`` in ``text``; None where there is none or no ``end``."""
+    head = re.search(rf"(?:^|[\s;])((?:(?:partial|encapsulated|final)\s+)*)(model|block|class)\s+{re.escape(short)}\b(?!\s*=)",
+                     text)
+    end = head and re.search(rf"\bend\s+{re.escape(short)}\s*;", text[head.end():])
+    return (head, head.end(), head.end() + end.start()) if end else None
+
+
 def statement_end(text: str, start: int) -> int | None:
     """The index just past the ``;`` that ends the statement starting at ``start`` (strings and
     brackets skipped), or None where the text ends first."""
