@@ -14,7 +14,7 @@ import re
 from pathlib import Path
 
 from .data import TimeSeries, as_timeseries
-from .errors import ConfigError, ModelicaError
+from .errors import ConfigError, DataError, ModelicaError
 from .outputs import check_input, special_kind
 from .registry import Registry
 from .simulation import SimulationOptions, SimulationResult
@@ -68,6 +68,12 @@ def simulate(model, inputs, params: dict | None = None, t_out=None,
     reg = reg or registry()
     if not hasattr(model, "input_names") or not hasattr(model, "output_names"):
         raise ConfigError(f"model: give a model from compile_model or load_model, not {type(model).__name__}")
+    if inputs is None and t_out is not None and not model.input_names:    # (a model that reads no inputs)
+        grid = _time_grid(t_out)
+        inputs = TimeSeries(grid, grid[:, None][:, :0], [])
+    elif inputs is None:
+        raise DataError("inputs: give the inputs " + ", ".join(model.input_names) if model.input_names else
+                        "inputs: the model reads none; give t_out, the times to simulate and record")
     if not isinstance(inputs, TimeSeries):
         inputs = as_timeseries(inputs, "inputs")
     inputs.select(model.input_names)          # a DataError naming the missing columns

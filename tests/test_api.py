@@ -79,6 +79,21 @@ def test_simulation_result_to_frame():
     assert list(frame.columns) == model.output_names and frame.index.name == "time" and len(frame) == 21
 
 
+def test_a_model_that_reads_no_inputs_is_simulated_on_the_times_asked(tmp_path):
+    """simulate(model, None, t_out=...): a free decay, x' = -x from 1, is exp(-t) at the times
+    asked; a model that reads inputs, or no times, is a one-line error."""
+    (tmp_path / "Decay.mo").write_text("model Decay\n  Real x(start = 1, fixed = true);\n"
+                                       "  output Real y = x;\nequation\n  der(x) = -x;\nend Decay;\n")
+    model = compile_model([tmp_path / "Decay.mo"], "Decay")
+    t = np.linspace(0, 2, 11)
+    run = simulate(model, None, t_out=t)
+    assert run.ok and np.allclose(run.outputs[:, 0], np.exp(-t), rtol=1e-4)
+    with pytest.raises(DataError, match="give t_out"):
+        simulate(model, None)
+    with pytest.raises(DataError, match="give the inputs"):
+        simulate(compile_model([], "MCL.Examples.CauerFilter"), None, t_out=t)
+
+
 @pytest.mark.slow
 def test_api_on_a_data_frame_equals_the_run_file(tmp_path, capsys):
     run = setup_run(tmp_path, cubic=0.3)
