@@ -510,6 +510,42 @@ REWRITES: dict[tuple[str, tuple[str, ...]], list[tuple[str, str]]] = {
 }
 
 
+# Modelica.Media.IdealGases.Common.SingleGasNasa (every single gas, DryAirNasa): rumoca resolves no
+# member of a record that is a package's constant (``data.R_s``: "unresolved Flat reference
+# `Common.SingleGasesData.N2.name`"), but passes such a record whole to a function. Each member
+# read (of the gas's data and of its fluid constants) through a function of one line that
+# returns it, defined beside DataRecord.
+_GAS_DATA = {"name": "String", "MM": "Real", "Hf": "Real", "H0": "Real", "Tlimit": "Real", "R_s": "Real"}
+_GAS_CONSTANTS = {"chemicalFormula": "String", "molarMass": "Real", "criticalTemperature": "Real",
+                  "criticalPressure": "Real", "criticalMolarVolume": "Real", "acentricFactor": "Real",
+                  "dipoleMoment": "Real", "hasCriticalData": "Boolean", "hasDipoleMoment": "Boolean"}
+_GAS_COMMON = "Modelica.Media.IdealGases.Common."
+
+
+def _gas_members(text: str) -> str:
+    """The single-gas media's reads of their constant records' members as calls (see above)."""
+    end = "end DataRecord;\n"
+    start, stop = text.find("partial package SingleGasNasa"), text.find("end SingleGasNasa;")
+    if text.count(end) != 1 or start < 0 or stop < start:
+        return text
+    fluid = "Modelica.Media.Interfaces.Types.IdealGas.FluidConstants"
+    getters = " ".join(
+        f"function mcl_{prefix}{m} input {cls} d; output {t} y; algorithm y := d.{m}; end mcl_{prefix}{m};"
+        for prefix, cls, members in (("", "DataRecord", _GAS_DATA), ("fc_", fluid, _GAS_CONSTANTS))
+        for m, t in members.items())
+    # (and nX given: rumoca sizes no array by nX = nS = size(substanceNames, 1) there)
+    body = text[start:stop].replace("     substanceNames={data.name},\n", "     substanceNames={data.name}, nX=1,\n")
+    body = re.sub(rf"\bdata\.({'|'.join(_GAS_DATA)})\b", rf"{_GAS_COMMON}mcl_\1(data)", body)
+    body = re.sub(rf"\bfluidConstants\[1\]\.({'|'.join(_GAS_CONSTANTS)})\b",
+                  rf"{_GAS_COMMON}mcl_fc_\1(fluidConstants[1])", body)
+    text = text[:start] + body + text[stop:]
+    return text.replace(end, f"end DataRecord; {getters} // mcl: members read through calls (overlays.py)\n")
+
+
+#: files rewritten by a function of their text
+TRANSFORMED = {("Modelica", ("Media", "IdealGases", "Common", "package.mo")): _gas_members}
+
+
 #: files whose component arrays rumoca reads only with their array modifiers written element by
 #: element (:func:`.bindings.distributed`): the RC elements of a battery cell take their R and C
 #: from the cell's record array; and fluid examples that heat their pipes through heat sources
@@ -533,7 +569,7 @@ SCALARISED = {("Modelica", ("Fluid",))}
 
 def files_of(library: str, directory: Path | None = None) -> list[tuple[str, ...]]:
     """The files of ``library`` (below its ``directory``) that a rewrite may change."""
-    units = [unit for lib, unit in [*REWRITES, *DISTRIBUTED, *PASSED] if lib == library]
+    units = [unit for lib, unit in [*REWRITES, *DISTRIBUTED, *PASSED, *TRANSFORMED] if lib == library]
     for lib, package in SCALARISED if directory is not None else ():
         if lib == library:
             units += [f.relative_to(directory).parts for f in sorted(directory.joinpath(*package).rglob("*.mo"))]
@@ -552,6 +588,8 @@ def rewritten(library: str, unit: tuple[str, ...], path: Path) -> str | None:
             text = text.replace(old, new)
     if (library, tuple(unit)) in DISTRIBUTED:
         text = distributed(text)
+    if (library, tuple(unit)) in TRANSFORMED:
+        text = TRANSFORMED[library, tuple(unit)](text)
     if (library, tuple(unit)) in PASSED:
         from .classes import LibraryClasses
 
@@ -583,7 +621,7 @@ def _classes(directory: str):
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
-VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + repr(sorted(PASSED)) + repr(sorted(SCALARISED))
+VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + Path(__file__).read_text() + repr(sorted(PASSED)) + repr(sorted(SCALARISED))
                           + Path(redeclares.__file__).read_text()
                           + Path(bindings.__file__).read_text() + complexops.MARK + Path(records.__file__).read_text()
                           + Path(scalarloops.__file__).read_text()).encode()).hexdigest()[:12]
