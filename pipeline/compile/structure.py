@@ -1823,7 +1823,9 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
                 together = None
             x0 = _nominal(together, xs0, dae) if together is not None else None
             if x0 is not None:
-                init_start = together
+                # (from the starts it was solved from: the relaxed ones, which the solve
+                # above did not meet, left a heating loop's tank empty at run time)
+                init_start, start = together, ca.Function("start", [P], [semi_start], ["p"], ["s"])
         return start, init_start, x0
 
     start, init_start, x0 = square(J)
@@ -1863,7 +1865,8 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
                 (start, init_start, _), worst = other, better
             if worst <= INIT_TOL:
                 break
-    return start, init_start, worst
+    # judged where a run starts: from the start values ``start`` gives
+    return start, init_start, _unmet(H, _nominal(init_start, np.array(start(dae.p_values)).ravel(), dae), dae, nh)
 
 
 def _linear_start(A: ca.MX, b: ca.MX, S: ca.MX) -> ca.MX:
