@@ -72,8 +72,9 @@ def simulate(model, inputs, params: dict | None = None, t_out=None,
         grid = _time_grid(t_out)
         inputs = TimeSeries(grid, grid[:, None][:, :0], [])
     elif inputs is None:
-        raise DataError("inputs: give the inputs " + ", ".join(model.input_names) if model.input_names else
-                        "inputs: the model reads none; give t_out, the times to simulate and record")
+        raise DataError(f"inputs: the model reads {', '.join(model.input_names)}: give them as a pandas DataFrame, "
+                        "a NumPy structured array, a mapping of columns, a TimeSeries or a CSV path"
+                        if model.input_names else "inputs: the model reads none; give t_out, the times to simulate and record")
     if not isinstance(inputs, TimeSeries):
         inputs = as_timeseries(inputs, "inputs")
     inputs.select(model.input_names)          # a DataError naming the missing columns

@@ -90,7 +90,7 @@ def test_a_model_that_reads_no_inputs_is_simulated_on_the_times_asked(tmp_path):
     assert run.ok and np.allclose(run.outputs[:, 0], np.exp(-t), rtol=1e-4)
     with pytest.raises(DataError, match="give t_out"):
         simulate(model, None)
-    with pytest.raises(DataError, match="give the inputs"):
+    with pytest.raises(DataError, match="the model reads u: give them"):
         simulate(compile_model([], "MCL.Examples.CauerFilter"), None, t_out=t)
 
 

@@ -593,7 +593,7 @@ def test_the_api_takes_frames_arrays_and_series_and_checks_like_the_cli(user):
     rec["time"], rec["u"] = t, np.sin(t)
     results = [mcl.api.simulate(model, x).outputs for x in (frame, rec, mcl.data.as_timeseries(frame))]
     assert np.allclose(results[0], results[1]) and np.allclose(results[0], results[2])
-    with pytest.raises(DataError, match="inputs: give a pandas DataFrame"):
+    with pytest.raises(DataError, match="inputs: the model reads u: give them as a pandas DataFrame"):
         mcl.api.simulate(model, None)
     with pytest.raises(DataError, match="missing column.* u; the data have: x"):
         mcl.api.simulate(model, pd.DataFrame({"time": t, "x": t}))
