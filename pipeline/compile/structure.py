@@ -1823,8 +1823,8 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
                 together = None
             x0 = _nominal(together, xs0, dae) if together is not None else None
             if x0 is not None:
-                # (from the starts it was solved from: the relaxed ones, which the solve
-                # above did not meet, left a heating loop's tank empty at run time)
+                # (a run starts from the start values it was solved from, not from relaxed
+                # ones the solve above did not meet)
                 init_start, start = together, ca.Function("start", [P], [semi_start], ["p"], ["s"])
         return start, init_start, x0
 
