@@ -69,8 +69,10 @@ def simulate(model, inputs, params: dict | None = None, t_out=None,
     if not hasattr(model, "input_names") or not hasattr(model, "output_names"):
         raise ConfigError(f"model: give a model from compile_model or load_model, not {type(model).__name__}")
     if inputs is None and t_out is not None and not model.input_names:    # (a model that reads no inputs)
+        import numpy as np
+
         grid = _time_grid(t_out)
-        inputs = TimeSeries(grid, grid[:, None][:, :0], [])
+        inputs = TimeSeries(grid, np.empty((len(grid), 0)), [])
     elif inputs is None:
         raise DataError(f"inputs: the model reads {', '.join(model.input_names)}: give them as a pandas DataFrame, "
                         "a NumPy structured array, a mapping of columns, a TimeSeries or a CSV path"

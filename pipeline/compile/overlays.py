@@ -621,7 +621,7 @@ def _classes(directory: str):
 
 #: the rewrites' own text: the library roots are keyed by it, so a changed rewrite never meets
 #: a root written by another
-VERSION = hashlib.sha256((repr(sorted(REWRITES.items())) + repr(sorted(DISTRIBUTED)) + Path(__file__).read_text() + repr(sorted(PASSED)) + repr(sorted(SCALARISED))
+VERSION = hashlib.sha256((Path(__file__).read_text()       # (REWRITES, TRANSFORMED and the sets are written here)
                           + Path(redeclares.__file__).read_text()
                           + Path(bindings.__file__).read_text() + complexops.MARK + Path(records.__file__).read_text()
                           + Path(scalarloops.__file__).read_text()).encode()).hexdigest()[:12]
