@@ -773,6 +773,26 @@ def test_a_stategraph_composite_step_is_suspended_and_resumed_on_its_transitions
     assert np.array_equal(active[~edges], expected[~edges])
 
 
+def test_a_stategraph_alternative_whose_timers_run_out_together_takes_its_first_branch(msl_path):
+    """StateGraph.Examples.ShowCompositeStep: the composite step's alternative has three
+    branches whose transitions wait 1 s each, so all three may fire at t = 2; the first has
+    priority (step3, which its transition leaves after 2 s). Two of the three timers were held
+    relations, banded at an event, and one was read live: only the third fired, and step4a was
+    entered instead."""
+    import mcl
+    from mcl.data import TimeSeries
+
+    model = mcl.compile_model([], "Modelica.StateGraph.Examples.ShowCompositeStep")
+    t = np.linspace(0.0, 15.0, 301)
+    res = mcl.simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), t_out=t)
+    assert res.ok, res.reason
+    active = {n: res.states[:, model.ode.x_names.index(f"compositeStep.{n}.localActive")]
+              for n in ("step3", "step4", "step4a")}
+    inside = ((t > 2.01) & (t < 3.99)) | ((t > 9.06) & (t < 10.99))
+    assert np.all(active["step3"][inside] == 1.0)
+    assert not active["step4"].any() and not active["step4a"].any()
+
+
 MAINS_LOAD = """
 model MainsLoad "a winding on the mains, as a phasor circuit of the MSL's quasi-static parts"
   import Modelica.Electrical.QuasiStatic.SinglePhase;

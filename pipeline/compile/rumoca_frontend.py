@@ -2136,7 +2136,7 @@ def _to_dae(ir: dict, located: Located, model: str, keep_calls: bool = False) ->
     # relations constant in time are read as the parameters make them (see _constant_in_time)
     steady = _constant_in_time(tr, met, residual, z, ca.vertcat(x, dx, u, d, d_pre, t, x_pre, z_pre, flags))
     keep = [rel for rel in _held(tr, met, ca.vertcat(x, dx, z), ca.vertcat(d, d_pre), residual, d_update[:n_d],
-                                 when_read, whole_values) if rel[0] not in steady]
+                                 when_read, whole_values, ca.vertcat(u, x_pre, z_pre)) if rel[0] not in steady]
     live = _Live(tr, keep, stay={str(h) for k, h, _, _, _ in tr.held if k in steady})
     residual, init_residual, d_update, x_reinit, asserts = map(
         live, (residual, init_residual, d_update, x_reinit, asserts))
@@ -2508,14 +2508,18 @@ def _settled(tr, steady: dict, p_all: ca.SX, resolved: ca.SX, p: ca.SX, p_values
 
 
 def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX, discrete: ca.SX,
-          when_read: set, whole: ca.SX) -> list:
+          when_read: set, whole: ca.SX, inputs: ca.SX) -> list:
     """(index, symbol, value at an event, crossing) of the relations held between events: those
     the continuous equations read that read an unknown, and those the discrete equations read
     outside when-conditions that read a continuous one (not asserts, nor when-conditions
     alone, nor time against a discrete variable: an event's iteration reads them there anyway).
     ``when_read``: the held relations (indices into ``tr.held``) the when-conditions read.
     ``whole``: the symbols of Integer and Boolean values (a relation between whole numbers is
-    read at an event as it is, see :func:`_integral`)."""
+    read at an event as it is, see :func:`_integral`). A relation on time, discrete values and
+    parameters alone (``inputs``: what else it may read) is held with no band either: it is
+    exact at an event as the relations read live there are (a StateGraph's three transitions
+    whose timers ran out together, two held and one live: banded, only the live one fired,
+    and the alternative took its third branch instead of its first)."""
     if not tr.held or not (residual.numel() or discrete.numel()):
         return []
     syms = ca.vertcat(*[h[1] for h in tr.held])
@@ -2524,10 +2528,15 @@ def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX
     unknowns = ca.vertcat(continuous, discrete_vars)
     ints = {v.element_hash() for v in ca.vertsplit(whole)}
 
-    def at_event(k, e):       # (an Integer's n > 0 at n = 0 is false, where the band kept it true)
+    moving = ca.vertcat(continuous, inputs)
+
+    def banded(k, e, cross):  # (an Integer's n > 0 at n = 0 is false, where the band kept it true)
         g = tr.relations[k]
-        return RELATION_TRUTH[tr.relation_ops[k]](g) if _integral(g, ints) else e  # (no band)
-    return [(k, h, at_event(k, e), cross) for j, (k, h, _, e, cross) in enumerate(tr.held) if k < met and (
+        if not ca.depends_on(g, moving):
+            return RELATION_TRUTH[tr.relation_ops[k]](g), g
+        return (RELATION_TRUTH[tr.relation_ops[k]](g) if _integral(g, ints) else e), cross
+
+    return [(k, h, *banded(k, e, cross)) for j, (k, h, _, e, cross) in enumerate(tr.held) if k < met and (
             j in by_residual and ca.depends_on(tr.relations[k], unknowns)
             or j in by_discrete and ca.depends_on(tr.relations[k], continuous))]
 
