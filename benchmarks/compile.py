@@ -9,6 +9,10 @@ alias elimination, index reduction, causalisation and the ODE functions. Also pr
 ladder of R-C sections from MSL parts at growing sizes (what grows faster than linearly).
 
     python benchmarks/compile.py [--msl DIR] [--json PATH] [--ladder 50,100,200]
+                                 [--also Modelica.Fluid.Examples.PumpingSystem,...]
+
+``--also``: more MSL examples after the ten (the fluid library's take minutes each: IF97 water's
+functions inlined at every volume).
 """
 from __future__ import annotations
 
@@ -110,10 +114,13 @@ def main():
     ap.add_argument("--msl", default=str(ROOT.parent / "shared" / "msl"))
     ap.add_argument("--json", default=None)
     ap.add_argument("--ladder", default="25,50,100,200", help="ladder sizes (empty: none)")
+    ap.add_argument("--also", default="", help="more MSL examples, comma-separated")
+    ap.add_argument("--only-also", action="store_true", help="the --also examples alone")
     args = ap.parse_args()
     rows = []
     print(f"{'model':58s} {'rumoca s':>9s} {'mcl s':>8s} {'ratio':>6s}  mcl stages (load/translate/aliases/structure)")
-    for name in EXAMPLES:
+    also = [m.strip() for m in args.also.split(",") if m.strip()]
+    for name in (also if args.only_also else EXAMPLES + also):
         ref, ours = run(RUMOCA, args.msl, name), run(MCL, args.msl, name)
         row = {"model": name, "rumoca_cpu": ref.get("cpu"), "mcl_cpu": ours.get("cpu"),
                "stages": ours.get("stages"), "error": ours.get("error") or ref.get("error")}

@@ -10,10 +10,18 @@ Derivatives, code generation and serialisation go through CasADi's own Switch.
 """
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
+
 import casadi as ca
 
 SMALLEST = 400          # instructions: a branch below this is left inline (a call costs about as much)
 _IEZ, _IN, _OUT, _CONST, _CALL = ca.OP_IF_ELSE_ZERO, ca.OP_INPUT, ca.OP_OUTPUT, ca.OP_CONST, ca.OP_CALL
+#: the switches made, by their branch's serialised form: a medium's function inlined at every
+#: pipe segment gives each block the same branches on other inputs (PumpingSystem: 123 blocks
+#: of 30 000-70 000 instructions, mostly IF97's regions), each made and split once
+_SWITCHES: OrderedDict = OrderedDict()
+_KEPT = 256
 
 
 def short_circuited(f: ca.Function, smallest: int = SMALLEST, depth: int = 0) -> ca.Function:
@@ -130,7 +138,7 @@ class _Program:
             if s in root_of:
                 c, i = root_of[s]
                 if c not in calls:
-                    calls[c] = self._branch(f"{name}_b{len(calls)}", c, frontier[c], w, smallest, depth)
+                    calls[c] = self._branch(c, frontier[c], w, smallest, depth)
                 return calls[c][i]
             return self.node(s, w, sx_in)
 
@@ -152,7 +160,7 @@ class _Program:
         r, op = self.ins[s], self.op[s]
         return ca.SX.unary(op, w[r[0]]) if len(r) == 1 else ca.SX.binary(op, w[r[0]], w[r[1]])
 
-    def _branch(self, name: str, c: int, frontier: list, w: dict, smallest: int, depth: int) -> list:
+    def _branch(self, c: int, frontier: list, w: dict, smallest: int, depth: int) -> list:
         """The branch under condition slot ``c``, called through a switch: its roots' values."""
         nodes, roots = self.big[c]
         f_in = ca.SX.sym("f", len(frontier))
@@ -160,13 +168,27 @@ class _Program:
         for s in nodes:
             local[s] = self.node(s, local, None)
         taken = ca.vertcat(*[local[self.ins[r][1]] for r in roots])
-        body = short_circuited(ca.Function(name, [f_in], [taken]), smallest, depth + 1)
-        zero = ca.Function(name + "_0", [f_in], [ca.SX.zeros(taken.sparsity())])
-        c_mx, f_mx = ca.MX.sym("c"), ca.MX.sym("f", len(frontier))
-        switch = ca.Function.if_else(name + "_if", body, zero)
-        call = ca.Function(name + "_call", [c_mx, f_mx], [switch(c_mx, f_mx)], {"never_inline": True})
+        call = _switch(f_in, taken, smallest, depth)
         got = call(w[c], ca.vertcat(*[w[s] for s in frontier]) if frontier else ca.SX(0, 1))
         return ca.vertsplit(got)
+
+
+def _switch(f_in: ca.SX, taken: ca.SX, smallest: int, depth: int) -> ca.Function:
+    """(c, f) -> c ? taken(f) : 0, the branch's own branches short-circuited; made once per
+    distinct branch (named by its form: equal branches are one function in generated code)."""
+    key = hashlib.sha1(ca.Function("branch", [f_in], [taken]).serialize().encode()).hexdigest()
+    if key in _SWITCHES:
+        _SWITCHES.move_to_end(key)
+        return _SWITCHES[key]
+    name = f"branch_{key[:16]}"
+    body = short_circuited(ca.Function(name, [f_in], [taken]), smallest, depth + 1)
+    zero = ca.Function(name + "_0", [f_in], [ca.SX.zeros(taken.sparsity())])
+    c_mx, f_mx = ca.MX.sym("c"), ca.MX.sym("f", f_in.numel())
+    switch = ca.Function.if_else(name + "_if", body, zero)
+    _SWITCHES[key] = ca.Function(name + "_call", [c_mx, f_mx], [switch(c_mx, f_mx)], {"never_inline": True})
+    while len(_SWITCHES) > _KEPT:
+        _SWITCHES.popitem(last=False)
+    return _SWITCHES[key]
 
 
 def _frontier(prog: _Program, nodes: list, roots: list) -> list:

@@ -28,8 +28,7 @@ import scipy.linalg
 
 from .dae import CSE_MIN, RELATION_TRUTH, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
-from . import dummy, homotopy
-from .branches import short_circuited
+from . import branches, dummy, homotopy
 from .hidden import revealed
 
 log = logging.getLogger(__name__)
@@ -332,7 +331,8 @@ def _unread_set(gs: list, rows, z_at: dict, read: set, z_guess: np.ndarray) -> N
 
 
 def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes: ca.SX | None = None,
-              guess: ca.SX | None = None, nominal: list[np.ndarray] | None = None, homotopic=None):
+              guess: ca.SX | None = None, nominal: list[np.ndarray] | None = None, homotopic=None,
+              short: bool = True):
     """Solve 0 = g(z, args) for z block by block; returns (Function args -> z, #nonlinear blocks,
     the Newton form or None). ``guess`` (a symbol like z): the loops' Newton methods start
     there, an argument after ``args`` (a run passes the last solution), instead of ``z_guess``;
@@ -354,7 +354,11 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
     ``nominal``: values of ``args`` (start values, parameters) where a loop's branches are
     compared (see :data:`HOLD_BRANCHES`). ``homotopic``: (g with homotopy's lambda, lambda):
     a loop that reads lambda starts where lambda leads it (its entries of ``z_guess`` set).
+    ``short``: the blocks' large if-branches evaluated only when taken (:mod:`.branches`),
+    for functions called at every step; an initial system's, solved a few times, is not worth
+    the rewriting (a heat exchanger's took 120 of its 400 CPU-s so).
     """
+    short_circuited = branches.short_circuited if short else (lambda f: f)
     sp = ca.jacobian_sparsity(g, z)     # structural: an unknown read in a condition counts
     blocks = _blocks(sp, z.numel())
     reads: dict[int, set] = {}          # row -> the unknowns it reads
@@ -1052,9 +1056,11 @@ def build_ode(dae: Dae, name: str = "model") -> Ode:
     return ode
 
 
-def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -> Ode:
+def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True, inner: bool = False) -> Ode:
     """The continuous model's ODE (``homotopic``: see :func:`homotopy.split`; ``select``: see
-    :func:`reduce_index`)."""
+    :func:`reduce_index`). ``inner``: the continuous part of a hybrid model, whose functions
+    :func:`_hybrid` wraps and expands again: left in MX (expanded here too, a heat
+    exchanger's took 47 of its 400 CPU-s)."""
     own, given = dae.residual, dae
     semi, state_to_orig, invariants, index = reduce_index(dae, select)
     moved = _preferred_states(dae, semi, state_to_orig)
@@ -1141,7 +1147,8 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
     crossings = None
     if dae.relations.numel() or nb:
         rel_sx = ca.Function("rel", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [dae.relations])
-        crossings = (compact if n_nl else expanded)(mk("zero", [ca.vertcat(rel_sx(XI, ZI, U, Pu, T, dXI), branch if nb else ca.MX(0, 1))]))
+        crossings = mk("zero", [ca.vertcat(rel_sx(XI, ZI, U, Pu, T, dXI), branch if nb else ca.MX(0, 1))])
+        crossings = compact(crossings) if n_nl and not inner else crossings
     y_all = probe_all[y_idx] if y_idx else ca.MX(0, 1)
     checks = ca.Function("checks", args, [y_all, absmax(g), absmax(inv)], names, ["y", "res", "drift"])
 
@@ -1163,7 +1170,7 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
         # make one rigid body, its rotation found from them by Newton's method): every
         # differentiated variable a state, the constraints checked as invariants
         log.debug("%s: no initial state in the selected states; the constraints dropped instead", name)
-        return _build(given, name, homotopic, select=False)
+        return _build(given, name, homotopic, select=False, inner=inner)
     if ng:
         init, start, init_start = (_guesses_ignored(f, ng) for f in (init, start, init_start))
     loops, given = _newton_functions(newton, args, names, sx_fun, probe_at, U, Pu, G, H)
@@ -1171,9 +1178,10 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True) -
     # loop's Newton solve expands too (a torn loop of one unknown), but as every iteration and
     # the fallback unrolled, all evaluated at each call, and its Jacobian through them all: the
     # Cauer example takes 21 CPU-s so, 12 with the loop solved in MX
-    if not n_nl:
-        ode, out, alg_res, drift, probe, init, checks, start, init_start = map(
-            expanded, (ode, out, alg_res, drift, probe, init, checks, start, init_start))
+    if not n_nl and not inner:
+        ode, out, alg_res, drift, probe, checks, crossings = expanded_together(
+            ode, out, alg_res, drift, probe, checks, crossings)
+        init, start, init_start = map(expanded, (init, start, init_start))
     return Ode(
         x_names=x_names, u_names=list(dae.u_names), p_names=list(dae.p_names),
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
@@ -1360,9 +1368,9 @@ def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
         exprs=exprs,     # (the values at the start: initial() true)
         d=ca.SX(0, 1), d_names=[], d_start=ca.SX(0, 1), d_pre=ca.SX(0, 1), x_pre=ca.SX(0, 1), z_pre=ca.SX(0, 1),
         flags=ca.SX(0, 1), d_update=ca.SX(0, 1), x_reinit=ca.SX(0, 1), asserts=ca.SX(0, 1))
-    inner = _build(aug, name, homotopic)
+    inner = _build(aug, name, homotopic, inner=True)
     if _demoted_read(dae, inner.x_names):
-        inner = _build(aug, name, homotopic, select=False)
+        inner = _build(aug, name, homotopic, select=False, inner=True)
     if nd and not retried and inner.init_unmet > INIT_TOL:
         # the relations held false leave the initial equations unmet or without a solution:
         # held as the start values make them instead, where that does better
@@ -1413,8 +1421,8 @@ def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
 
     expand = expanded if not inner.nonlinear_blocks else compact
 
-    def mk(fname, outs, out_names=("out",)):
-        return expand(ca.Function(fname, args, outs, io, list(out_names)))
+    def mk(fname, outs, out_names=("out",)):       # (expanded at the end: see ``together``)
+        return ca.Function(fname, args, outs, io, list(out_names))
 
     ode = mk("ode", [ca.vertcat(inner.ode(X, U, PA, T), ca.MX.zeros(nd))])
     probe_all = inner.probe(X, U, PA, T)
@@ -1459,6 +1467,10 @@ def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
         ["u", "p", "t", "s"], ["x0"]) if inner.init_start else None)
     zero = mk("zero", [inner.zero(X, U, PA, T)]) if inner.zero is not None else None
     asserts = mk("asserts", [probe_all[idx["assert"]]]) if hidden["assert"] else None
+    together = [ode, mk("out", [y]), mk("alg_res", [res]), mk("drift", [drift]), mk("probe", [probe_all[visible]]),
+                mk("checks", [y, res, drift], ("y", "res", "drift")), zero, asserts]
+    ode, out, alg_res, drift, probe, checks, zero, asserts = (
+        expanded_together(*together) if expand is expanded else [f if f is None else compact(f) for f in together])
     loops = given = None
     if inner.loops is not None:
         ZL = ca.MX.sym("zl", inner.given.size1_in(4))
@@ -1469,9 +1481,7 @@ def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
     return Ode(
         x_names=[*inner.x_names, *dae.d_names], u_names=list(dae.u_names), p_names=list(dae.p_names),
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
-        ode=ode, out=mk("out", [y]), alg_res=mk("alg_res", [res]), drift=mk("drift", [drift]),
-        init=expand(init), probe=mk("probe", [probe_all[visible]]),
-        checks=mk("checks", [y, res, drift], ("y", "res", "drift")),
+        ode=ode, out=out, alg_res=alg_res, drift=drift, init=expand(init), probe=probe, checks=checks,
         probe_names=[names[j] for j in visible], index=inner.index, nonlinear_blocks=inner.nonlinear_blocks,
         time_events=tuple(dae.time_events), zero=zero,
         start=expand(start) if start is not None else None,
@@ -1482,7 +1492,7 @@ def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
                 "relation_ops": list((inner.events or {}).get("relation_ops", dae.relation_ops)),
                 **({"branches": nb} if nb else {})},
         loops=loops, given=given,
-        solved=mk("solved", [inner.solved(X, U, PA, T)]) if ng else None, guess0=inner.guess0,
+        solved=expand(mk("solved", [inner.solved(X, U, PA, T)])) if ng else None, guess0=inner.guess0,
         init_unmet=inner.init_unmet,
     )
 
@@ -1537,6 +1547,28 @@ def expanded(f: ca.Function) -> ca.Function:
         return merged(f.expand())
     except RuntimeError:  # holds a rootfinder or a run-time linear solver
         return fused(f)
+
+
+def expanded_together(*fs: ca.Function | None) -> list:
+    """``expanded`` of each of ``fs`` (None stays None), functions of the same arguments that
+    read the same solve (x', the outputs, the checks, every variable): expanded and merged once,
+    what they share computed once in each (one by one, a heat exchanger's seven took 41 CPU-s,
+    most of it merging the same subexpressions again)."""
+    live = [f for f in fs if f is not None]
+    try:
+        args = live[0].mx_in()
+        whole = ca.Function("together", args, [o for f in live for o in f.call(args)]).expand()
+    except (IndexError, RuntimeError):      # (none, or one holds a solve: each as it expands)
+        return [None if f is None else expanded(f) for f in fs]
+    sx = whole.sx_in()
+    outs = whole.call(sx)
+    outs = ca.cse(outs) if whole.n_instructions() >= CSE_MIN else outs
+    made = []
+    for f in live:
+        made.append(ca.Function(f.name(), sx, outs[:f.n_out()], f.name_in(), f.name_out()))
+        outs = outs[f.n_out():]
+    made = iter(made)
+    return [None if f is None else next(made) for f in fs]
 
 
 def merged(f: ca.Function) -> ca.Function:
@@ -1895,7 +1927,7 @@ def _joint(joint, rows: list, pins: list, S: ca.MX, U: ca.MX, P: ca.MX, T: ca.MX
     empty = ca.SX(0, 1)
     residual = ca.vertcat(g, hard[rows] if rows else empty, xs[pins] - s[pins] if pins else empty)
     guess = np.concatenate([_start_values(xs, dae), _start_values(zs, dae)])
-    solve, _, _ = causalise(residual, w, [s, up, t], guess)
+    solve, _, _ = causalise(residual, w, [s, up, t], guess, short=False)
     return ca.Function("init_start", [U, P, T, S], [solve(S, ca.vertcat(U, P), T)[:nx]],
                        ["u", "p", "t", "s"], ["x0"])
 
