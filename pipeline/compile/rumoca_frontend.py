@@ -2508,7 +2508,7 @@ def _settled(tr, steady: dict, p_all: ca.SX, resolved: ca.SX, p: ca.SX, p_values
 
 
 def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX, discrete: ca.SX,
-          when_read: set, whole: ca.SX, inputs: ca.SX) -> list:
+          when_read: set, whole: ca.SX, varying: ca.SX) -> list:
     """(index, symbol, value at an event, crossing) of the relations held between events: those
     the continuous equations read that read an unknown, and those the discrete equations read
     outside when-conditions that read a continuous one (not asserts, nor when-conditions
@@ -2516,10 +2516,10 @@ def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX
     ``when_read``: the held relations (indices into ``tr.held``) the when-conditions read.
     ``whole``: the symbols of Integer and Boolean values (a relation between whole numbers is
     read at an event as it is, see :func:`_integral`). A relation on time, discrete values and
-    parameters alone (``inputs``: what else it may read) is held with no band either: it is
-    exact at an event as the relations read live there are (a StateGraph's three transitions
-    whose timers ran out together, two held and one live: banded, only the live one fired,
-    and the alternative took its third branch instead of its first)."""
+    parameters alone (not ``varying`` either: the inputs and pre() values) is held with no
+    band: it is exact at an event as the relations read live there are (a StateGraph's three
+    transitions whose timers ran out together, two held and one live: banded, only the live
+    one fired, and the alternative took its third branch instead of its first)."""
     if not tr.held or not (residual.numel() or discrete.numel()):
         return []
     syms = ca.vertcat(*[h[1] for h in tr.held])
@@ -2528,7 +2528,7 @@ def _held(tr, met: int, continuous: ca.SX, discrete_vars: ca.SX, residual: ca.SX
     unknowns = ca.vertcat(continuous, discrete_vars)
     ints = {v.element_hash() for v in ca.vertsplit(whole)}
 
-    moving = ca.vertcat(continuous, inputs)
+    moving = ca.vertcat(continuous, varying)
 
     def banded(k, e, cross):  # (an Integer's n > 0 at n = 0 is false, where the band kept it true)
         g = tr.relations[k]

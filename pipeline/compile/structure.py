@@ -1557,12 +1557,11 @@ def expanded_together(*fs: ca.Function | None) -> list:
     live = [f for f in fs if f is not None]
     try:
         args = live[0].mx_in()
-        whole = ca.Function("together", args, [o for f in live for o in f.call(args)]).expand()
+        whole = merged(ca.Function("together", args, [o for f in live for o in f.call(args)]).expand())
     except (IndexError, RuntimeError):      # (none, or one holds a solve: each as it expands)
         return [None if f is None else expanded(f) for f in fs]
     sx = whole.sx_in()
     outs = whole.call(sx)
-    outs = ca.cse(outs) if whole.n_instructions() >= CSE_MIN else outs
     made = []
     for f in live:
         made.append(ca.Function(f.name(), sx, outs[:f.n_out()], f.name_in(), f.name_out()))
