@@ -90,6 +90,8 @@ HOLD_COMPARISONS_MAX = 6
 #: a loop of several unknowns with at most this many comparisons that Newton's method and its
 #: fallback do not solve is solved on each combination of its branches (:func:`_branchwise`)
 BRANCHES_MAX = 2
+#: a pivot that reads more modes than this is not tried in each of them (2^n), nor divided by
+MODES_TRIED_MAX = 6
 
 
 @dataclass
@@ -399,8 +401,8 @@ def causalise(g: ca.SX, z: ca.SX, args: list[ca.SX], z_guess: np.ndarray, modes:
         linear = not ca.depends_on(A, zk) and not any(stepped[r] & own for r in rows)
         torn, residual, whole = ([], None, None) if linear else _tear([gs[r] for r in rows], [zs[c] for c in cols])
         if len(torn) > 1 and guess is not None and nominal is not None and HOLD_BRANCHES is not False:
-            torn, residual, whole = _torn_to_one(gk, zk, zprev, rows, cols, gs, zs, ca.vertcat(z, running), args, nominal,
-                                                 (torn, residual, whole))
+            torn, residual, whole = _torn_to_one(gk, zk, zprev, rows, cols, gs, zs, ca.vertcat(z, running), modes,
+                                                 args, nominal, (torn, residual, whole))
         sol_free = None
         if linear:
             b = ca.substitute(gk, zk, ca.SX.zeros(zk.sparsity()))
@@ -602,23 +604,34 @@ def _replay(f: ca.Function, inputs: list, held: ca.SX | None = None, match: list
     return outs, cmps, cross, ops
 
 
-def _torn_to_one(gk, zk, zprev, rows, cols, gs, zs, moving, args, nominal, torn):
+def _torn_to_one(gk, zk, zprev, rows, cols, gs, zs, moving, modes, args, nominal, torn):
     """A loop with branches (an amplifier's limits) torn to one unknown, where dividing by
     coefficients of parameters alone (a resistance), nonzero at their values, makes it so:
-    only such a loop is held on its branch (see :func:`causalise`); else ``torn`` as it is."""
+    only such a loop is held on its branch (see :func:`causalise`); else ``torn`` as it is.
+    A coefficient that reads the model's modes (``modes``: held relations, set at events) must
+    be nonzero in each of them: a check valve's s > 0 made s's coefficient 1 shut and 0 open,
+    and the loop, torn at its start (shut), divided by 0 once the valve opened."""
     par = ca.vertcat(zprev, *args)
     if not _replay(ca.Function("rows", [zk, par], [gk]), [zk, par])[1]:
         return torn
     values = [np.ravel(a) for a in nominal]
+    mode_list = ca.vertsplit(modes) if modes is not None else []
 
     def steady(coef):
         if ca.depends_on(coef, moving):
             return False
-        try:
-            v = float(ca.Function("coef", args[:len(nominal)], [coef])(*values))
-        except RuntimeError:
+        read = [m for m in mode_list if ca.depends_on(coef, m)]
+        if len(read) > MODES_TRIED_MAX:
             return False
-        return math.isfinite(v) and abs(v) > 0
+        for combo in itertools.product((0.0, 1.0), repeat=len(read)):
+            at = ca.substitute(coef, ca.vertcat(*read), ca.DM(combo)) if read else coef
+            try:
+                v = float(ca.Function("coef", args[:len(nominal)], [at])(*values))
+            except RuntimeError:
+                return False
+            if not (math.isfinite(v) and abs(v) > 0):
+                return False
+        return True
     loose = _tear([gs[r] for r in rows], [zs[c] for c in cols], steady)
     return loose if len(loose[0]) == 1 else torn
 
