@@ -62,7 +62,7 @@ AFTER_TIME_EVENT = 1024 * np.finfo(float).eps
 MAX_EVENTS = 100000
 EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
 #: a call ends at most this many times as far as the time in which a relation on the states
-#: reaches zero on its trend (see _Hybrid.reach); after an event, calls grow from one point
+#: reaches zero on its trend (see _Hybrid.reach); after an event, calls grow from two points
 REACH = 2.0
 ZOOM_TOL = 1e-7           # a crossing on the states located to this fraction of the interval it was seen in
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
@@ -831,7 +831,7 @@ class _Hybrid:
         self.span = None          # how far past its start a call goes: EVENT_SPAN x the events' spacing
         self.last_event = None
         self.recent = None        # (times, relations) read last since the last event (see reach)
-        self.grow = None          # points of the next call since the last event: 1, 2, 4, ...
+        self.grow = None          # points of the next call since the last event: 2, 4, 8, ...
 
     def ticks(self, t0, t1) -> dict:
         """Clock tick instants in [t0, t1] -> the clocks ticking there."""
