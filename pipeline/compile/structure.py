@@ -230,15 +230,16 @@ def _nonlinear(invariants: ca.SX, known: ca.SX) -> bool:
 def _preferred_states(dae: Dae, semi: dict, state_to_orig: ca.Function) -> Dae:
     """``dae`` with the variables declared ``stateSelect = prefer`` (or ``always``) made states,
     as Modelica tools select them, where its semi-explicit form ``semi`` solves them in a
-    nonlinear loop: a fluid volume's mass and energy are what its balances differentiate, but
-    its pressure and enthalpy are preferred, and from mass and energy they are a Newton solve
-    through the medium's functions at every evaluation. Where that loop decides events, IF97
-    water's phase (an Integer) followed the iterate and the event iteration never settled;
-    where it does not, a pump's 0.05 l of water kept its mass as a state, and its pressure
-    from that mass through the bulk modulus made the run stiff (PumpingSystem: 411 000 steps
-    in 5 s, against 234). As states they are integrated; index reduction differentiates the
+    nonlinear loop that decides events or solves more than one of them (a medium's state):
+    a fluid volume's mass and energy are what its balances differentiate, but its pressure
+    and enthalpy are preferred, and from mass and energy they are a Newton solve through the
+    medium's functions at every evaluation. Where that loop decides events, IF97 water's
+    phase (an Integer) followed the iterate and the event iteration never settled; where it
+    does not, a pump's 0.05 l of water kept its mass as a state, and its pressure from that
+    mass through the bulk modulus made the run stiff (PumpingSystem: 411 000 steps in 5 s,
+    against 234). As states they are integrated; index reduction differentiates the
     equations that give mass and energy from them, and those equations hold as invariants.
-    ``dae`` itself where no preferred variable is in a nonlinear loop."""
+    ``dae`` itself where no preferred variable is in such a loop."""
     # (a preferred variable may be an alias of the algebraic unknown that stands for it)
     z_at = {v.element_hash(): i for i, v in enumerate(ca.vertsplit(dae.z))}
     exprs = [dae.exprs.get(n) for n in dae.preferred]
@@ -255,12 +256,17 @@ def _preferred_states(dae: Dae, semi: dict, state_to_orig: ca.Function) -> Dae:
     if not in_semi or ca.sprank(sp) < zs.numel():
         return dae
     gs, ws = ca.vertsplit(g), ca.vertsplit(zs)
+    # what the event iteration reads: the relations, the discrete variables' updates
+    switching = ca.vertcat(dae.relations, *[e for n, e in dae.exprs.items() if n.startswith("$update[")])
     looped = set()
     for rows, cols in _blocks(sp, zs.numel()):
         mine = [in_semi[c] for c in cols if c in in_semi]
         if mine:
             gk, wk = ca.vertcat(*[gs[r] for r in rows]), ca.vertcat(*[ws[c] for c in cols])
-            if ca.depends_on(ca.jacobian(gk, wk), wk):
+            # (one preferred variable alone in a loop that decides no event is left to it: a
+            # coil's flux, solved through the saturating law a discovery puts into its core,
+            # made a state beside the current, and that law's fit failed)
+            if ca.depends_on(ca.jacobian(gk, wk), wk) and (len(mine) > 1 or ca.depends_on(switching, wk)):
                 looped.update(mine)
     if not looped:
         return dae
