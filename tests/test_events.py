@@ -105,13 +105,14 @@ def test_a_bouncing_ball_reinitialises_at_each_impact(tmp_path):
     model = compile_model([tmp_path / "Ball.mo"], "Ball")
     assert model.ode.discrete == 3                   # n, vimp and the memory of h < 0
     t = np.linspace(0, 3, 301)
+    # (at the default rtol of 1e-6, h is off by 1e-4 after ten bounces and an impact moves by
+    # 5e-5 s, to the other side of an output point now and then; at 1e-8, by 1.2e-6 m)
     res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []),
-                                  options=None)
+                                  options=SimulationOptions(rtol=1e-8))
     assert res.ok, res.reason
     h, n, vimp = _ball_truth(t)
     names = model.ode.x_names
-    # (the solver's rtol is 1e-6: 1.0e-4 measured over the 3 s, 1.2e-6 at rtol 1e-8)
-    assert np.max(np.abs(res.states[:, names.index("h")] - h)) < 2e-4
+    assert np.max(np.abs(res.states[:, names.index("h")] - h)) < 1e-5
     assert np.array_equal(res.states[:, names.index("n")], n)
     # the when-clause sees v before the reinit (MLS 8.3.6)
     assert np.allclose(res.states[:, names.index("vimp")], vimp, atol=1e-4)
