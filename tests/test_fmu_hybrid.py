@@ -71,10 +71,11 @@ def at(res, times):
     return last[k]
 
 
-def event_times(res, name):
-    """Where Model Exchange recorded a jump of ``name`` (twice the same instant)."""
+def event_times(res, name, least: float = 0.0):
+    """Where Model Exchange recorded a jump of ``name`` (twice the same instant) by more than
+    ``least``."""
     t, v = res["time"], res[name]
-    return t[np.flatnonzero((t[1:] == t[:-1]) & (v[1:] != v[:-1]))]
+    return t[np.flatnonzero((t[1:] == t[:-1]) & (np.abs(v[1:] - v[:-1]) > least))]
 
 
 def test_discrete_variables_are_exported_as_discrete_reals(fmus):
@@ -292,7 +293,9 @@ def test_msl_hybrid_examples_agree_with_the_in_process_engine(msl_fmus, name):
             ref = own.states[:, model.ode.x_names.index(n)]
             near = np.zeros(len(t), dtype=bool)
             if kind == "ModelExchange" and n in discrete:
-                events = event_times(res, n)
+                # (a jump within the values' tolerance is none to match: a period's mean
+                # current computed again at a tick, equal to rounding in steady state)
+                events = event_times(res, n, 1e-3 * max(np.ptp(ref), 1e-12))
                 jumps = np.flatnonzero(ref[1:] != ref[:-1])
                 for te in events:               # inside a step where the in-process value jumps
                     assert np.any((t[jumps] - slack <= te) & (te <= t[jumps + 1] + slack)), (n, te)
