@@ -1015,10 +1015,11 @@ class _Hybrid:
                 rest = rest[:ahead]
             if ahead != 0:
                 # events come every so often: a call far past the next one is thrown away (an
-                # arc's every 5 ms, calls to the end of a 1 s chunk: 160 steps an event)
+                # arc's every 5 ms, calls to the end of a 1 s chunk: 160 steps an event); and
+                # a call stops short of a crossing its relations' trend shows (see reach)
                 end = min(t0 + self.span if self.span is not None else np.inf, self.reach(t0))
-                rest = rest[:max(1, min(int(np.searchsorted(t_int[rest], end, side="right")), self.grow or len(rest)))]
-            if ahead != 0:
+                n = min(int(np.searchsorted(t_int[rest], end, side="right")), self.grow or len(rest))
+                rest = rest[:max(1, n)]
                 try:
                     rest = rest[:plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched)]
                 except (_SolverFailed, _Diverged):
