@@ -167,6 +167,10 @@ class _SolverFailed(_Stop):
     first looks for a crossing it ran into (:meth:`_Hybrid.probe`)."""
 
 
+class _Frugal(_SolverFailed):
+    """A frugal call (see :meth:`_Plan.advance`) needed more steps than it was given."""
+
+
 class _Unlimited:
     """A budget that never stops a run (the outputs of one that already failed)."""
 
@@ -500,8 +504,10 @@ class _Plan:
         clock = Stopwatch(0, cpu=True)
         try:
             xf = integ(x0=x, p=np.concatenate([p, self.tail, [ta, tb - ta]]))["xf"]
-        finally:
-            budget.record(_nsteps(integ), clock.elapsed)
+        except RuntimeError as exc:
+            budget.record(_spent(integ, steps, exc), clock.elapsed)
+            raise
+        budget.record(_nsteps(integ), clock.elapsed)
         xf = np.array(xf)
         self.within_bound(xf[: self.nx], ta + (tb - ta) * hop_grid(points, to_end))
         return xf.ravel() if points == 1 else xf
@@ -518,12 +524,15 @@ class _Plan:
                     raise
                 tb = 0.5 * (ta + tb)
 
-    def advance(self, x, t0, idx, p, budget: _Budget, traj, one_call: bool = False) -> int:
+    def advance(self, x, t0, idx, p, budget: _Budget, traj, one_call: bool = False,
+                frugal: bool = False) -> int:
         """Integrate from ``x`` at ``t0`` over the grid points ``idx``, filling ``traj``; each
         call sized by the budget. A call that runs out of its reduced steps ends the run.
         ``one_call``: return after the first call that succeeds (the loops' guesses are
         renewed at each call, and the relations read along it must be read with its own).
-        Returns the number of points filled."""
+        ``frugal``: each point at most the steps the points need so far (:meth:`_Budget._need`),
+        a call that needs more a failure (a model with events: its caller looks for a crossing
+        before it gives a call all its steps). Returns the number of points filled."""
         pos, failed, tight = 0, None, 1.0       # (tight: the tolerances' factor of a call retried)
         while pos < len(idx) and not (one_call and pos):
             budget.check(t0)
@@ -533,6 +542,9 @@ class _Plan:
                                else budget.call_size(1, 1.0))
             if failed is not None and steps <= failed:
                 raise budget.stop(bound, t0)
+            short = frugal and failed is None and budget.points and budget._need() < steps
+            if short:
+                steps = budget._need()
             if self.followed_points is not None:
                 # a call is thrown away from where its loops' guesses led it to another solution,
                 # and past there the solver meets jumps (a four-bar linkage whose calls each ran
@@ -550,7 +562,9 @@ class _Plan:
             try:
                 xf = np.array(integ(x0=x, p=np.concatenate([p, self.tail, extra]))["xf"])
             except RuntimeError as exc:
-                budget.record(_nsteps(integ) or steps, clock.elapsed)   # its steps, the rate measured
+                budget.record(_spent(integ, steps, exc), clock.elapsed)   # its steps, the rate measured
+                if short and "TOO_MUCH_WORK" in str(exc):
+                    raise _Frugal(f"more than {steps} solver steps a point before t = {self.t_int[sub[-1]]:g}") from None
                 if bound is not None and "TOO_MUCH_WORK" in str(exc):
                     failed = steps
                     continue
@@ -799,6 +813,14 @@ def _nsteps(integ) -> int:
         return 0
 
 
+def _spent(integ, steps: int, exc: Exception) -> int:
+    """The solver steps a call that failed with ``exc`` took, given ``steps`` a point. Out of
+    steps, CVODES's count is of the points it reached, not the allowance spent on the last (24
+    where 20 000 took 13 s, and the rate measured from them 500x too slow)."""
+    done = _nsteps(integ)
+    return max(done, steps) if "TOO_MUCH_WORK" in str(exc) else done or steps
+
+
 class _Hybrid:
     """Events of one plan: relations watched between grid points, time events and clock ticks,
     and the event iteration of a hybrid model's discrete variables.
@@ -1021,7 +1043,8 @@ class _Hybrid:
                 n = min(int(np.searchsorted(t_int[rest], end, side="right")), self.grow or len(rest))
                 rest = rest[:max(1, n)]
                 try:
-                    rest = rest[:plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched)]
+                    filled, crossing = self.called(plan, x0, t0, rest, p, budget, traj)
+                    rest = rest if crossing is not None else rest[:filled]
                 except (_SolverFailed, _Diverged):
                     crossing = self.probe(plan, x0, t0, rest, p, budget, traj) if self.zero is not None else None
                     if crossing is None or self.count >= MAX_EVENTS:
@@ -1055,6 +1078,21 @@ class _Hybrid:
             else:
                 pos += j
                 t0, x0 = t_star, x_star
+
+    def called(self, plan, x0, t0, rest, p, budget, traj) -> tuple[int, tuple | None]:
+        """(points filled, a crossing) of :meth:`_Plan.advance` over ``rest``, frugal first
+        where a failure can be looked into: a call run past a crossing into a branch held
+        beyond it fails there, with all its steps (20 000 a point: a check valve's took 12 s);
+        frugal, it fails within the steps the points have needed so far, and :meth:`probe`
+        finds the crossing. Where it finds none, the call again with all its steps."""
+        if self.zero is not None:
+            try:
+                return plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched, frugal=True), None
+            except _Frugal:
+                crossing = self.probe(plan, x0, t0, rest, p, budget, traj)
+                if crossing is not None:
+                    return 0, crossing
+        return plan.advance(x0, t0, rest, p, budget, traj, one_call=plan.branched), None
 
     def settle(self, plan, x, p, t, t_next, budget):
         """(time, state) of the event at ``t`` once its iteration settles. Where its discrete

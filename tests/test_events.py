@@ -1428,3 +1428,32 @@ def test_a_pump_check_valve_in_a_loop_opens_and_shuts_as_its_law_says(tmp_path):
     level = res.states[:, model.ode.x_names.index("level")]
     assert np.ptp(level) > 1.0
     np.testing.assert_allclose(level, ref, atol=1e-5)
+
+
+def test_a_call_that_runs_past_a_crossing_fails_soon_and_the_crossing_is_found(tmp_path):
+    """The pump of the check-valve model held at speed, then slowed: the valve's relation has
+    no trend to see while the speed is steady, so a long call starts and runs past the
+    crossing with the valve held open, where the open branch has no solution. That call must
+    fail within the steps its points have needed so far (frugal), not after 20 000 a point
+    (13 s for this model), and the crossing be found after it: the valve shuts once, when the
+    pump's head no longer lifts the water, as SciPy's integration of the same law says."""
+    from scipy.integrate import solve_ivp
+
+    (tmp_path / "CheckValve.mo").write_text(CHECK_VALVE)
+    model = compile_model([tmp_path / "CheckValve.mo"], "CheckValve.Tank")
+    t = np.linspace(0, 40, 401)
+    speed = np.interp(t, [0, 5, 15, 40], [1100, 1100, 600, 600])
+    res = CasadiEngine().simulate(model, TimeSeries(t, speed[:, None], ["N"]))
+    assert res.ok, res.reason
+    assert res.steps < 5000, res.steps            # no call given 20 000 steps to fail
+    assert len(res.switches) == 1
+    level = res.states[:, model.ode.x_names.index("level")]
+    # shut: the level falls by its leak alone, 0.01 level / (A rho) a second
+    shut = res.switches[0].time
+    after = t > shut + 0.5
+    ref = solve_ivp(lambda tt, y: [-0.01 * y[0] / (2 * (1000 - 0.1 * y[0]))], (t[after][0], 40),
+                    [level[after][0]], t_eval=t[after], rtol=1e-10, atol=1e-12).y[0]
+    np.testing.assert_allclose(level[after], ref, atol=1e-6)
+    # it shuts where the pump's zero-flow head, (N/1200)^2 100, falls to the lift, 60 + level
+    n_shut = np.interp(shut, t, speed)
+    assert abs((n_shut / 1200) ** 2 * 100 - 60 - np.interp(shut, t, level)) < 1e-3

@@ -2075,6 +2075,17 @@ def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8)
     if not pairs:
         return None
     r_idx, c_idx, coef = (np.array(v) for v in zip(*pairs))
+    # each ``ok`` is a solve of the whole initial system (2 s for a drum boiler's, failing):
+    # a sweep that lands where one was tried before has reached its fixed point, and the
+    # sweeps after it would too
+    seen = [np.array(start, float)]          # (the caller's own try)
+
+    def tried(x) -> bool:
+        if any(np.allclose(x, y, rtol=1e-12, atol=0.0, equal_nan=True) for y in seen):
+            return True
+        seen.append(x.copy())
+        return False
+
     residual = (lambda x: np.array(H(x, dae.u_start, dae.p_values, 0.0)).ravel())     # noqa: E731
     x = np.array(start, float)
     for _ in range(sweeps):
@@ -2086,6 +2097,8 @@ def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8)
         finite = np.isfinite(step)
         x = x.copy()
         x[c_idx[finite]] -= step[finite]
+        if tried(x):
+            break
         if ok(x):
             return x
     # Jacobi sweeps move every state from the others' old values: along a mechanism's chain of
@@ -2112,6 +2125,8 @@ def _relaxed(start, H, jac_s, at, fixed: set, dae, x_names, ok, sweeps: int = 8)
                         x[c] -= step
         except RuntimeError:
             return None
+        if tried(x):
+            break
         if ok(x):
             return x
     return None
