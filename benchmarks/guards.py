@@ -29,9 +29,10 @@ from mcl.data import TimeSeries
 name, stop, sens, guarded, repeat = sys.argv[1], float(sys.argv[2]), json.loads(sys.argv[3]), sys.argv[4] == "on", int(sys.argv[5])
 if not guarded:
     rf.guard_branches = lambda dae: dae
-t = time.process_time()
+from mcl.compile.isolation import cpu_seconds
+t = cpu_seconds()
 model = mcl.compile_model([], name, libraries=[sys.argv[6]])
-out = {"compile": time.process_time() - t}
+out = {"compile": cpu_seconds() - t}
 grid = np.linspace(0.0, stop, 201)
 none = TimeSeries(grid, np.zeros((len(grid), 0)), [])
 def cpu(**kw):

@@ -30,6 +30,7 @@ from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
 from .redeclares import lifted, lifted_tree, tree_copy
 from .scalarloops import scalarised
+from .isolation import ChildCrash, in_child
 from .dae import (RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, guard_branches, merge_common, resolve_parameters,
                   rows_reading)
 from .sources import KEYWORDS, first_line
@@ -515,45 +516,13 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
                                 f"defines '{top}'", where=str(paths[0]) if paths else None)
     real = prep.virtual
 
-    def work():
-        subset = prep.whole != prep.roots
-        try:
-            compiled = _compile(prep, prep.roots, model, libs)
-        except rumoca.RumocaError as first:
-            if not subset:
-                raise
-            try:
-                compiled, subset = _compile(prep, prep.whole, model, libs), False   # a file the subset missed
-            except rumoca.RumocaError:
-                # the whole libraries lack the subset's Complex rewrites: their error is the
-                # subset's own unless the subset's names a class it did not find
-                if _MISSED.search(str(first)):
-                    raise
-                raise first from None
-        flat = compiled.to_dict("flat")
-        records = _bound_records(prep, flat, libs)
-        if records:
-            try:
-                compiled = _compile(prep, prep.whole if not subset else prep.roots, model, libs, records)
-                flat = compiled.to_dict("flat")
-            except rumoca.RumocaError as exc:
-                log.warning("%s: records passed whole may have lost array members or sizes (rumoca refused "
-                            "them written as modifiers: %s)", model, _first_line(exc))
-        again = _outer_restated(prep, prep.whole if not subset else prep.roots, model, flat)
-        if again is not None:
-            compiled, flat = again, again.to_dict("flat")
-        ir = compiled.to_dict("dae")
-        ir["library_subset"] = subset
-        # the flat stage names each equation's origin (a component's own equation, a flow
-        # sum, a connection) and each variable's flow prefix: the model's component structure
-        ir["flat"] = flat
-        return ir
-
+    prep.roots      # (the library subset made here, in this process's settings, and sent with prep)
     try:
-        ir = in_rumoca_thread(work)
+        # (in a child process: rumoca keeps each model's memory for the life of its process)
+        ir = in_child(in_rumoca_thread, _work, prep, model, libs)
     except rumoca.RumocaError as exc:
         raise _with_suspects(_located_error(exc, model, prep.files, real), exc, model, prep) from None
-    except FrontEndCrash as exc:
+    except (FrontEndCrash, ChildCrash) as exc:
         raise UnsupportedConstruct(f"cannot compile {model}: the Modelica front end (rumoca) stopped on an "
                                    f"internal error ({exc}); a construct of the model it cannot translate",
                                    where=str(prep.files[0]) if prep.files else None) from None
@@ -563,6 +532,44 @@ def load_ir(paths, model: str, libraries=(), prepared: Prepared | None = None) -
     roots = str(roots_dir())
     located = Located({f[0]: (real.get(f[1]) or _real(f[1], roots), f[2]) for f in ir.get("source_map", {}).get("files", [])})
     return ir, located
+
+
+def _work(prep: Prepared, model: str, libs: dict) -> dict:
+    """rumoca's IR of ``model`` (run in the rumoca thread of a child process: see load_ir)."""
+    import rumoca
+
+    subset = prep.whole != prep.roots
+    try:
+        compiled = _compile(prep, prep.roots, model, libs)
+    except rumoca.RumocaError as first:
+        if not subset:
+            raise
+        try:
+            compiled, subset = _compile(prep, prep.whole, model, libs), False   # a file the subset missed
+        except rumoca.RumocaError:
+            # the whole libraries lack the subset's Complex rewrites: their error is the
+            # subset's own unless the subset's names a class it did not find
+            if _MISSED.search(str(first)):
+                raise
+            raise first from None
+    flat = compiled.to_dict("flat")
+    records = _bound_records(prep, flat, libs)
+    if records:
+        try:
+            compiled = _compile(prep, prep.whole if not subset else prep.roots, model, libs, records)
+            flat = compiled.to_dict("flat")
+        except rumoca.RumocaError as exc:
+            log.warning("%s: records passed whole may have lost array members or sizes (rumoca refused "
+                        "them written as modifiers: %s)", model, _first_line(exc))
+    again = _outer_restated(prep, prep.whole if not subset else prep.roots, model, flat)
+    if again is not None:
+        compiled, flat = again, again.to_dict("flat")
+    ir = compiled.to_dict("dae")
+    ir["library_subset"] = subset
+    # the flat stage names each equation's origin (a component's own equation, a flow
+    # sum, a connection) and each variable's flow prefix: the model's component structure
+    ir["flat"] = flat
+    return ir
 
 
 def _bound_records(prep: Prepared, flat: dict, libs: dict[str, Path]) -> tuple:

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..compile.isolation import cpu_seconds
 from ..data import TimeSeries
 from ..errors import ConfigError, DataError
 from ..executor import TaskFailed
@@ -531,14 +532,6 @@ def _say_head(head: TimeSeries, whole: TimeSeries) -> None:
 def refitted(names: list[str], active) -> list[str]:
     """A law's parameters that are fitted: the active ones but its first (the scale it is held at)."""
     return [n for k, (n, on) in enumerate(zip(names, active)) if on and k > 0]
-
-
-def cpu_seconds() -> float:
-    """CPU seconds of this process and its finished workers (user + system)."""
-    import resource
-
-    own, kids = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
-    return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
 def _how_sure(report: dict, found: list[dict], base: Base, spec, train, validate, outputs, whole) -> None:
