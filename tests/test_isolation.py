@@ -97,3 +97,19 @@ def test_loading_models_does_not_grow_the_callers_memory(monkeypatch):
 def _resident_mb() -> float:
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 1e6
+
+
+def test_a_process_forked_from_a_caller_uses_a_server_of_its_own():
+    """A pool's worker forked from a caller that has a server: its requests must not go down
+    the parent's pipes (their replies would cross), nor break the parent's exchange."""
+    import multiprocessing
+
+    assert in_child(_divides, 8, 2) == 4                  # (the caller's server running)
+    ctx = multiprocessing.get_context("fork")
+    with ctx.Pool(2) as pool:
+        assert pool.starmap(_in_child_divides, [(9, 3), (10, 5), (12, 4)]) == [3, 2, 3]
+    assert in_child(_divides, 9, 3) == 3
+
+
+def _in_child_divides(a, b):
+    return in_child(_divides, a, b)

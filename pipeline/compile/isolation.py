@@ -34,6 +34,7 @@ PRELOAD = "mcl.compile.rumoca_frontend"
 _SERVER: subprocess.Popen | None = None
 _LOCK = threading.Lock()
 _CHILDREN_CPU = 0.0       # CPU seconds of the server's children, as the server measured them
+_INHERITED: list = []     # a parent's server, in a process forked from it (see _forgotten)
 
 
 def cpu_seconds() -> float:
@@ -96,6 +97,20 @@ def _server() -> subprocess.Popen:
                                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
                                    start_new_session=True)
     return _SERVER
+
+
+def _forgotten() -> None:
+    """In a process forked from this one (a pool's worker): the server and its pipes are the
+    parent's, and the lock may have been held by another thread; this process starts its own
+    server if it needs one. The parent's is kept referenced, never closed or collected here:
+    its pipes' buffers would be flushed into the parent's exchange."""
+    global _SERVER, _LOCK
+    if _SERVER is not None:
+        _INHERITED.append(_SERVER)
+    _SERVER, _LOCK = None, threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forgotten)
 
 
 def _stop() -> None:
