@@ -60,14 +60,12 @@ RUMOCA_FILE = textwrap.dedent("""
 """)
 
 MCL = textwrap.dedent("""
-    import json, os, resource, sys, time
+    import json, os, sys, time
     os.environ["MODELICAPATH"] = sys.argv[1]
     os.environ["MCL_NO_COMPILE_CACHE"] = "1"
-    def cpu():      # (rumoca's work is done in a child process: its CPU time counts)
-        kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-        return time.process_time() + kids.ru_utime + kids.ru_stime
-    t = cpu()
+    t = time.process_time()
     import mcl
+    from mcl.compile.isolation import cpu_seconds as cpu   # (rumoca's work, in a child process, counts)
     from mcl.compile import rumoca_frontend, structure
     from mcl.compile.dae import eliminate_aliases
     stages = {}

@@ -38,10 +38,23 @@ _INHERITED: list = []     # a parent's server, in a process forked from it (see 
 
 
 def cpu_seconds() -> float:
-    """CPU seconds of this process, of the children it has waited for and of the work done in
-    the server's children: what a benchmark of a compile counts."""
+    """CPU seconds of this process, of the children it has waited for, and of the compile
+    server and the work done in its children: what a benchmark of a compile counts."""
     kids = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return time.process_time() + kids.ru_utime + kids.ru_stime + _CHILDREN_CPU
+    return time.process_time() + kids.ru_utime + kids.ru_stime + _CHILDREN_CPU + _server_cpu()
+
+
+def _server_cpu() -> float:
+    """The running server's own CPU seconds (its start, its imports, its forks; once it has
+    been stopped and waited for, they are among this process's children's)."""
+    if _SERVER is None or _SERVER.poll() is not None:
+        return 0.0
+    try:
+        with open(f"/proc/{_SERVER.pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return 0.0
 
 
 class ChildCrash(Exception):
