@@ -113,3 +113,16 @@ def test_a_process_forked_from_a_caller_uses_a_server_of_its_own():
 
 def _in_child_divides(a, b):
     return in_child(_divides, a, b)
+
+
+def test_a_server_that_cannot_start_leaves_the_work_in_process(monkeypatch, caplog):
+    """An interpreter that cannot run the server (here one that exits at once): the work is
+    done in the caller's process, with a warning, not refused."""
+    from mcl.compile import isolation
+
+    monkeypatch.setattr(isolation, "_SERVER", None)
+    monkeypatch.setattr(isolation, "_BROKEN", False)
+    monkeypatch.setattr(isolation.sys, "executable", "/bin/false")
+    assert in_child(_divides, 10, 4) == 2.5
+    assert isolation._BROKEN and "stopped" in caplog.text
+    monkeypatch.setattr(isolation, "_SERVER", None)

@@ -35,6 +35,7 @@ _SERVER: subprocess.Popen | None = None
 _LOCK = threading.Lock()
 _CHILDREN_CPU = 0.0       # CPU seconds of the server's children, as the server measured them
 _INHERITED: list = []     # a parent's server, in a process forked from it (see _forgotten)
+_BROKEN = False           # the server stopped by itself: the work is done in process
 
 
 def cpu_seconds() -> float:
@@ -64,7 +65,8 @@ class ChildCrash(Exception):
 def forks() -> bool:
     """Whether work goes to a child: on Linux (macOS's system libraries do not promise to work
     in a forked child; Windows does not fork), unless the caller said not."""
-    return sys.platform.startswith("linux") and bool(sys.executable) and not os.environ.get(IN_PROCESS)
+    return (sys.platform.startswith("linux") and bool(sys.executable) and not _BROKEN
+            and not os.environ.get(IN_PROCESS))
 
 
 def in_child(fn, *args):
@@ -83,10 +85,16 @@ def in_child(fn, *args):
             server.stdin.flush()
             cpu, n = struct.unpack("<dQ", _exactly(server.stdout, 16))
             reply = _exactly(server.stdout, n)
-        except BaseException as exc:      # (interrupted, or the server gone: a new one next time)
+        except (OSError, EOFError):
+            # the server itself ended (it only forks: it did not start, or its interpreter
+            # cannot import mcl): the work is done here from now on, as where there is none
             _stop()
-            if isinstance(exc, (OSError, EOFError)):
-                raise ChildCrash("the compile server ended") from None
+            global _BROKEN
+            _BROKEN = True
+            logging.getLogger(__name__).warning("the compile server stopped; rumoca runs in this process from now on")
+            return fn(*args)
+        except BaseException:             # (interrupted: a new server next time)
+            _stop()
             raise
     _CHILDREN_CPU += cpu
     kind, value, records = pickle.loads(reply)
