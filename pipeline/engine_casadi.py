@@ -225,7 +225,7 @@ class _Budget:
         if self.points and rest:
             if budget is not None:
                 work = max(budget - self.steps, 1)
-                need = self._need()
+                need = self.need()
                 if n_points * need <= work:
                     return n_points, need, "work"
                 return self._split(n_points, work, "work")
@@ -235,7 +235,7 @@ class _Budget:
             return self._split(n_points, max(budget - self.steps, 1), "work")
         return self._split(n_points, by_time, "time")
 
-    def _need(self) -> int:
+    def need(self) -> int:
         """Steps per point of a call whose points may each take 8x the steps the points have
         taken so far (at least 64, at most the cap; a power of 2: few integrators are built)."""
         return _pow2(min(max(64, int(8 * self.steps / self.points)), self.opts.max_steps))
@@ -249,7 +249,7 @@ class _Budget:
         if per_point >= 256:          # fewer steps per point: most calls need few
             return n_points, _pow2(min(per_point, cap)), bound
         if self.points:
-            need = self._need()
+            need = self.need()
             if allowed >= 2 * need:   # (each call is a restart: small steps, fresh Jacobians)
                 return min(n_points, int(allowed // need)), need, bound
         n = max(1, int(allowed // min(cap, 4096)))
@@ -530,7 +530,7 @@ class _Plan:
         call sized by the budget. A call that runs out of its reduced steps ends the run.
         ``one_call``: return after the first call that succeeds (the loops' guesses are
         renewed at each call, and the relations read along it must be read with its own).
-        ``frugal``: each point at most the steps the points need so far (:meth:`_Budget._need`),
+        ``frugal``: each point at most the steps the points need so far (:meth:`_Budget.need`),
         a call that needs more a failure (a model with events: its caller looks for a crossing
         before it gives a call all its steps). Returns the number of points filled."""
         pos, failed, tight = 0, None, 1.0       # (tight: the tolerances' factor of a call retried)
@@ -542,9 +542,9 @@ class _Plan:
                                else budget.call_size(1, 1.0))
             if failed is not None and steps <= failed:
                 raise budget.stop(bound, t0)
-            short = frugal and failed is None and budget.points and budget._need() < steps
+            short = frugal and failed is None and budget.points and budget.need() < steps
             if short:
-                steps = budget._need()
+                steps = budget.need()
             if self.followed_points is not None:
                 # a call is thrown away from where its loops' guesses led it to another solution,
                 # and past there the solver meets jumps (a four-bar linkage whose calls each ran
