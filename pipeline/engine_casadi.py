@@ -542,9 +542,9 @@ class _Plan:
                                else budget.call_size(1, 1.0))
             if failed is not None and steps <= failed:
                 raise budget.stop(bound, t0)
-            short = frugal and failed is None and budget.points and budget.need() < steps
-            if short:
-                steps = budget.need()
+            need = budget.need() if frugal and failed is None and budget.points else steps
+            short = need < steps
+            steps = min(steps, need)
             if self.followed_points is not None:
                 # a call is thrown away from where its loops' guesses led it to another solution,
                 # and past there the solver meets jumps (a four-bar linkage whose calls each ran

@@ -27,7 +27,8 @@ import time
 
 #: set (to anything) to do the work in the caller's process
 IN_PROCESS = "MCL_RUMOCA_IN_PROCESS"
-#: the stack and recursion limit results are pickled with (see _dumps)
+#: the stack and recursion limit of work that recurses as deep as a model's source nests (a
+#: 5000-term sum): rumoca's thread (rumoca_frontend.in_rumoca_thread), pickling its IR (_dumps)
 DEEP_STACK, DEEP_LIMIT = 1 << 29, 1_000_000
 #: what the server imports once, for every child
 PRELOAD = "mcl.compile.rumoca_frontend"
@@ -74,22 +75,20 @@ def in_child(fn, *args):
     process's environment and working directory: its value, or its exception raised here, with
     the log records it made handled here as if made here (``fn`` and ``args`` pickled: ``fn`` a
     module's function). A child that ends without either raises :class:`ChildCrash`."""
-    global _CHILDREN_CPU
+    global _CHILDREN_CPU, _BROKEN
     if not forks():
         return fn(*args)
     request = pickle.dumps((fn, args, dict(os.environ), os.getcwd()), protocol=pickle.HIGHEST_PROTOCOL)
     with _LOCK:                           # (one request at a time on the server's pipes)
         server = _server()
         try:
-            server.stdin.write(struct.pack("<Q", len(request)) + request)
-            server.stdin.flush()
-            cpu, n = struct.unpack("<dQ", _exactly(server.stdout, 16))
-            reply = _exactly(server.stdout, n)
+            _write_fd(server.stdin.fileno(), struct.pack("<Q", len(request)) + request)
+            cpu, n = struct.unpack("<dQ", _read_fd(server.stdout.fileno(), 16))
+            reply = _read_fd(server.stdout.fileno(), n)
         except (OSError, EOFError):
             # the server itself ended (it only forks: it did not start, or its interpreter
             # cannot import mcl): the work is done here from now on, as where there is none
             _stop()
-            global _BROKEN
             _BROKEN = True
             logging.getLogger(__name__).warning("the compile server stopped; rumoca runs in this process from now on")
             return fn(*args)
@@ -115,7 +114,7 @@ def _server() -> subprocess.Popen:
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
         # (a session of its own: a Ctrl-C at the terminal reaches the caller, which stops it)
         _SERVER = subprocess.Popen([sys.executable, "-c", f"from {__name__} import serve; serve()"],
-                                   stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env,
+                                   stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0, env=env,
                                    start_new_session=True)
     return _SERVER
 
@@ -140,13 +139,6 @@ def _stop() -> None:
         _SERVER.kill()
         _SERVER.wait()
         _SERVER = None
-
-
-def _exactly(stream, n: int) -> bytes:
-    data = stream.read(n)
-    if len(data) != n:
-        raise EOFError
-    return data
 
 
 def serve() -> None:
@@ -187,8 +179,10 @@ def _child(request: bytes, write: int) -> None:
     try:
         import faulthandler
 
+        from ..executor import die_with_parent
+
         faulthandler.disable()            # (a crash is the caller's error to report, in one line)
-        _die_with_parent()
+        die_with_parent()                 # (a caller that stops a compile stops the server, and this)
         fn, args, env, cwd = pickle.loads(request)
         os.environ.clear()
         os.environ.update(env)
@@ -211,18 +205,6 @@ def _child(request: bytes, write: int) -> None:
         code = 1
     finally:
         os._exit(code)
-
-
-def _die_with_parent() -> None:
-    """Be killed when the server dies (Linux PR_SET_PDEATHSIG): a caller that stops a compile
-    stops the server, and its child with it."""
-    try:
-        import ctypes
-        import signal
-
-        ctypes.CDLL(None).prctl(1, signal.SIGKILL)
-    except (OSError, AttributeError):
-        pass
 
 
 def _read_fd(fd: int, n: int | None) -> bytes:

@@ -30,7 +30,7 @@ from .classes import LibraryClasses
 from .records import bound_records, copied, declared_records
 from .redeclares import lifted, lifted_tree, tree_copy
 from .scalarloops import scalarised
-from .isolation import ChildCrash, in_child
+from .isolation import DEEP_STACK, ChildCrash, in_child
 from .dae import (RELATION_TRUTH, Dae, check_balance, fold_initial_parameters, guard_branches, merge_common, resolve_parameters,
                   rows_reading)
 from .sources import KEYWORDS, first_line
@@ -261,9 +261,8 @@ def _restatable(docs: dict[Path, tuple[str, set]], records=()) -> bool:
 
 
 VIRTUAL = "/mcl-source"
-#: rumoca's parser and passes recurse as deep as the source nests (a 5000-term sum): they run
-#: in one thread of their own with a large stack (rumoca's objects may not change thread)
-RUMOCA_STACK = 1 << 29
+#: rumoca's parser and passes recurse as deep as the source nests: they run in one thread of
+#: their own with a large stack (isolation.DEEP_STACK; rumoca's objects may not change thread)
 _RUMOCA_POOL = None
 
 
@@ -274,7 +273,7 @@ def in_rumoca_thread(fn, *args):
 
     global _RUMOCA_POOL
     if _RUMOCA_POOL is None:
-        old = threading.stack_size(RUMOCA_STACK)
+        old = threading.stack_size(DEEP_STACK)
         try:
             pool = ThreadPoolExecutor(1, thread_name_prefix="rumoca")
             pool.submit(lambda: None).result()      # the thread starts now, with the large stack
