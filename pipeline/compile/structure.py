@@ -26,7 +26,7 @@ import casadi as ca
 import numpy as np
 import scipy.linalg
 
-from .dae import CSE_MIN, RELATION_TRUTH, Dae, steps_read
+from .dae import CSE_MIN, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
 from . import branches, dummy, homotopy
 from .hidden import revealed
@@ -1308,7 +1308,7 @@ def _guesses_fixed(f: ca.Function, guess0: np.ndarray) -> ca.Function:
 
 def _same_kind(f: ca.Function, g: ca.Function) -> ca.Function:
     """``g``, a rewrapping of ``f``, expanded where ``f`` was SX."""
-    return expanded(g) if f.is_a("SXFunction") else g
+    return rewrapped(g) if f.is_a("SXFunction") else g
 
 
 def _guesses_ignored(f: ca.Function, ng: int) -> ca.Function:
@@ -1495,8 +1495,8 @@ def _hybrid(dae: Dae, name: str, homotopic=None, retried: bool = False) -> Ode:
         ZL = ca.MX.sym("zl", inner.given.size1_in(4))
         xdot_g, probe_g = inner.given(X, U, PA, T, ZL)
         loops = ca.Function("loops", args, [inner.loops(X, U, PA, T)], io, ["zl"])
-        given = expanded(ca.Function("given", [*args, ZL], [ca.vertcat(xdot_g, ca.MX.zeros(nd)), probe_g[visible]],
-                                     [*io, "zl"], ["xdot", "probe"]))
+        given = rewrapped(ca.Function("given", [*args, ZL], [ca.vertcat(xdot_g, ca.MX.zeros(nd)), probe_g[visible]],
+                                      [*io, "zl"], ["xdot", "probe"]))
     return Ode(
         x_names=[*inner.x_names, *dae.d_names], u_names=list(dae.u_names), p_names=list(dae.p_names),
         y_names=list(dae.outputs), p_values=dae.p_values.copy(), u_start=dae.u_start.copy(),
@@ -1524,8 +1524,9 @@ def _relations_at_start(dae: Dae) -> Dae | None:
     from the values during the initialisation. Tried only where false leaves them unmet."""
     from .rumoca_frontend import HELD_PREFIX
 
-    held = [(j, int(n[len(HELD_PREFIX):])) for j, n in enumerate(dae.d_names) if n.startswith(HELD_PREFIX)]
-    held = [(j, k) for j, k in held if k < dae.relations.numel() and dae.relation_ops[k] in RELATION_TRUTH]
+    # (each read from its value at an event, in ``d_update``: the relations' own list keeps only
+    # those on the unknowns, so a held relation's number is not its place there)
+    held = [j for j, n in enumerate(dae.d_names) if n.startswith(HELD_PREFIX)]
     if not held:
         return None
     # (in the parameters, inputs and time, as the discrete starts are: taken at each run's start;
@@ -1533,10 +1534,9 @@ def _relations_at_start(dae: Dae) -> Dae | None:
     values = ca.vertcat(dae.x_start, dae.z_start, ca.SX.zeros(dae.dx.numel()), dae.d_start, dae.d_start,
                         dae.x_start, ca.SX.zeros(dae.z_pre.numel()), ca.DM(np.eye(1, dae.flags.numel()).ravel()))
     syms = ca.vertcat(dae.x, dae.z, dae.dx, dae.d, dae.d_pre, dae.x_pre, dae.z_pre, dae.flags)
-    g = ca.substitute(ca.vertcat(*[dae.relations[k] for _, k in held]), syms, values)
-    truth = ca.vertcat(*[RELATION_TRUTH[dae.relation_ops[k]](g[n]) for n, (_, k) in enumerate(held)])
+    truth = ca.substitute(ca.vertcat(*[dae.d_update[j] for j in held]), syms, values)
     new = ca.vertsplit(dae.d_start)
-    for n, (j, _) in enumerate(held):
+    for n, j in enumerate(held):
         new[j] = truth[n]
     new = ca.vertcat(*new)
     at = ca.Function("d0", [dae.p, dae.u, dae.t], [dae.d_start, new])
@@ -1565,6 +1565,16 @@ def expanded(f: ca.Function) -> ca.Function:
     try:
         return merged(f.expand())
     except RuntimeError:  # holds a rootfinder or a run-time linear solver
+        return fused(f)
+
+
+def rewrapped(f: ca.Function) -> ca.Function:
+    """``expanded`` for a wrapper that calls functions already expanded and merged once each:
+    not merged again, which would find nothing (a room of moist air's 420 000 nodes, 2 s each
+    time, twice in its compile and once at each load from the cache)."""
+    try:
+        return f.expand()
+    except RuntimeError:    # holds a rootfinder or a run-time linear solver
         return fused(f)
 
 
