@@ -1338,13 +1338,7 @@ def test_a_relation_held_between_events_starts_as_the_start_values_make_it(tmp_p
     at the start, shut the weir: no steady state (q_in = 0), h stayed at its start value 1 and
     drained to 0.45 after the first event. As the start value makes it (1 >= 0.2, spilling),
     the steady state is found and kept."""
-    (tmp_path / "Weir.mo").write_text(WEIR)
-    model = compile_model([tmp_path / "Weir.mo"], "WeirTank", libraries=[msl_path()])
-    assert model.ode.init_unmet <= 1e-9
-    t = np.linspace(0, 5, 6)
-    res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
-    assert res.ok, res.reason
-    assert np.max(np.abs(res.states[:, 0] - 0.45)) < 1e-9
+    model, res = _weir_started(tmp_path, WEIR, "WeirTank")
     assert np.max(np.abs(res.output("q_out") - 0.1)) < 1e-9
     # the FMU starts there too (its discrete starts are the same expressions)
     from fmpy import simulate_fmu
@@ -1356,22 +1350,29 @@ def test_a_relation_held_between_events_starts_as_the_start_values_make_it(tmp_p
     assert np.max(np.abs(out["h"] - 0.45)) < 1e-9 and np.max(np.abs(out["q_out"] - 0.1)) < 1e-9
 
 
-
 @needs_msl()
 def test_a_held_relation_after_one_constant_in_time_starts_as_the_start_values_make_it(tmp_path):
     """The weir again, behind a relation on a variable the parameters fix (c > 0.3, read once at
     the parameters' values and left out of the relations watched): the weir's relation is then
     the first watched but the second met, and was read at the wrong place (past the end: never
     started as its start value makes it; the tank drained from 1 to 0.45)."""
-    (tmp_path / "Weir.mo").write_text(WEIR.replace("WeirTank", "WeirBehind").replace(
+    _weir_started(tmp_path, WEIR.replace("WeirTank", "WeirBehind").replace(
         'SI.Height h(start = 1) "level";', 'SI.Height h(start = 1) "level";\n  Real c;\n  Real q;').replace(
-        "A*der(h) = q_in - q_out;", "c = 2*h_weir;\n  q = if c > 0.3 then q_in else 0.5*q_in;\n  A*der(h) = q - q_out;"))
-    model = compile_model([tmp_path / "Weir.mo"], "WeirBehind", libraries=[msl_path()])
+        "A*der(h) = q_in - q_out;", "c = 2*h_weir;\n  q = if c > 0.3 then q_in else 0.5*q_in;\n  A*der(h) = q - q_out;"),
+        "WeirBehind")
+
+
+def _weir_started(tmp_path, text: str, name: str):
+    """(the model, its run over 5 s) of a weir tank ``text``, checked to start and stay at its
+    steady level 0.45."""
+    (tmp_path / "Weir.mo").write_text(text)
+    model = compile_model([tmp_path / "Weir.mo"], name, libraries=[msl_path()])
     assert model.ode.init_unmet <= 1e-9
     t = np.linspace(0, 5, 6)
     res = CasadiEngine().simulate(model, TimeSeries(t, np.zeros((len(t), 0)), []), options=None)
     assert res.ok, res.reason
     assert np.max(np.abs(res.states[:, 0] - 0.45)) < 1e-9
+    return model, res
 
 CHECK_VALVE = """
 package CheckValve
