@@ -239,9 +239,6 @@ def _signal_name(number: int) -> str:
 def _dumps(obj) -> bytes:
     """``obj`` pickled in a thread with a large stack, as deep as it nests: pickling recurses
     once per level, and the IR of a 5000-term sum nests 5000 deep (unpickling does not recurse)."""
-    import sys
-    import threading
-
     out: list = []
 
     def work():

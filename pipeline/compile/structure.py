@@ -1562,16 +1562,15 @@ def composed_checks(out: ca.Function, alg_res: ca.Function, drift: ca.Function) 
 
 
 def expanded(f: ca.Function) -> ca.Function:
-    try:
-        return merged(f.expand())
-    except RuntimeError:  # holds a rootfinder or a run-time linear solver
-        return fused(f)
+    """``f`` in SX, its repeated subexpressions merged (see :func:`rewrapped`, :func:`merged`)."""
+    return merged(rewrapped(f))
 
 
 def rewrapped(f: ca.Function) -> ca.Function:
-    """``expanded`` for a wrapper that calls functions already expanded and merged once each:
-    not merged again, which would find nothing (a room of moist air's 420 000 nodes, 2 s each
-    time, twice in its compile and once at each load from the cache)."""
+    """``f`` in SX where it expands, else :func:`fused`; not merged: for a wrapper that calls
+    functions already expanded and merged once each, where merging again would find nothing
+    (a room of moist air's 420 000 nodes, 2 s each time, twice in its compile and once at each
+    load from the cache)."""
     try:
         return f.expand()
     except RuntimeError:    # holds a rootfinder or a run-time linear solver
