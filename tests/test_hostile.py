@@ -793,3 +793,11 @@ def test_each_outputs_rms_is_given_beside_its_noise(caplog):
                        "validation_rms_after": 2.1}, "gain_per_output": each}
     page = _summary_rows(report)
     assert "Each output" in page and "1.25x smaller" in page      # the flow: 5e-5 -> 4e-5
+    # the calibration's own per output, where it ran (the flow then fixed too)
+    calibrated = {"p": {"train": 2.5, "validation": 2.5}, "q": {"train": 1e-6, "validation": 1e-6}}
+    with caplog.at_level(logging.INFO, logger="mcl"):
+        each = _per_output(["p", "q"], noise, y, nominal, learned, validate, [nominal, learned], calibrated)
+    assert each["q"]["validation_calibrated"] == 1e-6 and each["p"]["train_calibrated"] == 2.5
+    assert "p 300 -> 3 -> 2.5 (2); q 5e-05 -> 4e-05 -> 1e-06 (1e-06)" in caplog.text
+    page = _summary_rows({**report, "gain_per_output": each})
+    assert "laws + calibration" in page and "50x smaller" in page   # the flow: 5e-5 -> 1e-6

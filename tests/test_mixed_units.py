@@ -12,7 +12,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import discovered, msl_path, needs_msl
-from mcl.discovery.run import WEIGHED_WHEN, output_weights
+from mcl.discovery.run import MISFIT_SHARE, WEIGHED_WHEN, output_weights
 from mcl.stats import NoiseEstimate
 
 MSL = msl_path()
@@ -85,6 +85,25 @@ def test_weights_are_set_only_where_the_outputs_noise_levels_differ():
     w = output_weights(silent, y, ["a", "b"])
     assert w["b"] / w["a"] == pytest.approx(1.0 / (1e-4 * np.nanstd(y[:, 1])), rel=1e-9)
     assert WEIGHED_WHEN > 1
+
+
+def test_a_fine_output_the_nominal_misses_by_far_is_not_floored_at_its_spread():
+    """An encoder's noise is far below 1e-4 of its spread: where the nominal model misses it by
+    far, its noise is floored at MISFIT_SHARE of that misfit instead, and its misfit weighs as
+    much as a noisy output's that the nominal misses as far in its own noise."""
+    t = np.linspace(0.0, 10.0, 1001)
+    y = np.column_stack([0.1 * np.sin(t), 50.0 * np.cos(t)])            # position (m), force (N)
+    noise = {"q": NoiseEstimate(1e-8, "given"), "f": NoiseEstimate(0.1, "given")}
+    misfit = [1e-5, 20.0]                                               # 1000x and 200x their noise
+    before = output_weights(noise, y, ["q", "f"])
+    after = output_weights(noise, y, ["q", "f"], misfit)
+    spread_floor = 1e-4 * np.std(y[:, 0])
+    assert before["q"] / before["f"] == pytest.approx(0.1 / spread_floor)
+    assert after["q"] / after["f"] == pytest.approx(0.1 / (MISFIT_SHARE * 1e-5))
+    # in noise units the position's misfit now counts 100 (MISFIT_SHARE's), the force's 200
+    assert after["q"] * misfit[0] / (after["f"] * misfit[1]) == pytest.approx(0.5)
+    # a misfit within 1/MISFIT_SHARE of the noise changes nothing; nor does one of 0
+    assert output_weights(noise, y, ["q", "f"], [5e-7, 0.0]) == output_weights(noise, y, ["q", "f"], [0.0, 0.0]) == before
 
 
 @pytest.mark.slow

@@ -7,7 +7,8 @@ SOURCE_DIR holds the files as the benchmarks distribute them (the paths each REA
 ``DATA_EMPS_PULSES.mat`` (EMPS), ``WienerHammerBenchmark.csv`` (Wiener-Hammerstein), ``DATAPRBS.csv``
 (coupled electric drives). OUT_DIR/<case>/ receives ``train.csv`` and one ``test*.csv`` per
 test split of the benchmark's own protocol (the split in each case's README), each with a header
-``time,u,y``: time in seconds from 0, u the measured input, y the measured output. Nothing is
+``time,u,y``: time in seconds from 0, u the measured input, y the measured output (``emps_loop``:
+``time,qg,pulse,q,force``, the closed loop's inputs and outputs). Nothing is
 resampled; the Silverbox's test splits are the benchmark's index ranges. Files that are missing in
 SOURCE_DIR are skipped with a note.
 """
@@ -22,11 +23,16 @@ SILVERBOX_FS = 1e7 / 2 ** 14            # 610.35 Hz (Wigren and Schoukens 2013, 
 
 
 def write(path: Path, u, y, dt: float) -> None:
+    write_columns(path, {"u": u, "y": y}, dt)
+
+
+def write_columns(path: Path, columns: dict, dt: float) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    t = np.arange(len(u)) * dt
-    np.savetxt(path, np.column_stack([t, u, y]), delimiter=",", header="time,u,y", comments="",
-               fmt=["%.10g", "%.8g", "%.8g"])
-    print(f"{path}: {len(u)} samples")
+    values = [np.asarray(v, float) for v in columns.values()]
+    t = np.arange(len(values[0])) * dt
+    np.savetxt(path, np.column_stack([t, *values]), delimiter=",", header=",".join(["time", *columns]),
+               comments="", fmt=["%.10g"] + ["%.8g"] * len(values))
+    print(f"{path}: {len(t)} samples")
 
 
 def cascaded_tanks(src: Path, out: Path) -> None:
@@ -58,6 +64,20 @@ def emps(src: Path, out: Path) -> None:
         write(out / name, m["vir"][:, 0] * float(m["gtau"][0, 0]), m["qm"][:, 0], float(t[1] - t[0]))
 
 
+def emps_loop(src: Path, out: Path) -> None:
+    """The same records as the loop ran them: reference position and voltage pulses in, position and
+    motor force out (the benchmark's own closed-loop simulation, Simulation_EMPS.m)."""
+    from scipy.io import loadmat
+
+    for name, file in [("train.csv", "DATA_EMPS.mat"), ("test.csv", "DATA_EMPS_PULSES.mat")]:
+        m = loadmat(src / file)
+        t, n = m["t"][:, 0], len(m["t"])
+        pulse = m["pulses_N"][:, 0].astype(float) if "pulses_N" in m else np.zeros(n)
+        columns = {"qg": m["qg"][:, 0], "pulse": pulse, "q": m["qm"][:, 0],
+                   "force": m["vir"][:, 0] * float(m["gtau"][0, 0])}
+        write_columns(out / name, columns, float(t[1] - t[0]))
+
+
 def wiener_hammerstein(src: Path, out: Path) -> None:
     import pandas as pd
 
@@ -80,6 +100,7 @@ def coupled_drives(src: Path, out: Path) -> None:
 CASES = {"cascaded_tanks": (cascaded_tanks, ["dataBenchmark.csv"]),
          "silverbox": (silverbox, ["SNLS80mV.csv"]),
          "emps": (emps, ["DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"]),
+         "emps_loop": (emps_loop, ["DATA_EMPS.mat", "DATA_EMPS_PULSES.mat"]),
          "wh": (wiener_hammerstein, ["WienerHammerBenchmark.csv"]),
          "ced": (coupled_drives, ["DATAPRBS.csv"])}
 

@@ -19,7 +19,7 @@ from ..data import TimeSeries
 from ..progress import log
 from ..runfile import unknown_free
 from ..stats import gram_inverse
-from .fitters import FIT_OPTIONS, WHOLE_RUN, residual, rms_both
+from .fitters import FIT_OPTIONS, WHOLE_RUN, residual, rms_both, rms_each
 
 #: a parameter is determined by the data when its standard error is below this share of its
 #: value: two standard errors from 0. (At 1.0 a servo drive's load inertia, 0.83 of its value,
@@ -213,6 +213,7 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
     # (reported in the data's units; the calibrations of several laws are compared on the
     # residual weighted as it was fitted)
     out["train_rms"], out["_fit_rms"] = rms_both(whole, model, sim, outputs)
+    out["per_output"] = {o: {"train": v} for o, v in rms_each(whole, model, sim, outputs).items()}
     if validate is not None:
         # (at most a quarter of the record: the rest is judged on what was not fitted to it)
         head = validate.head(min(own_start or len(train.time), max(len(validate.time) // 4, 1)))
@@ -223,6 +224,8 @@ def calibrate(model, train: TimeSeries, validate: TimeSeries | None, params: dic
         if not sv.ok and seen:         # a start fitted on the head that fails later: the training's
             sv, seen = simulate(model, validate, new, options=WHOLE_RUN), []
         out["validation_rms"] = rms_both(validate, model, sv, outputs)[0]
+        for o, v in rms_each(validate, model, sv, outputs).items():
+            out["per_output"].setdefault(o, {})["validation"] = v
         if seen:
             out["validation_initial_state"] = seen
     out["params"], out["run"] = new, sim

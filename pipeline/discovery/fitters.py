@@ -54,6 +54,14 @@ def rms_both(data: TimeSeries, model, result, outputs) -> tuple[float | None, fl
     return rms(r / data.weight_of(outputs)), rms(r)
 
 
+def rms_each(data: TimeSeries, model, result, outputs) -> dict:
+    """Each output's RMS of a run's residual in the data's units ({} for a failed run)."""
+    if not result.ok:
+        return {}
+    r = residual(data, model, result, outputs) / data.weight_of(outputs)
+    return {o: rms(r[:, k]) for k, o in enumerate(outputs)}
+
+
 
 @dataclass
 class FitOutcome:

@@ -278,10 +278,14 @@ def _summary_rows(report) -> str:
     each = report.get("gain_per_output") or {}
     if len(each) > 1:      # (the pooled RMS mixes the outputs' units)
         which = judged_on(each)
+        cal = all(f"{which}_calibrated" in r for r in each.values())
         note += "<h3>Each output</h3>" + _table(
-            ["output", "noise", f"{which} RMS, nominal", "with the learned laws", "improvement"],
+            ["output", "noise", f"{which} RMS, nominal", "with the learned laws", "improvement"]
+            + ["laws + calibration", "improvement"] * cal,
             [[html.escape(o), _g(r["noise"]), _g(r[f"{which}_before"]), _g(r.get(f"{which}_after")),
-              _factor(r[f"{which}_before"], r.get(f"{which}_after"))] for o, r in each.items()])
+              _factor(r[f"{which}_before"], r.get(f"{which}_after"))]
+             + ([_g(r[f"{which}_calibrated"]), _factor(r[f"{which}_before"], r[f"{which}_calibrated"])] if cal else [])
+             for o, r in each.items()])
     return f"<table>{body}</table><h2>Before and after</h2>{_table(header, gain_rows)}{note}"
 
 

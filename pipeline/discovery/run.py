@@ -364,7 +364,7 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
     _celsius_for_kelvin(resid, outputs, nominal.info.get("units", {}), train.source)
     noise = noise_levels(y_meas, train.time, outputs, spec.noise)
     sigma = overall(noise)
-    weights = output_weights(noise, y_meas, outputs)
+    weights = output_weights(noise, y_meas, outputs, [rms(resid[:, k]) for k in range(len(outputs))])
     train = train.weighted(weights)
     validate = validate.weighted(weights) if validate is not None else None
     train_rms0 = rms(resid)
@@ -432,7 +432,8 @@ def run_discovery(spec, train: TimeSeries, validate: TimeSeries | None = None, f
         cal = report.get("calibration") or {}
         if cal.get("train_rms") is not None:      # the law alone (above) and with the calibration
             report["gain"].update(train_rms_calibrated=cal["train_rms"], validation_rms_calibrated=cal.get("validation_rms"))
-        report["gain_per_output"] = _per_output(outputs, noise, y_meas, y0, extended_y, validate, val_y)
+        report["gain_per_output"] = _per_output(outputs, noise, y_meas, y0, extended_y, validate, val_y,
+                                                (report.get("calibration") or {}).get("per_output"))
     if report["gain"] is None:
         report["gain"] = {"train_rms_before": train_rms0, "train_rms_after": train_rms0,
                           "validation_rms_before": val0, "validation_rms_after": val0}
@@ -475,11 +476,12 @@ def _say_unmeasured(declared: list[str], measured: list[str], validate: TimeSeri
                     "them" if len(unused) > 1 else "it")
 
 
-def _per_output(outputs, noise, y_meas, y0, y_ext, validate, val_y) -> dict:
-    """Each output's RMS before and after the laws, on the training and validation data, beside
-    its noise: the pooled RMS mixes units where the outputs have different ones (a pressure in Pa
-    beside a flow in m3/s hid a flow and two temperatures left at 9-15x their noise). Said in
-    the log where there are several outputs."""
+def _per_output(outputs, noise, y_meas, y0, y_ext, validate, val_y, calibrated=None) -> dict:
+    """Each output's RMS before and after the laws (and with the calibration, ``calibrated``:
+    calibrate's per_output), on the training and validation data, beside its noise: the pooled
+    RMS mixes units where the outputs have different ones (a pressure in Pa beside a flow in m3/s
+    hid a flow and two temperatures left at 9-15x their noise). Said in the log where there are
+    several outputs."""
     v_meas = validate.select(outputs).values if validate is not None and val_y is not None else None
     out = {}
     for k, o in enumerate(outputs):
@@ -489,14 +491,18 @@ def _per_output(outputs, noise, y_meas, y0, y_ext, validate, val_y) -> dict:
         for key, y in zip(("validation_before", "validation_after"), val_y or ()):
             if v_meas is not None and y is not None:
                 row[key] = rms(v_meas[:, k] - y[:, k])
+        row.update({f"{key}_calibrated": v for key, v in ((calibrated or {}).get(o) or {}).items()})
         out[o] = row
     if len(outputs) > 1:
         from .report import judged_on
 
         which = judged_on(out)
-        log.info("      per output, %s RMS before -> after the laws (noise): %s", which, "; ".join(
-            f"{o} {r[which + '_before']:.3g} -> {r.get(which + '_after', float('nan')):.3g} ({r['noise']:.3g})"
-            for o, r in out.items()))
+        cal = all(f"{which}_calibrated" in r for r in out.values())
+        log.info("      per output, %s RMS before -> after the laws%s (noise): %s", which,
+                 " -> with the calibration" * cal, "; ".join(
+                     f"{o} {r[which + '_before']:.3g} -> {r.get(which + '_after', float('nan')):.3g}"
+                     + (f" -> {r[which + '_calibrated']:.3g}" if cal else "") + f" ({r['noise']:.3g})"
+                     for o, r in out.items()))
     return out
 
 
@@ -596,7 +602,12 @@ def overall(noise: dict) -> float:
     return float(np.sqrt(np.mean([n.sigma ** 2 for n in noise.values()])))
 
 
-def output_weights(noise: dict, y_meas: np.ndarray, outputs: list[str]) -> dict | None:
+#: an output the nominal model misses by more than this many times its noise is weighed as if
+#: its noise were this share of that misfit (see :func:`output_weights`)
+MISFIT_SHARE = 0.01
+
+
+def output_weights(noise: dict, y_meas: np.ndarray, outputs: list[str], misfit=None) -> dict | None:
     """Each output's weight in the fits where the outputs' noise levels differ by more than
     :data:`WEIGHED_WHEN` (other units: a pressure in Pa beside a temperature in K): the overall
     noise over the output's own, so that every output's noise weighs as the overall noise does
@@ -604,20 +615,29 @@ def output_weights(noise: dict, y_meas: np.ndarray, outputs: list[str]) -> dict 
     one with the largest numbers (a fault only a current in A showed, beside a voltage in V,
     was not found: tests/test_mixed_units.py). None where they are alike. A
     noise level is taken as at least 1e-4 of its output's spread (a noiseless output would
-    outweigh all others)."""
+    outweigh all others); where the nominal model's RMS ``misfit`` per output is given and
+    misses an output by more than 1 / :data:`MISFIT_SHARE` times its noise (and 1e-6 of its
+    spread), at least :data:`MISFIT_SHARE` of that misfit instead where that is lower: a fine encoder beside a noisy force (EMPS in its loop: the position's noise
+    1.7e-8 m, its spread's 1e-4 8e-6 m, the nominal misses it by 1.6e-5 m) counted its misfit
+    as 2 noise units against the force's 233, and the laws fitted to the force tripled the
+    position's error."""
     if len(outputs) < 2:
         return None
     sigma = overall(noise)
     own = []
     for k, o in enumerate(outputs):
         spread = np.nanstd(y_meas[:, k]) if np.isfinite(y_meas[:, k]).any() else 0.0
-        s = max(noise[o].sigma, 1e-4 * spread)
+        floor, least = 1e-4 * spread, max(noise[o].sigma, 1e-6 * spread)
+        if misfit is not None and np.isfinite(misfit[k]) and misfit[k] * MISFIT_SHARE > least:
+            floor = min(floor, MISFIT_SHARE * misfit[k])
+        s = max(noise[o].sigma, floor)
         own.append(s if s > 0 else sigma)
     w = sigma / np.array(own)
     if not np.all(np.isfinite(w)) or w.max() <= WEIGHED_WHEN * w.min():
         return None
     log.info("      the outputs' noise levels differ (%s): each is fitted in units of its noise",
-             ", ".join(f"{o} {noise[o].sigma:.3g}" for o in outputs))
+             ", ".join(f"{o} {noise[o].sigma:.3g}" + (f" (taken as {s:.3g})" if s != noise[o].sigma else "")
+                       for o, s in zip(outputs, own)))
     return {o: float(v) for o, v in zip(outputs, w)}
 
 

@@ -1,0 +1,53 @@
+within ;
+package EmpsLoop "The engineer's nominal model of the EMPS benchmark in its position loop"
+  model Loop "the axis in its position loop as the benchmark ran it: rigid mass, viscous friction only, P-P cascade controller"
+    import Modelica.Units.SI;
+    import Modelica.Mechanics.Translational;
+    import Modelica.Blocks;
+    Blocks.Interfaces.RealInput qg(unit = "m") "reference position";
+    Blocks.Interfaces.RealInput pulse(unit = "V") "voltage pulses added to the drive's reference (none in the estimation record)";
+    Blocks.Interfaces.RealOutput q(unit = "m") "measured motor position qm";
+    Blocks.Interfaces.RealOutput force(unit = "N") "motor force on the load side, gtau * vir";
+    parameter Real kp(unit = "1/s") = 160.18 "position loop gain";
+    parameter Real kv(unit = "V.s/m") = 243.45 "velocity loop gain";
+    parameter Real gtau(unit = "N/V") = 35.15 "drive and screw gain";
+    parameter SI.Voltage virMax = 10 "drive reference limit";
+    parameter SI.Position s0 = 0 "initial position";
+    parameter SI.Velocity v0 = 0 "initial velocity";
+    Blocks.Math.Feedback positionError;
+    Blocks.Math.Gain positionController(k = kp) "velocity reference from the position error";
+    Blocks.Math.Feedback velocityError;
+    Blocks.Math.Gain velocityController(k = kv) "drive reference vir from the velocity error";
+    Blocks.Nonlinear.Limiter limit(uMax = virMax);
+    Blocks.Math.Add vir;
+    Blocks.Math.Gain drive(k = gtau);
+    Translational.Sources.Force motor;
+    Translational.Components.Fixed frame;
+    Translational.Components.Mass M(m = 100) "carriage, screw and motor inertia on the load side";
+    Translational.Components.Damper F(d = 200) "viscous friction of the guides and the screw";
+    Translational.Sensors.PositionSensor encoder;
+    Translational.Sensors.SpeedSensor speed "the velocity the controller differentiates from the encoder";
+  initial equation
+    M.s = s0;
+    M.v = v0;
+  equation
+    connect(qg, positionError.u1);
+    connect(encoder.s, positionError.u2);
+    connect(positionError.y, positionController.u);
+    connect(positionController.y, velocityError.u1);
+    connect(speed.v, velocityError.u2);
+    connect(velocityError.y, velocityController.u);
+    connect(velocityController.y, limit.u);
+    connect(limit.y, vir.u1);
+    connect(pulse, vir.u2);
+    connect(vir.y, drive.u);
+    connect(drive.y, motor.f);
+    connect(drive.y, force);
+    connect(motor.flange, M.flange_a);
+    connect(frame.flange, F.flange_a);
+    connect(F.flange_b, M.flange_a);
+    connect(M.flange_b, encoder.flange);
+    connect(M.flange_b, speed.flange);
+    connect(encoder.s, q);
+  end Loop;
+end EmpsLoop;
