@@ -131,3 +131,29 @@ def test_without_the_fault_mixed_units_find_nothing(tmp_path):
     branches_data(tmp_path / "validate.csv", 2, 0.0)
     report = discovered(tmp_path, "Branches.mo", "Branches", BRANCHES)
     assert not report["misfit"]["significant"] and report["cause"] is None
+
+
+def test_each_outputs_residual_is_drawn_against_its_own_noise():
+    """The report's residual plots draw each output's 3 x noise band in its own units (the
+    overall noise over its weight): a position's band of micrometres, not the overall noise."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from mcl.discovery.report import _outputs_figure, output_noise
+
+    t = np.linspace(0.0, 10.0, 501)
+    y = np.column_stack([0.1 * np.sin(t), 50.0 * np.cos(t)])
+    noise = {"q": NoiseEstimate(1e-8, "given"), "f": NoiseEstimate(0.1, "given")}
+    weights = output_weights(noise, y, ["q", "f"], [1e-5, 20.0])
+    overall = float(np.sqrt((1e-8**2 + 0.1**2) / 2))
+    report = {"misfit": {"noise_estimate": overall, "weights": weights}}
+    each = output_noise(report, ["q", "f"])
+    assert each["q"] == pytest.approx(MISFIT_SHARE * 1e-5) and each["f"] == pytest.approx(0.1)
+    assert output_noise({"misfit": {"noise_estimate": 0.3, "weights": None}}, ["q"]) == {"q": 0.3}
+    nominal = y + [[1e-5, 20.0]]
+    fig = _outputs_figure(plt, t, y, nominal, None, ["q", "f"], {}, each, "training data")
+    q_residual, f_residual = fig.axes[1], fig.axes[3]
+    assert q_residual.get_ylim()[1] < 1e-4 and f_residual.get_ylim()[1] > 1.0
+    plt.close(fig)

@@ -60,7 +60,7 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     log.info("[3/5] cause: %s (%s): %s", comp.name, comp.cls, law)
     var = template.law_variable
     lo, hi = best.get("law_range") or best.get("v_range") or [-1.0, 1.0]
-    xs = np.linspace(lo, hi, 41)
+    xs = np.linspace(lo, hi, 201)      # (a Coulomb-like tanh at 1 % of the range, drawn smooth)
     wd = words(comp)
     # the curve in the equation's own words and sign (a mechanical element's s_rel and f are
     # b - a and the force at b: the template's v and i negated; a connector's own potential
