@@ -615,12 +615,12 @@ def output_weights(noise: dict, y_meas: np.ndarray, outputs: list[str], misfit=N
     one with the largest numbers (a fault only a current in A showed, beside a voltage in V,
     was not found: tests/test_mixed_units.py). None where they are alike. A
     noise level is taken as at least 1e-4 of its output's spread (a noiseless output would
-    outweigh all others); where the nominal model's RMS ``misfit`` per output is given and
+    outweigh all others). Where the nominal model's RMS ``misfit`` per output is given and
     misses an output by more than 1 / :data:`MISFIT_SHARE` times its noise (and 1e-6 of its
-    spread), at least :data:`MISFIT_SHARE` of that misfit instead where that is lower: a fine encoder beside a noisy force (EMPS in its loop: the position's noise
-    1.7e-8 m, its spread's 1e-4 8e-6 m, the nominal misses it by 1.6e-5 m) counted its misfit
-    as 2 noise units against the force's 233, and the laws fitted to the force tripled the
-    position's error."""
+    spread), the floor is :data:`MISFIT_SHARE` of that misfit where that is lower. (A fine
+    encoder beside a noisy force, EMPS in its loop: the position's noise 1.7e-8 m, 1e-4 of its
+    spread 8e-6 m, the nominal's misfit 1.6e-5 m, counted 2 noise units against the force's 233,
+    and the laws fitted to the force tripled the position's error.)"""
     if len(outputs) < 2:
         return None
     sigma = overall(noise)
