@@ -1374,6 +1374,7 @@ def _weir_started(tmp_path, text: str, name: str):
     assert np.max(np.abs(res.states[:, 0] - 0.45)) < 1e-9
     return model, res
 
+
 CHECK_VALVE = """
 package CheckValve
   function characteristic "a pump's head at its nominal speed, extrapolated linearly outside its data"

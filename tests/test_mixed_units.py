@@ -12,7 +12,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from helpers import discovered, msl_path, needs_msl
-from mcl.discovery.run import MISFIT_SHARE, WEIGHED_WHEN, output_weights
+from mcl.discovery.run import MISFIT_SHARE, WEIGHED_WHEN, output_weights, overall
 from mcl.stats import NoiseEstimate
 
 MSL = msl_path()
@@ -87,14 +87,19 @@ def test_weights_are_set_only_where_the_outputs_noise_levels_differ():
     assert WEIGHED_WHEN > 1
 
 
+def encoder_and_force():
+    """(t, y, noise, nominal misfit) of a position (m) with an encoder's noise beside a force
+    (N), the nominal model missing them by 1000x and 200x their noise."""
+    t = np.linspace(0.0, 10.0, 1001)
+    y = np.column_stack([0.1 * np.sin(t), 50.0 * np.cos(t)])
+    return t, y, {"q": NoiseEstimate(1e-8, "given"), "f": NoiseEstimate(0.1, "given")}, [1e-5, 20.0]
+
+
 def test_a_fine_output_the_nominal_misses_by_far_is_not_floored_at_its_spread():
     """An encoder's noise is far below 1e-4 of its spread: where the nominal model misses it by
     far, its noise is floored at MISFIT_SHARE of that misfit instead, and its misfit weighs as
     much as a noisy output's that the nominal misses as far in its own noise."""
-    t = np.linspace(0.0, 10.0, 1001)
-    y = np.column_stack([0.1 * np.sin(t), 50.0 * np.cos(t)])            # position (m), force (N)
-    noise = {"q": NoiseEstimate(1e-8, "given"), "f": NoiseEstimate(0.1, "given")}
-    misfit = [1e-5, 20.0]                                               # 1000x and 200x their noise
+    t, y, noise, misfit = encoder_and_force()
     before = output_weights(noise, y, ["q", "f"])
     after = output_weights(noise, y, ["q", "f"], misfit)
     spread_floor = 1e-4 * np.std(y[:, 0])
@@ -143,16 +148,13 @@ def test_each_outputs_residual_is_drawn_against_its_own_noise():
 
     from mcl.discovery.report import _outputs_figure, output_noise
 
-    t = np.linspace(0.0, 10.0, 501)
-    y = np.column_stack([0.1 * np.sin(t), 50.0 * np.cos(t)])
-    noise = {"q": NoiseEstimate(1e-8, "given"), "f": NoiseEstimate(0.1, "given")}
-    weights = output_weights(noise, y, ["q", "f"], [1e-5, 20.0])
-    overall = float(np.sqrt((1e-8**2 + 0.1**2) / 2))
-    report = {"misfit": {"noise_estimate": overall, "weights": weights}}
+    t, y, noise, misfit = encoder_and_force()
+    weights = output_weights(noise, y, ["q", "f"], misfit)
+    report = {"misfit": {"noise_estimate": overall(noise), "weights": weights}}
     each = output_noise(report, ["q", "f"])
     assert each["q"] == pytest.approx(MISFIT_SHARE * 1e-5) and each["f"] == pytest.approx(0.1)
     assert output_noise({"misfit": {"noise_estimate": 0.3, "weights": None}}, ["q"]) == {"q": 0.3}
-    nominal = y + [[1e-5, 20.0]]
+    nominal = y + [misfit]
     fig = _outputs_figure(plt, t, y, nominal, None, ["q", "f"], {}, each, "training data")
     q_residual, f_residual = fig.axes[1], fig.axes[3]
     assert q_residual.get_ylim()[1] < 1e-4 and f_residual.get_ylim()[1] > 1.0

@@ -14,12 +14,19 @@ import real_data  # noqa: E402
 pytestmark = pytest.mark.slow
 
 
-def discovered(name: str, written: str = "parts") -> dict:
+def data_of(name: str):
+    """The folder holding the real data of case ``name``; the test skips where they, or the MSL,
+    are missing."""
     root = real_data.data_root()
     if root is None or not (root / name / "train.csv").exists():
         pytest.skip(f"real benchmark data '{name}' not found (../shared/real or MCL_REAL_DATA)")
     if msl_path() is None:
         pytest.skip("the MSL is not on MODELICAPATH nor at ../shared/msl")
+    return root / name
+
+
+def discovered(name: str, written: str = "parts") -> dict:
+    root = data_of(name).parent
     case = real_data.CASES[name]
     return real_data.mcl_discovery(case, real_data.load(case, root, "train.csv"),
                                    {split: real_data.load(case, root, split) for split in case.tests}, written)
@@ -77,15 +84,11 @@ def test_the_emps_loop_names_the_friction_and_its_force_reaches_the_reference_mo
 
     from mcl.cli import main
 
-    root = real_data.data_root()
-    if root is None or not (root / "emps_loop" / "train.csv").exists():
-        pytest.skip("real benchmark data 'emps_loop' not found (../shared/real or MCL_REAL_DATA)")
-    if msl_path() is None:
-        pytest.skip("the MSL is not on MODELICAPATH nor at ../shared/msl")
+    data = data_of("emps_loop")
     shutil.copy(ROOT / "examples" / "real" / "emps_loop" / "EmpsLoop.mo", tmp_path)
     (tmp_path / "run.yaml").write_text(
         f"model: {{sources: [EmpsLoop.mo], name: EmpsLoop.Loop, libraries: [{msl_path()}]}}\n"
-        f"data: {{train: {root / 'emps_loop' / 'train.csv'}, validate: {root / 'emps_loop' / 'test.csv'}}}\n"
+        f"data: {{train: {data / 'train.csv'}, validate: {data / 'test.csv'}}}\n"
         "free: auto\noutput: out\n")
     assert main(["--quiet", "run", str(tmp_path / "run.yaml")]) == 0
     report = json.loads((tmp_path / "out" / "report.json").read_text())
