@@ -351,6 +351,42 @@ def rms(a) -> float:
     return float(np.sqrt(np.mean(np.square(a[ok])))) if ok.any() else float("nan")
 
 
+def correlation_time(x) -> float:
+    """How many consecutive samples of a residual ``x`` carry one sample's worth of evidence: its
+    integrated autocorrelation time 1 + 2 sum_k rho_k, summed over Geyer's (1992) initial
+    positive sequence of pairs rho_2m + rho_2m+1 (the sum stops where the pairs stop being
+    positive, before the noise of the far lags); 1 for white noise."""
+    x = np.asarray(x, float)
+    x = x[np.isfinite(x)]
+    x = x - x.mean() if len(x) else x
+    n = len(x)
+    if n < 8 or not float(x @ x) > 0:
+        return 1.0
+    spectrum = np.fft.rfft(x, 2 * n)
+    acf = np.fft.irfft(spectrum * np.conj(spectrum))[:n]
+    rho = acf / acf[0]
+    pairs = rho[0:n - 1:2] + rho[1:n:2]
+    stop = np.flatnonzero(pairs <= 0)
+    tau = -1.0 + 2.0 * float(np.sum(pairs[:stop[0] if len(stop) else len(pairs)]))
+    return float(min(max(tau, 1.0), n))
+
+
+def effective_samples(r) -> float:
+    """The number of independent samples a residual ``r`` (samples x outputs, NaN where not
+    measured) is worth: its measured samples over their correlation time (each output's
+    :func:`correlation_time`, weighed by its share of the squares). A model's error sampled far
+    faster than it changes (a position at 1 kHz) is worth far fewer samples than it has, and a
+    criterion that counts every sample keeps terms that fit its slow wiggles; white noise is
+    worth all of them."""
+    r = np.asarray(r, float).reshape(len(r), -1)
+    n = int(np.isfinite(r).sum())
+    squares = np.nansum(r ** 2, axis=0)
+    if n == 0 or not squares.sum() > 0:
+        return float(n)
+    tau = float(np.sum(squares * [correlation_time(c) for c in r.T]) / squares.sum())
+    return n / tau
+
+
 def rss(a) -> float:
     """Residual sum of squares over the measured (finite) entries."""
     a = np.asarray(a, float)

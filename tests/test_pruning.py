@@ -48,3 +48,33 @@ def test_the_growing_windows_leave_out_a_quiet_start():
     assert [len(w.time) for w in moving(horizons(data), ["y"])] == [2001]
     even = TimeSeries(t, np.c_[np.sin(7.0 * t)], ["y"], "test")
     assert [len(w.time) for w in moving(horizons(even), ["y"])] == [250, 500, 1000, 2001]
+
+
+def test_a_friction_curve_distils_to_the_textbook_law():
+    """Offset, viscous and Coulomb friction read off a law's curve: the scale of the step fitted."""
+    from mcl.discovery.families import friction_laws
+
+    v = np.linspace(-0.3, 0.3, 201)
+    coulomb, stribeck = friction_laws(v, -3.0 + 200.0 * v + 20.0 * np.tanh(v / 0.004), "dv", ("1", "{x}"))
+    assert coulomb["terms"] == ["1", "dv", "tanh(dv/s1)"]
+    assert np.allclose(coulomb["c"], [-3.0, 200.0, 20.0], rtol=1e-4) and np.isclose(coulomb["scales"]["s1"], 0.004)
+    assert "exp(-(dv/s2)^2)" in stribeck["terms"][-1]
+
+
+def test_a_wordy_law_is_reported_with_the_best_plainer_law_of_its_kind():
+    """Beside a six-term friction law: the best law of at most three terms among its family's and
+    the shape laws in the same variable; not a hysteresis' law, not another component's."""
+    from mcl.discovery.verdict import readable
+
+    def law(component, family, terms, score, variable="dv"):
+        return {"component": component, "family": family, "law_variable": variable, "score": score,
+                "terms": ["i", *terms], "active": [True] * (len(terms) + 1), "w": [1.0] * (len(terms) + 1),
+                "equation": f"{family} {len(terms)}", "template": {}, "train_rms": score / 100}
+
+    wordy = law("F", "rate", ["1", "dv", "dv^2", "tanh(dv/0.01)", "tanh(dv/0.05)", "tanh(dv/0.25)"], 100.0)
+    cands = [wordy, law("F", "shape", ["1", "dv", "tanh(dv/s1)"], 130.0), law("F", "shape", ["sinh(dv/s1)"], 150.0),
+             law("F", "hysteresis", ["dv", "z"], 110.0), law("D", "rate", ["dv"], 105.0),
+             law("F", "storage", ["v"], 101.0, variable="v")]
+    plain = readable(wordy, cands)
+    assert plain["equation"] == "shape 3" and plain["score_difference"] == 30.0
+    assert readable(cands[1], cands) is None          # (three terms beside a constant: readable)

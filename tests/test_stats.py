@@ -6,8 +6,8 @@ import pytest
 from scipy.signal import butter, sosfilt
 
 from mcl.errors import ConfigError
-from mcl.stats import (MIN_SAMPLES, NoiseEstimate, estimate_noise, given_noise, misfit_significance,
-                       noise_estimate, noise_levels)
+from mcl.stats import (MIN_SAMPLES, NoiseEstimate, correlation_time, effective_samples, estimate_noise,
+                       given_noise, misfit_significance, noise_estimate, noise_levels)
 
 F0 = 70.0                      # the oscillator's resonance (Hz), as the Silverbox's
 
@@ -175,6 +175,24 @@ def test_two_outputs_combine():
     assert not ok.significant and len(ok.details["outputs"]) == 2
     r[:, 1] += 0.02                                          # an offset on the small output
     assert misfit_significance(r, [given_noise(1.0), given_noise(0.01)]).significant
+
+
+def test_white_noise_is_worth_every_sample_and_a_slow_error_few():
+    """Effective samples: white noise counts in full; an AR(1) residual (phi = 0.9) counts
+    (1 - phi) / (1 + phi) of its samples; a slow wiggle sampled 1000 times per period counts a
+    handful. Each output counts by its share of the squares."""
+    rng = np.random.default_rng(3)
+    e = rng.standard_normal(20000)
+    assert 0.9 < correlation_time(e) < 1.15
+    ar = np.zeros_like(e)
+    for k in range(1, len(e)):
+        ar[k] = 0.9 * ar[k - 1] + e[k]
+    assert correlation_time(ar) == pytest.approx(19.0, rel=0.25)
+    slow = np.sin(2 * np.pi * np.arange(8192) / 1000) + 1e-3 * e[:8192]
+    assert effective_samples(slow) < 40
+    both = np.column_stack([e[:8192], 1e-3 * slow])      # (the slow one is a millionth of the squares)
+    assert effective_samples(both) > 0.85 * both.size
+    assert effective_samples(np.zeros(100)) == 100
 
 
 def _real(case: str):

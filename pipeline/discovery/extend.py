@@ -39,6 +39,10 @@ def _as_good(alt: dict, comp) -> dict:
     return out
 
 
+def _rms(x) -> str:
+    return "-" if x is None else f"{x:.3g}"
+
+
 def _named(said: str, var: str, name: str) -> str:
     """A term's words (``shape_words``) with the law's variable in the component's own name, as
     the law is written: "sinh(x/s1)" for the term k*x, not the template's "sinh(v/s1)"."""
@@ -97,13 +101,18 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     if alternatives:
         effect += "; as good for the data: " + "; ".join(f"{a['equation']} ({a['score_difference']:+.2g})"
                                                         for a in alternatives)
+    plainer = _as_good(best["plainer"], comp) if best.get("plainer") else None
+    if plainer:
+        plainer.update({k: best["plainer"].get(k) for k in ("train_rms", "validation_rms")})
+        effect += (f"; a plainer law (training RMS {_rms(plainer['train_rms'])}, this law {_rms(best.get('train_rms'))}): "
+                   f"{plainer['equation']}")
     name = {"v": "v", "dv": "der(v)", "i": "i", "va": _local(wd.potentials[0]), "vb": _local(wd.potentials[1])}[var]
     return {"component": comp.name, "class": comp.cls, "effect": effect, "template": best["template"],
             "w": w.tolist(), "mode": best.get("mode"), "nominal_form": best.get("nominal_form"),
             "evidence": {"criterion": criterion_of(spec.criterion).name, "delta_to_next": best["delta"],
                          "strength": criterion_of(spec.criterion).strength(best["delta"]),
                          "role": best.get("role"), "effect_kind": best.get("effect_kind")},
-            "equivalents": equivalents, "alternatives": alternatives,
+            "equivalents": equivalents, "alternatives": alternatives, **({"plainer": plainer} if plainer else {}),
             "law": {"equation": law, "where": wd.definitions,
                     "template_equation": template.equation(w, across="v", flow="i"),
                     "family": best.get("family"), "across": wd.across, "flow": wd.flow,

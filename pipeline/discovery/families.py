@@ -425,6 +425,33 @@ def distillations(x: np.ndarray, f: np.ndarray, name: str, max_terms: int = 3,
     return out
 
 
+#: the friction laws of the textbooks beside a law's own offset and viscous terms: Coulomb's,
+#: Fc tanh(v/s) (a sign rounded off, s fitted), and with the Stribeck dip; each shape's start
+#: scale as a share of the visited span
+FRICTION = ((("tanh({x}/{s})", 0.01),), (("tanh({x}/{s})", 0.01), ("tanh({x}/{s})*exp(-({x}/{s})^2)", 0.1)))
+
+
+def friction_laws(x: np.ndarray, f: np.ndarray, name: str, keep: tuple = ()) -> list[dict]:
+    """The :data:`FRICTION` laws fitted to the curve f(x) of a speed's law, beside the basis
+    terms ``keep`` (its constant and line): the readable law a friction's wordy one stands for,
+    whose Coulomb step the distillation's curve error may rate below a rounder shape (a
+    positioning axis's seven-term friction distilled to sqrt(|v|) tanh(v/s) beside the line,
+    ten times the error of the Coulomb law the benchmark's reference model has)."""
+    x, f = np.asarray(x, float), np.asarray(f, float)
+    ok = np.isfinite(f)
+    x, f = x[ok], f[ok]
+    span = float(np.max(np.abs(x))) if len(x) else 0.0
+    if not span > 0:
+        return []
+    out = []
+    for shapes in FRICTION:
+        chosen = [(t, None) for t in keep] + [(shape, (k * span,)) for shape, k in shapes]
+        err, scales, c = _fit_scales(chosen, x, f, name)
+        if np.all(np.isfinite(c)):
+            out.append(_law(chosen, name, scales, c, err))
+    return out
+
+
 def _law(chosen, name: str, scales: dict, c, err: float) -> dict:
     """A distilled law: its terms with named scales (s1, s2, ...: fitted further by simulation),
     their values, the coefficients and the curve error."""

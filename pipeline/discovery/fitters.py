@@ -22,7 +22,7 @@ import numpy as np
 from ..data import TimeSeries
 from ..errors import MclError
 from ..simulation import RUN_TIME_LIMIT
-from ..stats import criterion as criterion_of, gram_inverse, rms, rss as rss_of
+from ..stats import criterion as criterion_of, effective_samples, gram_inverse, rms, rss as rss_of
 
 #: solver tolerances while fitting: a Gauss-Newton step needs the sensitivities to a few digits,
 #: and measured inputs (linear between samples) make CVODES stop at every kink; 10x looser
@@ -178,6 +178,15 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     def score_for(rss, active_mask):
         return score_of(rss, n_obs, int((active_mask & ~held).sum()), dictionary)
 
+    # terms are removed by the criterion counting the samples the full law's residual is worth
+    # (:func:`mcl.stats.effective_samples`), the score the fit reports counts them all: sampled
+    # far faster than its error changes (a friction at 1 kHz), every sample counted kept a cubic
+    # that fits its slow wiggles; a law that leaves white noise is pruned as before
+    n_worth = n_obs
+
+    def pruning(rss, kept: int):
+        return score_of(rss * n_worth / n_obs, n_worth, kept, dictionary)
+
     w, rss, problem, res = fit(active, w0)
     record(problem, active)
     sims = res.simulations
@@ -206,7 +215,14 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         if rss_c < rss:
             w, rss, problem, res = w_c, rss_c, problem_c, res_c
     path = []
-    score = score_for(rss, active)
+    if prune and (active & prunable).sum() > 1:
+        r, _ = problem.residual_and_cost(problem.simulate(w[active & ~held]))
+        sims += 1
+        # (at least the dictionary's square: below it the extended BIC's cost of the choice,
+        # 2 log C(D, k), largest at half the dictionary, outweighs a term's own log n, and a
+        # full law would be kept whole for counting few samples)
+        n_worth = min(float(n_obs), max(effective_samples(r), dictionary ** 2)) if r is not None else n_obs
+    score = pruning(rss, int((active & ~held).sum()))
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
     last = {}      # the previous estimates, by parameter: for a point whose sensitivities fail
     grouping = True
@@ -218,7 +234,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         w_t, rss_t, problem_t, res_t = refit
         record(problem_t, trial)
         sims += res_t.simulations
-        score_t = score_for(rss_t, trial)
+        score_t = pruning(rss_t, int((trial & ~held).sum()))
         ok = score_t < score
         path.append({"removed": removed, "estimate": float(estimate), "rss": rss_t,
                      "score": score_t, "accepted": bool(ok)})
@@ -246,7 +262,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
             # the terms the criterion would drop together, by the same estimate, in one refit
             # (a six-term law pruned to two: one refit, not four); refused, one at a time
             group = _group_to_drop(w[free], H_inv, est, rss, score,
-                                   lambda r, m: score_of(r, n_obs, len(free) - m, dictionary))
+                                   lambda r, m: pruning(r, len(free) - m))
             if len(group) > 1:
                 trial = active.copy()
                 trial[free[group]] = False
@@ -288,8 +304,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
     sims += 1
     if final.ok:
         rss = rss_of(residual(data, model, final))
-        score = score_for(rss, active)
-    return w, active, rss, score, sims, path, visited, final
+    return w, active, rss, score_for(rss, active), sims, path, visited, final
 
 
 def _joint_increase(w: np.ndarray, H_inv: np.ndarray, group) -> float:

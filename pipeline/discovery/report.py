@@ -267,6 +267,11 @@ def _summary_rows(report) -> str:
         for a in cause.get("alternatives", []):
             rows.append(("as good a law", f"{a['equation']}  (Δ{ev.get('criterion', 'bic').upper()} "
                                           f"{a['score_difference']:+.2g}: the data do not choose between them)"))
+        if cause.get("plainer"):
+            p = cause["plainer"]
+            rows.append(("plainer law", f"{p['equation']}  (training RMS {_g(p.get('train_rms'))} against "
+                                        f"{_g(cause.get('train_rms'))}; validation {_g(p.get('validation_rms'))} "
+                                        f"against {_g(cause.get('validation_rms'))}; the data prefer the law above)"))
         if cause.get("after"):
             rows.append(("misfit left", f"training RMS {_g(cause['after']['train_rms'])}: {cause['after']['misfit_left']}"))
     failed = report.get("failed", [])

@@ -43,7 +43,7 @@ from .families import spec_name
 from .fitters import WHOLE_RUN, rms_both
 from .inject import NominalForm, compiled, mode_of, rate_variables, with_law
 from .search import at_noise, search, time_limit
-from .verdict import EQUAL, decide, failures, role_items, weigh_unevaluated
+from .verdict import EQUAL, decide, failures, readable, role_items, weigh_unevaluated
 
 #: outputs whose noise levels differ by more than this factor are weighted by them in the fits
 WEIGHED_WHEN = 3.0
@@ -280,6 +280,8 @@ class Causes:
                     bests = self.without(bests, f"does not simulate once put in the model: {exc}")
             if not bests:
                 break
+            for b in bests:     # (the plainer law beside a wordy one, and what it costs)
+                b["plainer"] = readable(b, self.rounds[-1]["candidates"])
             base = extended
             found += bests
             self.n_params += sum(int(np.sum(b["active"])) - 1 for b in bests)

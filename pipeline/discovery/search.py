@@ -25,10 +25,10 @@ from ..sensitivity import fine_grid
 from ..simulation import SimulationOptions
 from ..stats import criterion as criterion_of, gram_inverse
 from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fit_task, free_parameters, publish, stopped
-from .families import distillations, families, hysteresis_families, inverse_families, potential_families, role_of
+from .families import distillations, families, friction_laws, hysteresis_families, inverse_families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
 from .screen import law_signals, linear_response
-from .verdict import EQUAL
+from .verdict import EQUAL, READABLE
 
 #: pairs of laws are screened when the best single law is predicted to leave more than this
 #: times the noise's share of the RSS; a pair is fitted when it promises at most half the best
@@ -47,8 +47,8 @@ TIME_FACTOR = 20
 HYSTERESIS_INDEX, POTENTIALS_INDEX, INVERSE_INDEX = 85, 90, 95
 #: family index of the plainer laws distilled from a wordy best law (:func:`plainer`)
 TIDY_INDEX = 110
-#: a law of one variable with more terms than this (beside a constant) is distilled further
-READABLE = 3
+#: and of the textbooks' friction laws distilled from a wordy law in a speed
+FRICTION_INDEX = 120
 
 
 def balanced(base: Base, train: TimeSeries, comp) -> bool:
@@ -414,7 +414,10 @@ def shapes(fit: Batch, cands: list[dict], sigma: float) -> list[dict]:
     if n.get("score") is None or not n.get("law_range"):
         return out
     out += distilled(fit, best["component"], n, SHAPE_INDEX, keep=("1",) if "1" in kept_terms(best) else ())
-    return out + plainer(fit, _ranked(cands + out)[0])
+    # (the best law but the network, its reference: a wordy law below the network was not
+    # distilled, though the network is never named)
+    top = next((c for c in _ranked(cands + out) if c.get("family") != "reference"), None)
+    return out + (plainer(fit, top) if top is not None else [])
 
 
 def distilled(fit: Batch, component: str, law: dict, index: int, keep: tuple = (), size: int = 3,
@@ -427,6 +430,12 @@ def distilled(fit: Batch, component: str, law: dict, index: int, keep: tuple = (
         return []
     laws = distillations(xs, curve, law["law_variable"], max_terms=size, keep=keep, plain=plain,
                          sensor=fit.ctx.base.structure.components[component].sensor)
+    return fitted(fit, component, laws, index)
+
+
+def fitted(fit: Batch, component: str, laws: list[dict], index: int) -> list[dict]:
+    """Distilled ``laws`` (terms, scales, coefficients from a curve) fitted by simulation at
+    ``component`` (items from ``index`` on)."""
     return fit([Item(component, index + k,
                      {"name": "polynomial", "lhs": ["i"], "rhs": d["terms"], "scales": d["scales"],
                       "start": [1.0, *map(float, d["c"])], "family": "shape"})
@@ -473,8 +482,12 @@ def plainer(fit: Batch, best: dict) -> list[dict]:
              len(kept_terms(best)))
     var = best["law_variable"]
     keep = tuple(t for t in ("1", "{x}") if t.format(x=var) in kept_terms(best))
-    return distilled(fit, best["component"], best, TIDY_INDEX, keep=keep, size=READABLE - ("{x}" in keep),
-                     plain=True)
+    out = distilled(fit, best["component"], best, TIDY_INDEX, keep=keep, size=READABLE - ("{x}" in keep),
+                    plain=True)
+    if var == "dv" and any(t.startswith("tanh(") for t in kept_terms(best)):
+        # a law in a speed that keeps Coulomb-like terms: the textbooks' friction laws too
+        out += fitted(fit, best["component"], friction_laws(*law_curve(best), var, keep), FRICTION_INDEX)
+    return out
 
 
 # -- a round ------------------------------------------------------------------------------------

@@ -20,6 +20,8 @@ from .families import families, spec_name
 
 #: a lead below this (in the criterion) does not separate two laws: they explain the data alike
 EQUAL = 2.0
+#: a law of one variable with more terms than this (beside a constant) is distilled further
+READABLE = 3
 
 
 def components_of(c: dict) -> list[str]:
@@ -152,6 +154,32 @@ def plainest(best: dict, close: list[dict]) -> dict:
         "shape" in (c.get("family"), best.get("family")) and c.get("law_variable") == best.get("law_variable"))
     same = [c for c in close if c is best or (c.get("component") == best["component"] and "parts" not in c and kin(c))]
     return min(same, key=lambda c: (size(c), c["score"]))
+
+
+def terms_kept(c: dict) -> list[str]:
+    """The terms a fitted law keeps beside its scale anchor and a constant."""
+    return [t for t, on in zip((c.get("terms") or [])[1:], (c.get("active") or [])[1:]) if on and t != "1"]
+
+
+def readable(best: dict, cands: list[dict]) -> dict | None:
+    """Where the law named keeps more than :data:`READABLE` terms beside a constant, the
+    best-scoring law of its component that keeps at most that many, of its family or a shape law
+    in the same variable (:func:`plainest`'s kin): the plainer law a person may prefer, reported
+    with what it costs in fit (a positioning axis's seven-term friction, and a three-term shape
+    law beside it at 1.3x its training RMS); else None."""
+    if "parts" in best or len(terms_kept(best)) <= READABLE:
+        return None
+    plain = [c for c in cands if c is not best and c.get("component") == best["component"] and "parts" not in c
+             and c.get("score") is not None and not c.get("failed") and c.get("family") != "reference"
+             and c.get("family") in (best.get("family"), "shape") and c.get("law_variable") == best.get("law_variable")
+             and 0 < len(terms_kept(c)) <= READABLE]
+    if not plain:
+        return None
+    c = min(plain, key=lambda c: c["score"])
+    w = (np.asarray(c["w"]) * np.asarray(c["active"])).tolist() if "w" in c and "active" in c else None
+    return {"equation": c.get("equation") or spec_name(c["template"]), "family": c.get("family"),
+            "template": c.get("template"), "w": w, "score_difference": float(c["score"] - best["score"]),
+            "train_rms": c.get("train_rms"), "validation_rms": c.get("validation_rms")}
 
 
 def helps(after, before: float, margin: float = 0.02) -> bool:
