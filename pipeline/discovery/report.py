@@ -271,7 +271,7 @@ def _summary_rows(report) -> str:
             p = cause["plainer"]
             rows.append(("plainer law", f"{p['equation']}  (training RMS {_g(p.get('train_rms'))} against "
                                         f"{_g(cause.get('train_rms'))}; validation {_g(p.get('validation_rms'))} "
-                                        f"against {_g(cause.get('validation_rms'))}; the data prefer the law above)"))
+                                        f"against {_g(cause.get('validation_rms'))}; the law above was chosen)"))
         if cause.get("after"):
             rows.append(("misfit left", f"training RMS {_g(cause['after']['train_rms'])}: {cause['after']['misfit_left']}"))
     failed = report.get("failed", [])
