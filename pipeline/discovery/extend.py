@@ -23,6 +23,7 @@ from ..templates import unscaled
 from .families import shape_words
 from .fitters import WHOLE_RUN, residual
 from .modelica import write_extended
+from .report import _g
 from .words import in_words, said, words
 
 def class_name_for(component: str, template) -> str:
@@ -37,10 +38,6 @@ def _as_good(alt: dict, comp) -> dict:
     if alt.get("template") is not None and alt.get("w") is not None:
         out["equation"] = said(registry().template(alt["template"]), np.asarray(alt["w"]), comp)
     return out
-
-
-def _rms(x) -> str:
-    return "-" if x is None else f"{x:.3g}"
 
 
 def _named(said: str, var: str, name: str) -> str:
@@ -104,7 +101,7 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     plainer = _as_good(best["plainer"], comp) if best.get("plainer") else None
     if plainer:
         plainer.update({k: best["plainer"].get(k) for k in ("train_rms", "validation_rms")})
-        effect += (f"; a plainer law (training RMS {_rms(plainer['train_rms'])}, this law {_rms(best.get('train_rms'))}): "
+        effect += (f"; a plainer law (training RMS {_g(plainer['train_rms'])}, this law {_g(best.get('train_rms'))}): "
                    f"{plainer['equation']}")
     name = {"v": "v", "dv": "der(v)", "i": "i", "va": _local(wd.potentials[0]), "vb": _local(wd.potentials[1])}[var]
     return {"component": comp.name, "class": comp.cls, "effect": effect, "template": best["template"],

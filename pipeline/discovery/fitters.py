@@ -179,13 +179,20 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         return score_of(rss, n_obs, int((active_mask & ~held).sum()), dictionary)
 
     # terms are removed by the criterion counting the samples the full law's residual is worth
-    # (:func:`mcl.stats.effective_samples`), the score the fit reports counts them all: sampled
-    # far faster than its error changes (a friction at 1 kHz), every sample counted kept a cubic
-    # that fits its slow wiggles; a law that leaves white noise is pruned as before
+    # (:func:`mcl.stats.effective_samples`, from pruning's first run), the score the fit reports
+    # counts them all: sampled far faster than its error changes (a friction at 1 kHz), every
+    # sample counted kept a cubic that fits its slow wiggles; a law that leaves white noise is
+    # pruned as before
     n_worth = n_obs
 
     def pruning(rss, kept: int):
         return score_of(rss * n_worth / n_obs, n_worth, kept, dictionary)
+
+    def worth(sim) -> float:
+        # (at least the dictionary's square: below it the extended BIC's cost of the choice,
+        # 2 log C(D, k), largest at half the dictionary, outweighs a term's own log n, and a
+        # full law would be kept whole for counting few samples)
+        return min(float(n_obs), max(effective_samples(problem.residual_and_cost(sim)[0]), dictionary ** 2))
 
     w, rss, problem, res = fit(active, w0)
     record(problem, active)
@@ -215,13 +222,6 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         if rss_c < rss:
             w, rss, problem, res = w_c, rss_c, problem_c, res_c
     path = []
-    if prune and (active & prunable).sum() > 1:
-        r, _ = problem.residual_and_cost(problem.simulate(w[active & ~held]))
-        sims += 1
-        # (at least the dictionary's square: below it the extended BIC's cost of the choice,
-        # 2 log C(D, k), largest at half the dictionary, outweighs a term's own log n, and a
-        # full law would be kept whole for counting few samples)
-        n_worth = min(float(n_obs), max(effective_samples(r), dictionary ** 2)) if r is not None else n_obs
     score = pruning(rss, int((active & ~held).sum()))
     path.append({"removed": None, "rss": rss, "score": score, "accepted": True, "message": res.message})
     last = {}      # the previous estimates, by parameter: for a point whose sensitivities fail
@@ -244,6 +244,9 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
         sim = problem.simulate(w[active & ~held], gradient=True)
         sims += 1
         free = np.flatnonzero(active & ~held)
+        if sim.ok and not path[1:]:      # (the full law's run, nothing removed yet: its residual's worth)
+            n_worth = worth(sim)
+            score = path[0]["score"] = pruning(rss, len(free))
         if sim.ok:
             S = problem.output_sensitivities(sim).reshape(-1, len(free))
             H_inv = gram_inverse(S.T @ S)

@@ -28,7 +28,7 @@ from .candidates import NEURAL_INDEX, SHAPE_INDEX, Base, Context, Item, Pair, fi
 from .families import distillations, families, friction_laws, hysteresis_families, inverse_families, potential_families, role_of
 from .inject import compiled, mode_of, rate_variables, with_injections
 from .screen import law_signals, linear_response
-from .verdict import EQUAL, READABLE
+from .verdict import EQUAL, READABLE, kept_terms, size_of
 
 #: pairs of laws are screened when the best single law is predicted to leave more than this
 #: times the noise's share of the RSS; a pair is fitted when it promises at most half the best
@@ -458,15 +458,10 @@ def one_variable(law: dict) -> bool:
     return law.get("family") in ("static", "rate", "absolute") and law.get("law_variable") in ("v", "dv", "va", "vb")
 
 
-def kept_terms(law: dict) -> list[str]:
-    """The terms a fitted law keeps (not its scale anchor)."""
-    return [t for t, on in zip((law.get("terms") or [])[1:], (law.get("active") or [])[1:]) if on]
-
-
 def wordy(law: dict) -> bool:
     """Whether a fitted law of one variable keeps more than :data:`READABLE` terms beside a
     constant: a law a person cannot read at a glance."""
-    return one_variable(law) and len([t for t in kept_terms(law) if t != "1"]) > READABLE
+    return one_variable(law) and size_of(law) > READABLE
 
 
 def plainer(fit: Batch, best: dict) -> list[dict]:

@@ -96,10 +96,16 @@ def alternatives(best: dict, scored: list[tuple[float, dict]], score: float) -> 
         if (c is best or "parts" in c or c.get("component") != best["component"] or value - score > EQUAL
                 or (c.get("family"), c.get("equation")) == (best.get("family"), best.get("equation"))):
             continue
-        w = (np.asarray(c["w"]) * np.asarray(c["active"])).tolist() if "w" in c and "active" in c else None
-        out.append({"equation": c.get("equation") or spec_name(c["template"]), "family": c.get("family"),
-                    "template": c.get("template"), "w": w, "score_difference": float(value - score)})
+        out.append(other_law(c, value - score))
     return out
+
+
+def other_law(c: dict, score_difference: float) -> dict:
+    """A law named beside the cause's (an as good one, a plainer one): its equation, family,
+    template, coefficients and score difference to the cause's."""
+    w = (np.asarray(c["w"]) * np.asarray(c["active"])).tolist() if "w" in c and "active" in c else None
+    return {"equation": c.get("equation") or spec_name(c["template"]), "family": c.get("family"),
+            "template": c.get("template"), "w": w, "score_difference": float(score_difference)}
 
 
 def decide(cands: list[dict], spec, resid, val0, roles: dict, structure, rss0: float, signals: dict | None = None):
@@ -156,9 +162,15 @@ def plainest(best: dict, close: list[dict]) -> dict:
     return min(same, key=lambda c: (size(c), c["score"]))
 
 
-def terms_kept(c: dict) -> list[str]:
-    """The terms a fitted law keeps beside its scale anchor and a constant."""
-    return [t for t, on in zip((c.get("terms") or [])[1:], (c.get("active") or [])[1:]) if on and t != "1"]
+def kept_terms(law: dict) -> list[str]:
+    """The terms a fitted law keeps (not its scale anchor)."""
+    return [t for t, on in zip((law.get("terms") or [])[1:], (law.get("active") or [])[1:]) if on]
+
+
+def size_of(law: dict) -> int:
+    """How many terms a fitted law keeps beside a constant (:data:`READABLE` the most a person
+    reads at a glance)."""
+    return len([t for t in kept_terms(law) if t != "1"])
 
 
 def readable(best: dict, cands: list[dict]) -> dict | None:
@@ -167,19 +179,17 @@ def readable(best: dict, cands: list[dict]) -> dict | None:
     in the same variable (:func:`plainest`'s kin): the plainer law a person may prefer, reported
     with what it costs in fit (a positioning axis's seven-term friction, and a three-term shape
     law beside it at 1.3x its training RMS); else None."""
-    if "parts" in best or len(terms_kept(best)) <= READABLE:
+    if "parts" in best or size_of(best) <= READABLE:
         return None
     plain = [c for c in cands if c is not best and c.get("component") == best["component"] and "parts" not in c
              and c.get("score") is not None and not c.get("failed") and c.get("family") != "reference"
              and c.get("family") in (best.get("family"), "shape") and c.get("law_variable") == best.get("law_variable")
-             and 0 < len(terms_kept(c)) <= READABLE]
+             and 0 < size_of(c) <= READABLE]
     if not plain:
         return None
     c = min(plain, key=lambda c: c["score"])
-    w = (np.asarray(c["w"]) * np.asarray(c["active"])).tolist() if "w" in c and "active" in c else None
-    return {"equation": c.get("equation") or spec_name(c["template"]), "family": c.get("family"),
-            "template": c.get("template"), "w": w, "score_difference": float(c["score"] - best["score"]),
-            "train_rms": c.get("train_rms"), "validation_rms": c.get("validation_rms")}
+    return {**other_law(c, c["score"] - best["score"]), "train_rms": c.get("train_rms"),
+            "validation_rms": c.get("validation_rms")}
 
 
 def helps(after, before: float, margin: float = 0.02) -> bool:
