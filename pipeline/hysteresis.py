@@ -146,14 +146,14 @@ class HysteresisTemplate(PolynomialTemplate):
         return super().residual(w, env)
 
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4,
-                 potentials: tuple[str, str] = ("va", "vb")) -> str:
+                 potentials: tuple[str, str] = ("va", "vb"), negated=()) -> str:
         """The law and z's equation, h1 and h2 folded into their coefficients."""
         w = np.asarray(w, float)
         h1, h2 = self._shape(w)
         rate = f"der({across})"
         z = (f"der(z) = {rate} - ({h1 / self.span:.{digits}g}*abs({rate})*z "
              f"+ {h2 / self.span:.{digits}g}*{rate}*abs(z))").replace("+ -", "- ")
-        return f"{super().equation(w, across, flow, digits, potentials)}; {z}"
+        return f"{super().equation(w, across, flow, digits, potentials, negated)}; {z}"
 
     def hidden_modelica(self, w, rate: str, shape: bool = True) -> tuple[list[str], list[str]]:
         """(declarations, equations) of z in a class whose rate of v is named ``rate``; with

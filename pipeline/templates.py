@@ -565,32 +565,37 @@ class PolynomialTemplate(Template):
         return sum(wk * m.sx(e) for wk, m in zip(w[k:len(self.terms)], self.rhs)) / w[0]
 
     def equation(self, w, across: str = "v", flow: str = "i", digits: int = 4,
-                 potentials: tuple[str, str] = ("va", "vb")) -> str:
+                 potentials: tuple[str, str] = ("va", "vb"), negated=()) -> str:
+        """The fitted law, readable; the terms whose indices are in ``negated`` are written in
+        -across and -flow (a flipped component's term that is neither even nor odd)."""
         rename = {"v": across, "i": flow, "dv": f"der({across})", "di": f"der({flow})",
                   "va": potentials[0], "vb": potentials[1]}
+        minus = {**rename, "v": f"(-{across})", "i": f"(-{flow})", "dv": f"der(-{across})",
+                 "di": f"der(-{flow})"}
 
-        def side(ws, terms):
+        def side(ws, terms, first=0):
             parts = []
-            for c, m in zip(ws, terms):
+            for j, (c, m) in enumerate(zip(ws, terms), first):
                 if c == 0:  # a term removed by pruning
                     continue
+                names = minus if j in negated else rename
                 unit = scaled_power(m)
                 if unit is not None:   # (x/s)^p: c/s^p on x^p
                     x, s_, p = unit
                     c, m = c / s_**p, Monomial(((x, p),))
-                mono = (re.sub(r"\b(va|vb|dv|di|v|i)\b", lambda g: rename[g.group(1)], m.modelica())
+                mono = (re.sub(r"\b(va|vb|dv|di|v|i)\b", lambda g: names[g.group(1)], m.modelica())
                         if isinstance(m, Expression) else
-                        "*".join(rename[n] if p == 1 else f"{rename[n]}^{p}" for n, p in m.powers))
+                        "*".join(names[n] if p == 1 else f"{names[n]}^{p}" for n, p in m.powers))
                 coef = f"{c:.{digits}g}"
                 parts.append(mono if coef == "1" and mono else coef + (f"*{mono}" if mono else ""))
             return " + ".join(parts).replace("+ -", "- ") or "0"
 
         w = np.asarray(w, dtype=float)
         k, n = len(self.lhs), len(self.terms)
-        text = f"{side(w[:k], self.lhs)} = {side(w[k:n], self.rhs)}"
+        text = f"{side(w[:k], self.lhs)} = {side(w[k:n], self.rhs, k)}"
         for name, value in zip(self.scales, w[n:]):      # scales by their fitted values
             text = re.sub(rf"\b{name}\b", f"{value:.{digits}g}", text)
-        for r in rename.values():       # an across value written as a difference: once in parentheses
+        for r in [*rename.values(), *minus.values()]:   # a value written as a difference: once in parentheses
             if r.startswith("(") and r.endswith(")"):
                 text = text.replace(f"({r})", r)
         return re.sub(r"([+-])([+-])(?=[0-9.])", lambda g: "-" if g[1] != g[2] else "+", text)   # x+-0.1: x-0.1

@@ -102,6 +102,23 @@ def test_potentials_keep_their_sign_when_a_mechanical_part_is_flipped():
     assert np.isclose(-i, 2.0 * (s_b - s_a) - 3.0 * s_a**2)
 
 
+def test_a_flipped_part_keeps_its_own_names_for_a_term_that_is_neither_even_nor_odd():
+    """i = c0 + c1 tanh(dv/s1) + c2 (exp(dv/s2) - 1) on a damper (v = -s_rel, i = -f): the
+    constant and the tanh change sign, the exponential is written in -v_rel; the law reads
+    f = ... in the damper's names, not (-f) = ... der(-s_rel). Checked at a point."""
+    tpl = PolynomialTemplate(lhs=["i"], rhs=["1", "tanh(dv/s1)", "exp(dv/s2)-1"], scales={"s1": 0.01, "s2": 0.2})
+    w = [1.0, 1.5, 18.0, 17.5, 0.01, 0.2]
+    text = in_words(tpl, w, SLIDE)
+    assert text.startswith("D.f = ") and "der(" not in text and "(-D.f)" not in text, text
+    assert "(-D.v_rel)" in text and "tanh(D.v_rel/0.01)" in text, text
+    # the written law, evaluated, gives the template's force at b for a speed of b against a
+    v_rel = 0.05
+    rhs = text.split(" = ", 1)[1].replace("D.v_rel", repr(v_rel)).replace("^", "**")
+    f_b = eval(rhs, {"tanh": np.tanh, "exp": np.exp})
+    i = 1.5 + 18.0 * np.tanh(-v_rel / 0.01) + 17.5 * (np.exp(-v_rel / 0.2) - 1)
+    assert np.isclose(f_b, -i)
+
+
 def test_roles_and_families_for_laws_in_a_potential():
     t = np.linspace(0, 50, 400)
     h1, h2 = 0.5 + 0.3 * np.sin(0.3 * t), 0.3 + 0.1 * np.cos(0.2 * t)

@@ -96,17 +96,19 @@ def in_words(template, w, comp, digits: int = 4) -> str:
     wd = words(comp)
     if not wd.flipped or not hasattr(template, "terms"):
         if wd.flipped:   # no terms to rewrite: name the variables by their definitions
-            return _equation(template, w, f"(-{wd.across})", f"(-{wd.flow})", digits, wd)
+            return _renamed(_equation(template, w, f"(-{wd.across})", f"(-{wd.flow})", digits, wd), wd)
         return _renamed(_equation(template, w, wd.across, wd.flow, digits, wd), wd)
     # v = -across', i = -flow' (va, vb keep their names and signs): an even term keeps its
     # value, an odd one changes sign; with a term that is neither, the law is written in the
     # negated variables
+    # (a term that is neither, exp(v/s) - 1, is written in -across, its coefficient kept)
     signs = np.array([parity(t, getattr(template, "scales", None)) for t in template.terms])
-    if (signs == 0).any():
+    if signs[0] == 0:
         return _renamed(_equation(template, w, f"(-{wd.across})", f"(-{wd.flow})", digits, wd), wd)
     w = np.asarray(w, float).copy()
-    w[:len(signs)] *= signs * signs[0]
-    return _renamed(_equation(template, w, wd.across, wd.flow, digits, wd), wd)
+    w[:len(signs)] *= np.where(signs == 0, 1, signs) * signs[0]
+    return _renamed(_equation(template, w, wd.across, wd.flow, digits, wd,
+                              negated={k for k in range(len(signs)) if signs[k] == 0}), wd)
 
 
 def said(template, w, comp) -> str:
@@ -118,16 +120,19 @@ def said(template, w, comp) -> str:
         return template.equation(w)
 
 
-def _equation(template, w, across: str, flow: str, digits: int, wd: Words) -> str:
-    """``template``'s equation in these names; the potentials named only for a law that reads
-    them (a third party's template need not know of them)."""
+def _equation(template, w, across: str, flow: str, digits: int, wd: Words, negated=()) -> str:
+    """``template``'s equation in these names; the potentials, and the terms ``negated``, named
+    only for a law that has them (a third party's template need not know of them)."""
+    more = {"negated": negated} if negated else {}
     if {"va", "vb"} & set(template.uses):
-        return template.equation(w, across=across, flow=flow, digits=digits, potentials=wd.potentials)
-    return template.equation(w, across=across, flow=flow, digits=digits)
+        more["potentials"] = wd.potentials
+    return template.equation(w, across=across, flow=flow, digits=digits, **more)
 
 
 def _renamed(text: str, wd: Words) -> str:
-    """der(s_rel) reads v_rel, der(phi_rel) w_rel."""
+    """der(s_rel) reads v_rel, der(phi_rel) w_rel; der(-s_rel) reads (-v_rel)."""
     if not wd.rate.startswith("der("):
+        for negated in (f"der((-{wd.across}))", f"der(-{wd.across})"):
+            text = text.replace(negated, f"(-{wd.rate})")
         text = text.replace(f"der({wd.across})", wd.rate)
     return text
