@@ -99,9 +99,8 @@ def in_words(template, w, comp, digits: int = 4) -> str:
             return _renamed(_equation(template, w, f"(-{wd.across})", f"(-{wd.flow})", digits, wd), wd)
         return _renamed(_equation(template, w, wd.across, wd.flow, digits, wd), wd)
     # v = -across', i = -flow' (va, vb keep their names and signs): an even term keeps its
-    # value, an odd one changes sign; with a term that is neither, the law is written in the
-    # negated variables
-    # (a term that is neither, exp(v/s) - 1, is written in -across, its coefficient kept)
+    # value, an odd one changes sign, one that is neither (exp(v/s) - 1) is written in -across;
+    # the whole law in the negated variables only where its first term is neither
     signs = np.array([parity(t, getattr(template, "scales", None)) for t in template.terms])
     if signs[0] == 0:
         return _renamed(_equation(template, w, f"(-{wd.across})", f"(-{wd.flow})", digits, wd), wd)
