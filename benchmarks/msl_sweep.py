@@ -80,31 +80,32 @@ ONE = textwrap.dedent("""
         # given ``limit`` seconds: a reference that runs longer (rumoca on a robot's six axes)
         # is no reference, and leaves mcl's own run its time; a string says why there is none
         import multiprocessing, tempfile
-        out = os.path.join(tempfile.mkdtemp(), "ref.npz")
-        def child():
-            try:
-                import rumoca
-                m = rumoca.Session([msl]).loads("model E_\\n  extends " + name + ";\\nend E_;\\n",
-                                                model="E_", filename="/sweep/E_.mo")
-                r = m.simulate((0.0, t_end), dt=t_end / 2000)
-                np.savez(out, time=np.asarray(r.time, float),
-                         **{f"x{k}": np.asarray(r[n], float) for k, n in enumerate(states) if n in r.names})
-            except Exception as exc:
-                with open(out + ".err", "w") as f:
-                    f.write(f"{type(exc).__name__}: {exc}"[:120])
-        proc = multiprocessing.get_context("fork").Process(target=child)
-        proc.start()
-        proc.join(limit)
-        if proc.is_alive():
-            proc.kill()
-            proc.join()
-            return f"rumoca's simulation ran longer than {limit:.0f} s"
-        if os.path.exists(out + ".err"):
-            return open(out + ".err").read()
-        if not os.path.exists(out):
-            return f"rumoca's simulation crashed (exit {proc.exitcode})"
-        got = np.load(out)
-        return got["time"], {n: got[f"x{k}"] for k, n in enumerate(states) if f"x{k}" in got.files}
+        with tempfile.TemporaryDirectory() as tmp:
+            out = os.path.join(tmp, "ref.npz")
+            def child():
+                try:
+                    import rumoca
+                    m = rumoca.Session([msl]).loads("model E_\\n  extends " + name + ";\\nend E_;\\n",
+                                                    model="E_", filename="/sweep/E_.mo")
+                    r = m.simulate((0.0, t_end), dt=t_end / 2000)
+                    np.savez(out, time=np.asarray(r.time, float),
+                             **{f"x{k}": np.asarray(r[n], float) for k, n in enumerate(states) if n in r.names})
+                except Exception as exc:
+                    with open(out + ".err", "w") as f:
+                        f.write(f"{type(exc).__name__}: {exc}"[:120])
+            proc = multiprocessing.get_context("fork").Process(target=child)
+            proc.start()
+            proc.join(limit)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+                return f"rumoca's simulation ran longer than {limit:.0f} s"
+            if os.path.exists(out + ".err"):
+                return open(out + ".err").read()
+            if not os.path.exists(out):
+                return f"rumoca's simulation crashed (exit {proc.exitcode})"
+            with np.load(out) as got:      # (read whole before the folder goes)
+                return got["time"], {n: got[f"x{k}"] for k, n in enumerate(states) if f"x{k}" in got.files}
     import mcl
     from mcl.compile.isolation import cpu_seconds
     from mcl.data import TimeSeries
