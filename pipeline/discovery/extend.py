@@ -23,7 +23,7 @@ from ..templates import unscaled
 from .families import shape_words
 from .fitters import WHOLE_RUN, residual
 from .modelica import write_extended
-from .report import _g
+from .report import short_number
 from .words import in_words, said, words
 
 def class_name_for(component: str, template) -> str:
@@ -101,7 +101,7 @@ def describe(best: dict, base, spec, train, signals) -> dict:
     plainer = _as_good(best["plainer"], comp) if best.get("plainer") else None
     if plainer:
         plainer.update({k: best["plainer"].get(k) for k in ("train_rms", "validation_rms")})
-        effect += (f"; a plainer law (training RMS {_g(plainer['train_rms'])}, this law {_g(best.get('train_rms'))}): "
+        effect += (f"; a plainer law (training RMS {short_number(plainer['train_rms'])}, this law {short_number(best.get('train_rms'))}): "
                    f"{plainer['equation']}")
     name = {"v": "v", "dv": "der(v)", "i": "i", "va": _local(wd.potentials[0]), "vb": _local(wd.potentials[1])}[var]
     return {"component": comp.name, "class": comp.cls, "effect": effect, "template": best["template"],

@@ -76,7 +76,8 @@ def misfit_in_time(time, residual, sigma: float, factor: float = 3.0, max_spans:
     return sorted(sorted(spans, key=lambda s: s[0] - s[1])[:max_spans])
 
 
-def _g(x, digits: int = 3) -> str:
+def short_number(x, digits: int = 3) -> str:
+    """``x`` in ``digits`` significant figures; "-" where there is none."""
     return "-" if x is None else f"{x:.{digits}g}"
 
 
@@ -247,9 +248,9 @@ def judged_on(each: dict) -> str:
 def _summary_rows(report) -> str:
     m, g = report["misfit"], report["gain"]
     causes = report.get("causes") or ([report["cause"]] if report.get("cause") else [])
-    noise = "; ".join(f"{o}: {_g(n['sigma'])} ({n['method']})" for o, n in (m.get("noise") or {}).items())
+    noise = "; ".join(f"{o}: {short_number(n['sigma'])} ({n['method']})" for o, n in (m.get("noise") or {}).items())
     rows = [("misfit", m.get("significance") or ("significant" if m["significant"] else "not significant")),
-            ("noise", noise or _g(m["noise_estimate"])),
+            ("noise", noise or short_number(m["noise_estimate"])),
             *([("fitted", "each output in units of its noise (their levels differ); candidates' RMS so weighted")]
               if m.get("weights") else []),
             ("where", ", ".join(f"{a:.3g}-{b:.3g} s" for a, b in sorted(m.get("where", []))) or "-")]
@@ -269,11 +270,11 @@ def _summary_rows(report) -> str:
                                           f"{a['score_difference']:+.2g}: the data do not choose between them)"))
         if cause.get("plainer"):
             p = cause["plainer"]
-            rows.append(("plainer law", f"{p['equation']}  (training RMS {_g(p.get('train_rms'))} against "
-                                        f"{_g(cause.get('train_rms'))}; validation {_g(p.get('validation_rms'))} "
-                                        f"against {_g(cause.get('validation_rms'))}; the law above was chosen)"))
+            rows.append(("plainer law", f"{p['equation']}  (training RMS {short_number(p.get('train_rms'))} against "
+                                        f"{short_number(cause.get('train_rms'))}; validation {short_number(p.get('validation_rms'))} "
+                                        f"against {short_number(cause.get('validation_rms'))}; the law above was chosen)"))
         if cause.get("after"):
-            rows.append(("misfit left", f"training RMS {_g(cause['after']['train_rms'])}: {cause['after']['misfit_left']}"))
+            rows.append(("misfit left", f"training RMS {short_number(cause['after']['train_rms'])}: {cause['after']['misfit_left']}"))
     failed = report.get("failed", [])
     rows.append(("not evaluated", "; ".join(f"{f['component']} ({f['stage']}: {plain(f['reason'])})" for f in failed) or "-"))
     body = "".join(f"<tr><th>{html.escape(k)}</th><td>{html.escape(str(v))}</td></tr>" for k, v in rows)
@@ -282,7 +283,7 @@ def _summary_rows(report) -> str:
     for name, b, a, c in (("training RMS", g["train_rms_before"], g["train_rms_after"], g.get("train_rms_calibrated")),
                           ("validation RMS", g["validation_rms_before"], g["validation_rms_after"],
                            g.get("validation_rms_calibrated"))):
-        row = [name, _g(b), _g(a), _factor(b, a)] + ([_g(c), _factor(b, c)] if calibrated else [])
+        row = [name, short_number(b), short_number(a), _factor(b, a)] + ([short_number(c), _factor(b, c)] if calibrated else [])
         gain_rows.append(row)
     header = ["", "nominal model", "with the learned laws", "improvement"] + (
         ["laws + calibration", "improvement"] if calibrated else [])
@@ -296,9 +297,9 @@ def _summary_rows(report) -> str:
         note += "<h3>Each output</h3>" + _table(
             ["output", "noise", f"{which} RMS, nominal", "with the learned laws", "improvement"]
             + ["laws + calibration", "improvement"] * cal,
-            [[html.escape(o), _g(r["noise"]), _g(r[f"{which}_before"]), _g(r.get(f"{which}_after")),
+            [[html.escape(o), short_number(r["noise"]), short_number(r[f"{which}_before"]), short_number(r.get(f"{which}_after")),
               _factor(r[f"{which}_before"], r.get(f"{which}_after"))]
-             + ([_g(r[f"{which}_calibrated"]), _factor(r[f"{which}_before"], r[f"{which}_calibrated"])] if cal else [])
+             + ([short_number(r[f"{which}_calibrated"]), _factor(r[f"{which}_before"], r[f"{which}_calibrated"])] if cal else [])
              for o, r in each.items()])
     return f"<table>{body}</table><h2>Before and after</h2>{_table(header, gain_rows)}{note}"
 
@@ -309,14 +310,14 @@ def _uncertainty_rows(report) -> str:
         params = cause["law"].get("parameters") or []
         if not params:
             continue
-        rows = [[html.escape(p["name"]), _g(p["value"], 4), _g(p["std_error"], 2),
-                 f"[{_g(p['ci95'][0], 4)}, {_g(p['ci95'][1], 4)}]", _g(p.get("bootstrap_std_error"), 2)]
+        rows = [[html.escape(p["name"]), short_number(p["value"], 4), short_number(p["std_error"], 2),
+                 f"[{short_number(p['ci95'][0], 4)}, {short_number(p['ci95'][1], 4)}]", short_number(p.get("bootstrap_std_error"), 2)]
                 for p in params]
         out.append(f"<h3>{html.escape(cause['component'])}</h3>" + _table(
             ["parameter", "value", "standard error", "95% interval", "block bootstrap s.e."], rows))
     cal = report.get("calibration")
     if cal and not cal.get("error"):
-        rows = [[html.escape(n), _g(v["before"], 4), _g(v["after"], 4), _g(v["std_error"], 2)]
+        rows = [[html.escape(n), short_number(v["before"], 4), short_number(v["after"], 4), short_number(v["std_error"], 2)]
                 for n, v in cal.get("values", {}).items()]
         out.append("<h3>Calibration (nominal parameters refitted with the laws)</h3>" + _table(
             ["parameter", "before", "after", "standard error"], rows))
@@ -340,7 +341,7 @@ def _tried_rows(report) -> str:
                   _details(f"failed: {plain(raw)}", raw) or s.get("not_fitted") or "fitted")
         fam = family_of(s["template"])
         rows.append([html.escape(f"{s.get('round', 1)}"), html.escape(s["component"]), html.escape(str(fam)),
-                     _g(s.get("predicted_rss")), status if "<details>" in str(status) else html.escape(str(status))])
+                     short_number(s.get("predicted_rss")), status if "<details>" in str(status) else html.escape(str(status))])
     if not rows:
         return ""
     return "<h2>What was tried</h2>" + _table(["round", "component", "law family",
@@ -356,7 +357,7 @@ def _files_and_settings(report) -> str:
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in ext.get("notes", []))
     settings = [[html.escape(k), html.escape(str(v))] for k, v in (report.get("settings") or {}).items()]
     software = [[html.escape(k), html.escape(v)] for k, v in (report.get("software") or {}).items()]
-    cost = f"{_g(report.get('cpu_seconds'))} CPU seconds ({_g(report.get('seconds'))} s on the clock)"
+    cost = f"{short_number(report.get('cpu_seconds'))} CPU seconds ({short_number(report.get('seconds'))} s on the clock)"
     return (f"<h2>Files</h2><ul>{items}{notes}</ul><h2>Settings</h2>{_table(['setting', 'value'], settings)}"
             f"<p>{html.escape(cost)}</p><h2>Software</h2>{_table(['package', 'version'], software)}")
 
