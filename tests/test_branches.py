@@ -55,6 +55,18 @@ def test_a_large_branch_runs_only_when_taken_and_keeps_its_values_and_derivative
     np.testing.assert_array_equal(np.array(back([0.3, 0.5, 0.5])), np.array(f([0.3, 0.5, 0.5])))
 
 
+def test_a_branch_of_the_same_form_in_another_function_reads_its_own_inputs():
+    """A branch made once is reused where another function has one of the same form (the same
+    medium function at another pipe segment); each call still reads its own function's
+    values: here other inputs and another constant."""
+    def f_of(a, k):
+        return ca.Function("f", [X], [ca.if_else(X[2] > 1, _heavy(a, k), ca.cos(a))])
+    first = f_of(X[0] * X[1], 0.1)
+    second = f_of(X[1] - X[0], 0.7)
+    for f in (first, second, f_of(X[0] * X[1], 0.1)):
+        _same(f, short_circuited(f, smallest=100), [[0.3, 0.5, 1.5], [-0.7, 0.2, 0.5]])
+
+
 def test_a_branch_not_taken_leaves_no_nan_behind():
     """The side not taken may be undefined there (a logarithm of a negative number), as in an
     if-expression guarding it: the value and its derivative are those of the side taken."""

@@ -22,6 +22,8 @@ _IEZ, _IN, _OUT, _CONST, _CALL = ca.OP_IF_ELSE_ZERO, ca.OP_INPUT, ca.OP_OUTPUT, 
 #: of 30 000-70 000 instructions, mostly IF97's regions), each made and split once
 _SWITCHES: OrderedDict = OrderedDict()
 _KEPT = 256
+#: the same switches by their branch's form in the program (see :meth:`_Program._shape`)
+_SHAPES: OrderedDict = OrderedDict()
 
 
 def short_circuited(f: ca.Function, smallest: int = SMALLEST, depth: int = 0) -> ca.Function:
@@ -163,14 +165,33 @@ class _Program:
     def _branch(self, c: int, frontier: list, w: dict, smallest: int, depth: int) -> list:
         """The branch under condition slot ``c``, called through a switch: its roots' values."""
         nodes, roots = self.big[c]
-        f_in = ca.SX.sym("f", len(frontier))
-        local = {s: f_in[i] for i, s in enumerate(frontier)}
-        for s in nodes:
-            local[s] = self.node(s, local, None)
-        taken = ca.vertcat(*[local[self.ins[r][1]] for r in roots])
-        call = _switch(f_in, taken, smallest, depth)
+        shape = (self._shape(nodes, roots, frontier), smallest, depth)
+        call = _SHAPES.get(shape)
+        if call is None:
+            f_in = ca.SX.sym("f", len(frontier))
+            local = {s: f_in[i] for i, s in enumerate(frontier)}
+            for s in nodes:
+                local[s] = self.node(s, local, None)
+            taken = ca.vertcat(*[local[self.ins[r][1]] for r in roots])
+            call = _switch(f_in, taken, smallest, depth)
+            _SHAPES[shape] = call
+            while len(_SHAPES) > _KEPT:
+                _SHAPES.popitem(last=False)
         got = call(w[c], ca.vertcat(*[w[s] for s in frontier]) if frontier else ca.SX(0, 1))
         return ca.vertsplit(got)
+
+    def _shape(self, nodes: list, roots: list, frontier: list) -> str:
+        """The branch's form as a digest of its operations and how they are wired, from the
+        program alone: an equal branch met in another block (the same medium function at
+        another pipe segment) is then found without building its expression to serialise it."""
+        at = {s: i for i, s in enumerate(frontier)}
+        n = len(at)
+        for k, s in enumerate(nodes):
+            at[s] = n + k
+        ins, op = self.ins, self.op
+        form = [len(frontier), *[(op[s], *[at[d] for d in ins[s]]) for s in nodes],
+                *[at[ins[r][1]] for r in roots]]
+        return hashlib.sha1(repr(form).encode()).hexdigest()
 
 
 def _switch(f_in: ca.SX, taken: ca.SX, smallest: int, depth: int) -> ca.Function:
