@@ -215,6 +215,49 @@ end Heat;
     assert np.allclose(res.states[:, 0], t / 2, rtol=1e-6, atol=1e-9)
 
 
+def test_a_function_called_on_equal_arguments_built_twice_is_inlined_once(tmp_path):
+    """Two equations call one function on ``x + 1``, each written apart: the arguments are equal
+    expressions but not one node. They are known by their form (the symbols they read and how),
+    so the call is inlined once; an argument that differs in a constant's last digits, or reads
+    another symbol, is another call."""
+    import casadi as ca
+
+    from mcl.compile.rumoca_frontend import _form
+
+    x, y = ca.SX.sym("x"), ca.SX.sym("x")       # (one name, two symbols)
+    assert _form(0.5 * (x + 1)) == _form(0.5 * (x + 1))
+    assert _form(0.5 * (x + 1)) != _form(0.5 * (x + 1 + 1e-15))
+    assert _form(0.5 * (x + 1)) != _form(0.5 * (y + 1))
+    f = tmp_path / "Twice.mo"
+    f.write_text("""model Twice
+  function cubic "y with y^3 + y = x, by Newton's method"
+    input Real x;
+    output Real y = 0;
+  protected
+    Real step;
+  algorithm
+    for k in 1:40 loop
+      step := (y^3 + y - x) / (3*y^2 + 1);
+      y := y - step;
+    end for;
+  end cubic;
+  Real x(start = 0, fixed = true);
+  output Real a = cubic(x + 1);
+  output Real b = 2*cubic(x + 1);
+  output Real c = cubic(x + 2);
+equation
+  der(x) = 1;
+end Twice;
+""")
+    model = compile_model([f], "Twice")
+    t = np.linspace(0.0, 5.0, 11)
+    res = simulate(model, series(t), t_out=t)
+    assert res.ok, res.reason
+    a, b, c = (res.outputs[:, model.output_names.index(n)] for n in "abc")
+    assert np.allclose(a**3 + a, t + 1, atol=1e-9) and np.allclose(b, 2 * a, atol=1e-12)
+    assert np.allclose(c**3 + c, t + 2, atol=1e-9)
+
+
 def test_a_function_with_while_loops_runs_them_bounded(tmp_path):
     """rumoca refuses a function's while loop it cannot evaluate while compiling; mcl compiles
     it again with each while loop a bounded for loop: a Newton iteration (inside a table search's
