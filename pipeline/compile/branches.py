@@ -173,10 +173,7 @@ class _Program:
             for s in nodes:
                 local[s] = self.node(s, local, None)
             taken = ca.vertcat(*[local[self.ins[r][1]] for r in roots])
-            call = _switch(f_in, taken, smallest, depth)
-            _SHAPES[shape] = call
-            while len(_SHAPES) > _KEPT:
-                _SHAPES.popitem(last=False)
+            call = _kept(_SHAPES, shape, _switch(f_in, taken, smallest, depth))
         got = call(w[c], ca.vertcat(*[w[s] for s in frontier]) if frontier else ca.SX(0, 1))
         return ca.vertsplit(got)
 
@@ -206,10 +203,15 @@ def _switch(f_in: ca.SX, taken: ca.SX, smallest: int, depth: int) -> ca.Function
     zero = ca.Function(name + "_0", [f_in], [ca.SX.zeros(taken.sparsity())])
     c_mx, f_mx = ca.MX.sym("c"), ca.MX.sym("f", f_in.numel())
     switch = ca.Function.if_else(name + "_if", body, zero)
-    _SWITCHES[key] = ca.Function(name + "_call", [c_mx, f_mx], [switch(c_mx, f_mx)], {"never_inline": True})
-    while len(_SWITCHES) > _KEPT:
-        _SWITCHES.popitem(last=False)
-    return _SWITCHES[key]
+    return _kept(_SWITCHES, key, ca.Function(name + "_call", [c_mx, f_mx], [switch(c_mx, f_mx)], {"never_inline": True}))
+
+
+def _kept(cache: OrderedDict, key, value):
+    """``value``, kept in ``cache`` under ``key`` (the oldest dropped past :data:`_KEPT`)."""
+    cache[key] = value
+    while len(cache) > _KEPT:
+        cache.popitem(last=False)
+    return value
 
 
 def _frontier(prog: _Program, nodes: list, roots: list) -> list:

@@ -1001,6 +1001,11 @@ def _missing_class(model: str, files: list[Path]) -> ModelicaError | None:
                          f"{', '.join(inside[:12]) or 'nothing'})")
 
 
+def _nodes(a: ca.SX) -> tuple:
+    """A call argument's identity by its nodes' addresses."""
+    return tuple(e.element_hash() for e in ca.vertsplit(ca.vec(a)))
+
+
 def _form(a: ca.SX):
     """A call argument's identity for the memo of calls: its nodes where each is a symbol or a
     constant, else its expression's form (serialised) with the symbols it reads. Equal
@@ -1008,9 +1013,8 @@ def _form(a: ca.SX):
     call, inlined once: a pumping system's water functions had 1.2 of their 3 million
     instructions inlined again so, and its common-subexpression pass took 11 CPU-s, now 7.
     (Asked only where the nodes are new: serialising is 0.8 ms an argument.)"""
-    parts = ca.vertsplit(ca.vec(a))
-    if all(e.is_leaf() for e in parts) or ca.n_nodes(a) > FORM_NODES_MAX:
-        return tuple(e.element_hash() for e in parts)
+    if all(e.is_leaf() for e in ca.vertsplit(ca.vec(a))) or ca.n_nodes(a) > FORM_NODES_MAX:
+        return _nodes(a)
     leaves = ca.symvar(a)
     return ca.Function("form", leaves, [a]).serialize(), tuple(v.element_hash() for v in leaves)
 
@@ -1751,7 +1755,7 @@ class _Translator:
         # one expansion per call on the same expressions: a record-valued call read field by
         # field (Water IF97's rho_ph reads waterBaseProp_ph's record 16 times) is otherwise
         # inlined once per field (14.7 million nodes for rho_ph instead of 0.9)
-        key = (compiled.name(), tuple(tuple(e.element_hash() for e in ca.vertsplit(ca.vec(a))) for a in actual))
+        key = (compiled.name(), tuple(_nodes(a) for a in actual))
         if key not in self._calls:
             # (and one on equal expressions built twice: see _form)
             form = (compiled.name(), tuple(_form(a) for a in actual))
