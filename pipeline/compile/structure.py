@@ -28,7 +28,7 @@ import scipy.linalg
 
 from .dae import CSE_MIN, Dae, steps_read
 from ..errors import ModelicaError, UnsupportedConstruct
-from . import branches, dummy, homotopy
+from . import branches, dummy, homotopy, steady
 from .hidden import revealed
 
 log = logging.getLogger(__name__)
@@ -1177,12 +1177,14 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True, i
                             ca.vertcat(x_impl, dxi_sx, z_orig))
     wish = _preferred(dae)
     wish_sx = wish(x_impl, z_orig, dae.u, dae.p, t, dxi_sx)
-    joint = (zs, semi["alg"], ca.vertcat(invariants_in(invariants, dae, x_impl, z_orig), init_sx, wish_sx),
-             xs, up, t)
+    invariant_rows = invariants_in(invariants, dae, x_impl, z_orig)
+    joint = (zs, semi["alg"], ca.vertcat(invariant_rows, init_sx, wish_sx), xs, up, t)
     # (the initial system's loops from the start values)
     zargs = [X, ca.vertcat(U, P0), T, *((ca.DM(z_guess), -ca.DM.ones(nh)) if ng else (G, H))]
+    pseudo = (lambda: _pseudo_transient_rows(dae, joint, invariant_rows, (x_impl, dxi_sx, z_orig),
+                                             X, U, P0, T, zfun, zargs))
     start, init_start, unmet = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
-                                     joint[2].numel() - wish_sx.numel(), x_names, joint)
+                                     joint[2].numel() - wish_sx.numel(), x_names, joint, pseudo)
     init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
     if semi.get("selected") and _finite(lambda u: init(u, p0, 0.0), u0) is None:
         # no consistent start in the selected states (six coordinates of point masses that
@@ -1753,22 +1755,41 @@ def _preferred(dae) -> ca.Function:
     return ca.Function("preferred", [dae.x, dae.z, dae.u, dae.p, dae.t, dae.dx], [value])
 
 
-def _initial_rows(joint, zfun, zargs) -> ca.MX:
+def _initial_rows(joint, zfun, zargs, extra=()) -> ca.MX:
     """The initial system's rows (``joint``'s: invariants, initial equations, wishes) in the
     ODE's arguments ``zargs[:3]`` (x, (u, p), t), with the algebraic unknowns they read from
     ``zfun`` inlined: the blocks no row reads are then not in their graph. A robot's 375
     accelerations and forces, solved by QR at run time, kept its whole initial system in MX,
     each Newton step a dense Jacobian through that solve (seconds); its rows read positions
-    and velocities alone, and expand to SX."""
+    and velocities alone, and expand to SX. ``extra``: (SX symbol, its MX argument) pairs the
+    rows also read."""
     zs, _, rows, xs, up, t = joint
     used = sorted(set(ca.jacobian_sparsity(rows, zs).get_col())) if zs.numel() else []
     Z = zfun.call(zargs, True, False)[0]
     zu = ca.vertcat(*[zs[i] for i in used]) if used else ca.SX(0, 1)
-    f = ca.Function("rows", [xs, zu, up, t], [rows])
-    return f(zargs[0], ca.vertcat(*[Z[i] for i in used]) if used else ca.MX(0, 1), zargs[1], zargs[2])
+    f = ca.Function("rows", [xs, zu, up, t, *[s for s, _ in extra]], [rows])
+    return f(zargs[0], ca.vertcat(*[Z[i] for i in used]) if used else ca.MX(0, 1), zargs[1], zargs[2],
+             *[a for _, a in extra])
 
 
-def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
+def _pseudo_transient_rows(dae, joint, invariant_rows, implicit, X, U, P, T, zfun, zargs) -> ca.Function:
+    """(x, u, p, t, x_prev, 1/h) -> the initial system's rows (no wishes) with each der() of
+    an original state read as its right-hand side less the implicit Euler step's difference
+    quotient from x_prev: at 1/h = 0, the initial system itself (see steady.py).
+    ``implicit``: the original states, their der() and the algebraic unknowns in joint's."""
+    zs, g, _, xs, up, t = joint
+    x_impl, dxi, z_orig = implicit
+    xp, inv_h = ca.SX.sym("xp", xs.numel()), ca.SX.sym("inv_h")
+    quotient = inv_h * (x_impl - ca.substitute(x_impl, xs, xp))
+    init = ca.substitute(dae.init_residual, ca.vertcat(dae.x, dae.dx, dae.z),
+                         ca.vertcat(x_impl, dxi - quotient, z_orig))
+    XP, IH = ca.MX.sym("xp", xs.numel()), ca.MX.sym("inv_h")
+    out = _initial_rows((zs, g, ca.vertcat(invariant_rows, init), xs, up, t), zfun, zargs,
+                        [(xp, XP), (inv_h, IH)])
+    return ca.Function("pseudo", [X, U, P, T, XP, IH], [out])
+
+
+def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint, pseudo=None):
     """(p -> start values s, (u, p, t, s) -> consistent x0): invariants + initial equations
     (der() of a state is its right-hand side) + chosen start values (s is an argument, so an FMU
     can take a state's start value from its user), those of the variables declared ``stateSelect
@@ -1820,7 +1841,7 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
              + [i for i, n in enumerate(x_names) if n in dae.x_names and n not in fixed]
              + [i for i, n in enumerate(x_names) if n not in dae.x_names])
 
-    def square(J):
+    def square(J, equilibrate=False):
         """(start, init_start, the initial state at the model's values or None) solving the
         equations independent at J, the other states pinned to their start values."""
         # each state's column scaled to its largest entry: which rows are independent is then
@@ -1858,8 +1879,16 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
         R = ca.Function("R", [Xs, Us, Ps, Ts, Ss], [residual])
         Q = ca.MX.sym("q", U.numel() + P.numel() + 1 + nx)
         cut = np.cumsum([0, U.numel(), P.numel(), 1, nx]).tolist()
-        G = ca.Function("G", [X, Q], [R(X, *ca.vertsplit(Q, cut))])
-        x0 = _loop_solve("init", G, S, ca.vertcat(U, P, T, S), strict=True)
+        if equilibrate:
+            # the unknowns and rows scaled at the start values (a walk's end, next to a
+            # solution whose Jacobian spans 1e-33 to 1e12: unscaled, Newton's steps are lost
+            # to rounding and its tolerance is out of reach of the largest rows)
+            cols, rows_s = (ca.DM(v) for v in _equilibration(ca.Function("A", [Xs, Us, Ps, Ts, Ss], [A_s]), xs0, dae))
+            G = ca.Function("G", [X, Q], [rows_s * R(X / cols, *ca.vertsplit(Q, cut))])
+            x0 = _loop_solve("init", G, S * cols, ca.vertcat(U, P, T, S), strict=True) / cols
+        else:
+            G = ca.Function("G", [X, Q], [R(X, *ca.vertsplit(Q, cut))])
+            x0 = _loop_solve("init", G, S, ca.vertcat(U, P, T, S), strict=True)
         init_start = ca.Function("init_start", [U, P, T, S], [x0], ["u", "p", "t", "s"], ["x0"])
         x0 = _nominal(init_start, xs0, dae)
         if x0 is None:
@@ -1887,7 +1916,39 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
                 init_start, start = together, ca.Function("start", [P], [semi_start], ["p"], ["s"])
         return start, init_start, x0
 
-    start, init_start, x0 = square(J)
+    walked, unwalked = False, None
+
+    def walk():
+        """square() at the end of a pseudo-transient walk from the start values (see steady.py),
+        the starts moved there (``unwalked``: as they were); None where the walk or solve fails."""
+        nonlocal semi_start, xs0, walked, unwalked
+        walked = True
+        if pseudo is None or not nh:
+            return None
+        moved = _walked(pseudo(), xs0, order, nh, lambda x: _unmet(H, x, dae, nh), dae)
+        Jm = _finite(at, moved) if moved is not None else None
+        if Jm is None:
+            return None
+        unwalked = semi_start, xs0
+        semi_start, xs0 = _moved_starts(semi_start, xs0, moved), moved
+        try:
+            other = square(Jm, equilibrate=True)
+        except ModelicaError:
+            other = None
+        if other is None or other[2] is None:
+            semi_start, xs0 = unwalked
+            return None
+        return other
+
+    try:
+        start, init_start, x0 = square(J)
+    except ModelicaError:
+        # singular at the start values (pipes of water at rest, all at one pressure): where
+        # the model's dynamics lead
+        other = walk()
+        if other is None:
+            raise
+        start, init_start, x0 = other
     if x0 is None:
         # no solve: the equations chosen again where the relaxed starts leave them all finite
         # (the rows and pins chosen at rotation matrices of 0 are not those of a mechanism)
@@ -1924,8 +1985,52 @@ def _initialiser(dae, xs, X, U, P, T, hard, nh, x_names, joint):
                 (start, init_start, _), worst = other, better
             if worst <= INIT_TOL:
                 break
+    if worst > INIT_TOL and not walked:
+        # still unmet (a steady state with the water at rest at the start values)
+        other = walk()
+        better = _unmet(H, other[2], dae, nh) if other is not None else np.inf
+        if better < worst:
+            (start, init_start, _), worst = other, better
+        elif other is not None:
+            semi_start, xs0 = unwalked
     # judged where a run starts: from the start values ``start`` gives
     return start, init_start, _unmet(H, _nominal(init_start, np.array(start(dae.p_values)).ravel(), dae), dae, nh)
+
+
+def _equilibration(A: ca.Function, x: np.ndarray, dae) -> tuple[np.ndarray, np.ndarray]:
+    """(each unknown's column maximum, each row's inverse size) of the Jacobian ``A`` at ``x``:
+    the unknowns times the first have columns of at most 1, and the rows times the second are
+    relative to the size of their terms (a pressure's mass balance, terms of 1e11, is met to
+    rounding at 1e-5; a tank's heat balance needs 1e-12)."""
+    J = np.abs(np.nan_to_num(np.array(A(x, dae.u_start, dae.p_values, 0.0, x), float)))
+    cols = J.max(axis=0, initial=0.0)
+    size = J @ (np.abs(x) + 1e-10)
+    return np.where(cols > 0, cols, 1.0), 1.0 / np.where(size > 0, size, 1.0)
+
+
+def _walked(pseudo: ca.Function, xs0: np.ndarray, order: list[int], nh: int, unmet, dae):
+    """The end of a pseudo-transient walk (steady.py) from the start values ``xs0``: each
+    step solves the rows independent at the first step with the other states pinned (those
+    the user fixed first, as ``order`` gives), at the model's parameter values."""
+    u, p = dae.u_start, dae.p_values
+    X, XP, IH = (ca.MX.sym(n, k) for n, k in (("x", xs0.size), ("xp", xs0.size), ("inv_h", 1)))
+    r = pseudo(X, u, p, 0.0, XP, IH)
+    J = _finite(lambda x: ca.Function("J", [X, XP, IH], [ca.jacobian(r, X)])(x, x, 1.0 / steady.H0), xs0)
+    if J is None:
+        return None
+    J = J / np.maximum(np.max(np.abs(J), axis=0, initial=0.0), 1e-300)
+    rows = _independent_rows(J[:nh])
+    basis = _column_basis(J[rows], order[::-1])
+    if len(basis) < len(rows):
+        return None
+    pins = [i for i in order if i not in set(basis)]
+    s = ca.DM(xs0)
+    res = ca.vertcat(r[rows], X[pins] - s[pins]) if pins else r[rows]
+    step = ca.Function("step", [X, XP, IH], [res, ca.jacobian(res, X)])
+    x = steady.walk(step, unmet, xs0, INIT_TOL)
+    if x is not None:
+        x[pins] = xs0[pins]
+    return x
 
 
 def _linear_start(A: ca.MX, b: ca.MX, S: ca.MX) -> ca.MX:
