@@ -72,7 +72,7 @@ def guess(rows: ca.SX, lam: ca.SX, unknowns: ca.SX, par: ca.SX, par0: np.ndarray
     z = np.array(start, float)
     try:
         for level in np.linspace(1.0, 0.0, STEPS + 1):
-            z = newton(lambda v: [np.array(a, float) for a in fun(v, par0, level)], z)
+            z = _newton(lambda v: [np.array(a, float) for a in fun(v, par0, level)], z)
             if z is None:
                 return None
     except RuntimeError:
@@ -80,7 +80,7 @@ def guess(rows: ca.SX, lam: ca.SX, unknowns: ca.SX, par: ca.SX, par0: np.ndarray
     return z
 
 
-def newton(f, z: np.ndarray) -> np.ndarray | None:
+def _newton(f, z: np.ndarray) -> np.ndarray | None:
     """Newton's method with step halving from ``z``; None where it does not converge."""
     r, J = f(z)
     r = r.ravel()
