@@ -1181,8 +1181,10 @@ def _build(dae: Dae, name: str = "model", homotopic=None, select: bool = True, i
     joint = (zs, semi["alg"], ca.vertcat(invariant_rows, init_sx, wish_sx), xs, up, t)
     # (the initial system's loops from the start values)
     zargs = [X, ca.vertcat(U, P0), T, *((ca.DM(z_guess), -ca.DM.ones(nh)) if ng else (G, H))]
+    # (a walk only where the initial equations read der(): without, its steps are the solve itself)
     pseudo = (lambda: _pseudo_transient_rows(dae, joint, invariant_rows, (x_impl, dxi_sx, z_orig),
-                                             X, U, P0, T, zfun, zargs))
+                                             X, U, P0, T, zfun, zargs)) \
+        if dae.dx.numel() and ca.depends_on(dae.init_residual, dae.dx) else None
     start, init_start, unmet = _initialiser(dae, xs, X, U, P0, T, _initial_rows(joint, zfun, zargs),
                                      joint[2].numel() - wish_sx.numel(), x_names, joint, pseudo)
     init = ca.Function("init", [U, P0, T], [init_start(U, P0, T, start(P0))], ["u", "p", "t"], ["x0"])
