@@ -62,6 +62,11 @@ def _step(step, x_prev: np.ndarray, h: float) -> np.ndarray | None:
         return None
 
 
+def term_sizes(J: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """Each row's size at ``z``: the sum of its terms' magnitudes, linearised (|J| |z|)."""
+    return np.abs(J) @ (np.abs(z) + 1e-10)
+
+
 def _newton(f, z: np.ndarray) -> np.ndarray | None:
     """Newton's method with step halving, each step solved with the Jacobian's rows and
     columns scaled to 1 (a valve's area of 3e-6 m2 beside pressures of 1e5 Pa and their rows
@@ -73,8 +78,7 @@ def _newton(f, z: np.ndarray) -> np.ndarray | None:
             return None
         # met row by row against the size of its terms (a tank's slow heat balance beside a
         # pressure's fast mass balance: one tolerance for all left the tank 0.03 K off steady)
-        size = np.abs(J) @ (np.abs(z) + 1e-10) + 1e-300
-        if np.all(np.abs(r) <= homotopy.TOL * size):
+        if np.all(np.abs(r) <= homotopy.TOL * (term_sizes(J, z) + 1e-300)):
             return z
         cols = 1.0 / np.maximum(np.abs(J).max(axis=0, initial=0.0), 1e-300)
         rows = 1.0 / np.maximum(np.abs(J * cols).max(axis=1, initial=0.0), 1e-300)

@@ -2006,7 +2006,7 @@ def _equilibration(A: ca.Function, x: np.ndarray, dae) -> tuple[np.ndarray, np.n
     rounding at 1e-5; a tank's heat balance needs 1e-12)."""
     J = np.abs(np.nan_to_num(np.array(A(x, dae.u_start, dae.p_values, 0.0, x), float)))
     cols = J.max(axis=0, initial=0.0)
-    size = J @ (np.abs(x) + 1e-10)
+    size = steady.term_sizes(J, x)
     return np.where(cols > 0, cols, 1.0), 1.0 / np.where(size > 0, size, 1.0)
 
 
