@@ -61,11 +61,12 @@ SWITCHED = 1e-6
 AFTER_TIME_EVENT = 1024 * np.finfo(float).eps
 MAX_EVENTS = 100000
 EVENT_SPAN = 4.0          # a call spans this many times the spacing of the events so far
-#: a call ends at this fraction of the time in which a relation on the states reaches zero on
-#: its trend (see _Hybrid.reach): it stops short of the crossing, and the next call, on a
-#: closer trend, steps over it (a check valve in a pump's loop, run 0.4 s past its crossing
-#: with the valve held, took 20 000 solver steps and 12 s to fail; stopped short, 0.13 s)
-REACH = 0.5
+#: a call ends at most this many times as far as the time in which a relation on the states
+#: reaches zero on its trend (see _Hybrid.reach). Not short of it: a call run past a crossing
+#: into a branch held beyond it fails within its frugal steps (see _Hybrid.called), and calls
+#: ended at half the way restarted the solver 5x as often (a furnished room's fits: 250 CPU-s
+#: at 0.5, 50 at 2)
+REACH = 2.0
 ZOOM_TOL = 1e-7           # a crossing on the states located to this fraction of the interval it was seen in
 ZOOM_POINTS = 32         # points of one call that narrows a crossing on the states (32x narrower a call)
 #: output points whose outputs and checks a model with algebraic loops evaluates in one call
@@ -185,12 +186,15 @@ class _Budget:
         self.opts, self.clock = opts, clock
         self.steps = 0
         self.points = 0           # output points integrated so far
+        self.last = 0.0           # steps per point of the last call
         self.rate = None          # seconds per step, measured
         self.guessed = False      # rate is a guess made before any call
 
     def record(self, steps: int, seconds: float, points: int = 0):
         self.steps += int(steps)
         self.points += int(points)
+        if points:
+            self.last = steps / points
         if steps > 0:
             r = seconds / steps
             self.rate = r if self.rate is None or self.guessed else max(r, 0.5 * self.rate)
@@ -237,8 +241,10 @@ class _Budget:
 
     def need(self) -> int:
         """Steps per point of a call whose points may each take 8x the steps the points have
-        taken so far (at least 64, at most the cap; a power of 2: few integrators are built)."""
-        return _pow2(min(max(64, int(8 * self.steps / self.points)), self.opts.max_steps))
+        taken so far, or 4x those of the last call's (where the run has turned stiff: a spring
+        stiffening a millionfold halfway, each point at the run's mean failed first), at least
+        64, at most the cap; a power of 2: few integrators are built."""
+        return _pow2(min(max(64, int(8 * self.steps / self.points), int(4 * self.last)), self.opts.max_steps))
 
     def _split(self, n_points: int, allowed: float, bound: str) -> tuple[int, int, str | None]:
         """A call of at most ``n_points`` points whose steps in all stay within ``allowed``."""
@@ -534,6 +540,7 @@ class _Plan:
         a call that needs more a failure (a model with events: its caller looks for a crossing
         before it gives a call all its steps). Returns the number of points filled."""
         pos, failed, tight = 0, None, 1.0       # (tight: the tolerances' factor of a call retried)
+        upto, then = None, None                # (a call's points the last, failed, call got past)
         while pos < len(idx) and not (one_call and pos):
             budget.check(t0)
             # after a call that ran out of its reduced steps: again with more steps, sized with
@@ -552,7 +559,7 @@ class _Plan:
                 # as the last call followed, more after one that followed to its end (a power
                 # of 2: an integrator is built for each size, 1 s each on an engine's loops)
                 n = min(n, _pow2(self.followed_points))
-            sub = idx[pos:pos + n]
+            sub = idx[pos:pos + (n if upto is None else min(n, upto))]
             if self.hybrid is not None and len(sub) > 1 and not _even(t0, self.t_int[sub]) and _even(
                     self.t_int[sub[0]], self.t_int[sub[1:]]):
                 sub = sub[:1]        # (from an event's instant: to the next point, then evenly on)
@@ -566,7 +573,12 @@ class _Plan:
                 if short and "TOO_MUCH_WORK" in str(exc):
                     raise _Frugal(f"more than {steps} solver steps a point before t = {self.t_int[sub[-1]]:g}") from None
                 if bound is not None and "TOO_MUCH_WORK" in str(exc):
-                    failed = steps
+                    # out of steps past its first point: the points it got past again, as they
+                    # were, then the one it failed on alone with more steps (its first point
+                    # alone again each time: a stiff law's run redid up to 30 points for each
+                    # point it kept, 210 s of a fit)
+                    upto = _passed(integ, self.tau(self.t_int[sub]), extra) or None
+                    failed, then = (steps, None) if upto is None else (None, steps)
                     continue
                 if tight == 1.0 and _TEST_FAILURES in str(exc):
                     # the error test failing over and over where the step cannot shrink: once
@@ -576,7 +588,7 @@ class _Plan:
                     tight = TIGHTER
                     continue
                 raise _SolverFailed(f"solver error before t = {self.t_int[sub[-1]]:g}: {_last_line(exc)}") from None
-            failed, tight = None, 1.0
+            failed, tight, upto, then = then, 1.0, None, None
             budget.record(_nsteps(integ), clock.elapsed, len(sub))
             traj[:, sub] = xf
             if not np.all(np.isfinite(xf)):
@@ -811,6 +823,18 @@ def _nsteps(integ) -> int:
         return int(integ.stats().get("nsteps", 0))
     except RuntimeError:
         return 0
+
+
+def _passed(integ, tau: np.ndarray, extra) -> int:
+    """The output points (at the scaled times ``tau``; a hop's call, ``extra`` = [start,
+    length], in its own time from 0 to 1) a failed call of ``integ`` got past."""
+    try:
+        reached = float(integ.stats().get("tcur", np.nan))
+    except RuntimeError:
+        return 0
+    if extra:
+        tau = hop_grid(len(tau), False)
+    return int(np.searchsorted(tau, reached, side="right")) if np.isfinite(reached) else 0
 
 
 def _spent(integ, steps: int, exc: Exception) -> int:

@@ -130,3 +130,50 @@ def test_a_runs_numbers_do_not_follow_the_machines_speed(tmp_path, monkeypatch, 
         assert res.ok, res.reason
         runs.append(res.outputs)
     assert all(np.array_equal(runs[0], other) for other in runs[1:])
+
+
+def test_a_failed_call_tells_how_many_of_its_points_it_got_past():
+    """A call out of steps at its sixth point: the five before it are kept (the retry is those
+    five, then the sixth alone with more steps; it was the first alone, over and over)."""
+    import casadi as ca
+
+    from mcl.engine_casadi import _passed
+
+    x, t = ca.SX.sym("x", 2), ca.SX.sym("t")
+    stiffening = 1 + 1e6 / (1 + ca.exp(-(t - 0.55) / 1e-3))       # a millionfold past t = 0.55
+    grid = np.linspace(0.1, 1.0, 10)
+    ode = ca.vertcat(x[1], -stiffening * x[0])                       # (an oscillator: 1000 rad/s)
+    integ = ca.integrator("I", "cvodes", {"x": x, "t": t, "ode": ode}, 0.0, grid.tolist(),
+                          {"max_num_steps": 200})
+    with pytest.raises(RuntimeError, match="TOO_MUCH_WORK"):
+        integ(x0=[1.0, 0.0])
+    assert _passed(integ, grid, []) == 5
+    # a hop's call (its own time from 0 to 1): the same count
+    assert _passed(integ, grid, [0.0, 1.0]) == 5
+
+
+ONSET = """
+model Onset "a slow oscillator whose spring stiffens a millionfold halfway"
+  Real x(start = 1, fixed = true);
+  Real v(start = 0, fixed = true);
+  output Real o;
+equation
+  der(x) = v;
+  der(v) = -(1 + 1e6/(1 + exp(-(time - 5)/0.1)))*x - 0.1*v;
+  o = x;
+end Onset;
+"""
+
+
+def test_a_run_that_turns_stiff_halfway_runs_within_its_work_budget(tmp_path):
+    """Under a work budget (a fit's runs) each call's points get a few times the steps the
+    points have needed: the run's second half needs 20x those of its first, and runs on, to
+    the solution of the run without a budget, in about as many steps."""
+    (tmp_path / "Onset.mo").write_text(ONSET)
+    model = compile_model([tmp_path / "Onset.mo"], "Onset")
+    t = np.linspace(0, 10, 201)
+    free = simulate(model, _none(t), options={"max_steps": 10**6})
+    budgeted = simulate(model, _none(t), options={"max_work": 10**7, "max_steps": 10**6})
+    assert free.ok and budgeted.ok, (free.reason, budgeted.reason)
+    assert np.allclose(budgeted.output("o"), free.output("o"), atol=1e-3)
+    assert budgeted.steps < 1.5 * free.steps, (budgeted.steps, free.steps)
