@@ -67,6 +67,13 @@ class HysteresisTemplate(PolynomialTemplate):
         return super().uses_where(active) | {"dv"}
 
     @property
+    def follows(self) -> dict:
+        """z's coefficient (a parameter index) -> h1's and h2's: they act only through z (with
+        z removed they are 0, and z turns with v)."""
+        n = len(self.terms)
+        return {1 + [str(m) for m in self.rhs].index("z"): (n, n + 1)}
+
+    @property
     def law_variable(self) -> str:
         return "v"
 

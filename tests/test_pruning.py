@@ -78,3 +78,22 @@ def test_a_wordy_law_is_reported_with_the_best_plainer_law_of_its_kind():
     plain = readable(wordy, cands)
     assert plain["equation"] == "shape 3" and plain["score_difference"] == 30.0
     assert readable(cands[1], cands) is None          # (three terms beside a constant: readable)
+
+
+def test_a_hysteresis_shape_goes_with_z_when_z_is_pruned():
+    """h1 and h2 act only through z: a removal of z's coefficient removes them too (left free
+    with no effect they drifted to 5e13, and the model was too stiff to validate)."""
+    from mcl.discovery.fitters import _followed
+    from mcl.hysteresis import HysteresisTemplate
+
+    t = HysteresisTemplate(rhs=["dv", "dv^3", "z"], span=0.5)
+    names = t.parameter_names()
+    follows = t.follows
+    (z, shape), = follows.items()
+    assert len(names) == 6 and [names[k] for k in shape] == names[4:]
+    active = np.ones(6, bool)
+    active[z] = False
+    assert _followed(active, follows).tolist() == [True, True, True, False, False, False]
+    active = np.ones(6, bool)
+    active[1] = False                    # another term: the shape stays
+    assert _followed(active, follows).tolist() == [True, False, True, True, True, True]

@@ -106,7 +106,7 @@ class SimulationFitter(CandidateFitter):
         n_terms = len(getattr(template, "terms", names))
         return FitOutcome(*fit_and_prune(model, data, names, w0, budget, criterion, give_up=give_up,
                                          prune=prune, n_terms=n_terms, progress=progress, algorithm=algorithm,
-                                         limits=limits))
+                                         limits=limits, follows=getattr(template, "follows", {})))
 
 
 class FullDiscretisationFitter(CandidateFitter):
@@ -122,9 +122,22 @@ class FullDiscretisationFitter(CandidateFitter):
         return FitOutcome(*refine_candidate(model, data, names, w0, criterion, template))
 
 
+def _followed(active: np.ndarray, follows: dict | None) -> np.ndarray:
+    """``active`` with the parameters that act only through a removed term removed with it
+    (``follows``: a term's index -> theirs; a hysteresis' shape parameters go with z's
+    coefficient: left free with no effect, they drifted to 5e13 and made the model too stiff
+    to run on the validation data). Removed, they are 0."""
+    out = np.array(active, bool)
+    for k, others in (follows or {}).items():
+        if not out[k]:
+            out[list(others)] = False
+    return out
+
+
 def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, criterion,
                   give_up=None, prune: bool = True, n_terms: int | None = None, progress=None,
-                  held=None, prunable=None, algorithm: str = "levenberg-marquardt", limits: dict | None = None):
+                  held=None, prunable=None, algorithm: str = "levenberg-marquardt", limits: dict | None = None,
+                  follows: dict | None = None):
     """LM fit of the law parameters, then backward elimination of terms.
 
     ``held`` marks the parameters kept at their start value (each law's scale: G(w) = 0 and
@@ -269,6 +282,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
             if len(group) > 1:
                 trial = active.copy()
                 trial[free[group]] = False
+                trial = _followed(trial, follows)
                 try:
                     refit = fit(trial, w, restore=1)
                 except MclError:
@@ -288,6 +302,7 @@ def fit_and_prune(model, data: TimeSeries, names: list[str], w0, budget: int, cr
                 break
             trial = active.copy()
             trial[free[j]] = False
+            trial = _followed(trial, follows)
             try:
                 refit = fit(trial, w, restore=1)
             except MclError:
