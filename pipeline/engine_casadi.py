@@ -577,7 +577,8 @@ class _Plan:
                     # were, then the one it failed on alone with more steps (its first point
                     # alone again each time: a stiff law's run redid up to 30 points for each
                     # point it kept, 210 s of a fit)
-                    upto = _passed(integ, self.tau(self.t_int[sub]), extra) or None
+                    grid = hop_grid(len(sub)) if extra else self.tau(self.t_int[sub])
+                    upto = _passed(integ, grid) or None
                     failed, then = (steps, None) if upto is None else (None, steps)
                     continue
                 if tight == 1.0 and _TEST_FAILURES in str(exc):
@@ -825,16 +826,14 @@ def _nsteps(integ) -> int:
         return 0
 
 
-def _passed(integ, tau: np.ndarray, extra) -> int:
-    """The output points (at the scaled times ``tau``; a hop's call, ``extra`` = [start,
-    length], in its own time from 0 to 1) a failed call of ``integ`` got past."""
+def _passed(integ, grid: np.ndarray) -> int:
+    """The output points (``grid``: their times in the integrator's own time) a failed call of
+    ``integ`` got past."""
     try:
         reached = float(integ.stats().get("tcur", np.nan))
     except RuntimeError:
         return 0
-    if extra:
-        tau = hop_grid(len(tau), False)
-    return int(np.searchsorted(tau, reached, side="right")) if np.isfinite(reached) else 0
+    return int(np.searchsorted(grid, reached, side="right")) if np.isfinite(reached) else 0
 
 
 def _spent(integ, steps: int, exc: Exception) -> int:

@@ -262,14 +262,16 @@ def fit_task(ctx: Context, item) -> dict:
     shape = isinstance(item, Item) and item.index >= NEURAL_INDEX
     give_up = None if shape or not ctx.progress_dir else GiveUp(ctx, item)
     if isinstance(item, Pair):        # two laws: each keeps its scale, every term may be pruned
-        held, prunable = [], []
+        held, prunable, follows = [], [], {}
         for law in laws:
-            n_terms = len(getattr(law.template, "terms", law.names))
+            n_terms, at = len(getattr(law.template, "terms", law.names)), len(held)
+            follows.update({at + k: tuple(at + j for j in others)
+                            for k, others in getattr(law.template, "follows", {}).items()})
             held += [k == 0 for k in range(len(law.names))]
             prunable += [0 < k < n_terms for k in range(len(law.names))]
         fit = FitOutcome(*fit_and_prune(model, ctx.train, names, w0, 2 * ctx.budget, ctx.criterion, give_up=give_up,
                                         held=held, prunable=prunable, algorithm=ctx.algorithm,
-                                        limits=ctx.limits))
+                                        limits=ctx.limits, follows=follows))
     else:
         # the shape stage (a network, then distilled laws with fitted scales) always simulates:
         # it refines the best law and is not stopped for being behind it; a network has many
