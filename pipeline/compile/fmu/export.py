@@ -507,7 +507,7 @@ def _build_key(*parts: str) -> str:
     """What decides the FMU (its code or what the code is made from, its model description),
     with the C compiler and its flags."""
     h = hashlib.sha256()
-    for part in (_gcc_version(), " ".join(_CFLAGS), repr(sorted(_OPTIMISE.items())), *parts):
+    for part in (_gcc_version(), " ".join(_CFLAGS), repr(sorted(_OPTIMISE.items())), " ".join(O1), *parts):
         h.update(part.encode())
         h.update(b"\0")
     return h.hexdigest()[:40]
@@ -535,6 +535,10 @@ GCC_TIMEOUT = 600
 #: a right-hand side's C past this is compiled at -O1: a Modelica.Fluid tank and pipe's 3.5 MB
 #: took gcc 90 CPU-s at -O2, 54 at -O1 (23 at -O0)
 O1_PAST = 2_000_000
+#: ... without the dominator optimisations: on long straight-line functions their SSA updates
+#: were most of gcc's time (a 45-node dense block's sparse QR, 2.9 MB: 108 CPU-s, 23 without
+#: them; the FMU runs 1.1x as long)
+O1 = ("-O1", "-fno-tree-dominator-opts")
 _FUNCTION_START = re.compile(rb"^(?:static |CASADI_SYMBOL_EXPORT )?int \w+\(const casadi_real\*\* arg", re.M)
 
 
@@ -564,7 +568,7 @@ def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: lis
     so = build / f"{ident}.so"
     objects = [f.with_suffix(".o") for f in c_files]
     # each file at its own optimisation (none past C_LIMIT), side by side, then linked
-    _gcc([["gcc", "-c", *_CFLAGS, _optimisation(f, size), f"-I{build}", str(f), "-o", str(o)]
+    _gcc([["gcc", "-c", *_CFLAGS, *_optimisation(f, size), f"-I{build}", str(f), "-o", str(o)]
           for f, o in zip(c_files, objects)], size, build)
     _gcc([["gcc", "-shared", *_CFLAGS, *map(str, objects), "-o", str(so), "-lm"]], size, build)
     fmu = build / "model.fmu"
@@ -576,14 +580,15 @@ def _compile_and_pack(build: Path, ident: str, c_files: list[Path], sources: lis
     return fmu
 
 
-def _optimisation(f: Path, size: int) -> str:
-    """gcc's -O for C file ``f`` of code ``size`` bytes in all: its own (:data:`_OPTIMISE`),
-    -O1 for a right-hand side past :data:`O1_PAST`, none past :data:`C_LIMIT`."""
+def _optimisation(f: Path, size: int) -> tuple[str, ...]:
+    """gcc's optimisation flags for C file ``f`` of code ``size`` bytes in all: its own
+    (:data:`_OPTIMISE`), :data:`O1` for a right-hand side past :data:`O1_PAST`, none past
+    :data:`C_LIMIT`."""
     if size > C_LIMIT:
-        return "-O0"
+        return ("-O0",)
     if _OPTIMISE[f.name] == "-O2" and f.stat().st_size > O1_PAST:
-        return "-O1"
-    return _OPTIMISE[f.name]
+        return O1
+    return (_OPTIMISE[f.name],)
 
 
 def _gcc(commands: list[list[str]], size: int, build: Path) -> None:
