@@ -1687,7 +1687,12 @@ def compact(f: ca.Function) -> ca.Function:
     call graph)."""
     if expanded_size(f) > EXPAND_TRY_MAX:      # (expanding to find out took minutes on a fluid model)
         return f
-    e = expanded(f)
+    return _kept(f, expanded(f))
+
+
+def _kept(f: ca.Function, e: ca.Function) -> ca.Function:
+    """:func:`compact`'s choice between ``f`` and ``e``, its expansion: ``e`` unless it is SX
+    past COMPACT_SX_MAX instructions."""
     return e if not e.is_a("SXFunction") or e.n_instructions() <= COMPACT_SX_MAX else f
 
 
@@ -1698,11 +1703,7 @@ def compact_together(*fs: ca.Function | None) -> list:
     memo: dict = {}
     small = [f is not None and expanded_size(f, memo) <= EXPAND_TRY_MAX for f in fs]
     made = iter(expanded_together(*(f for f, s in zip(fs, small) if s)))
-    out = []
-    for f, s in zip(fs, small):
-        e = next(made) if s else f
-        out.append(e if s and e.is_a("SXFunction") and e.n_instructions() <= COMPACT_SX_MAX else f)
-    return out
+    return [_kept(f, next(made)) if s else f for f, s in zip(fs, small)]
 
 
 def expanded_size(f: ca.Function, memo: dict | None = None) -> float:
